@@ -1,0 +1,69 @@
+//! Decoded returns and frames: the one data type every stage after the decoder sees.
+
+use serde::{Deserialize, Serialize};
+
+/// Which return of a firing a point is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[repr(u8)]
+pub enum ReturnKind {
+    /// Single-return mode 0x37: the strongest return.
+    Strongest = 0,
+    /// Single-return mode 0x38: the last return.
+    Last = 1,
+    /// Dual mode 0x39, even block of a pair: the last return.
+    DualLast = 2,
+    /// Dual mode 0x39, odd block of a pair: the strongest return, or the second
+    /// strongest where the strongest is also the last.
+    DualStrongest = 3,
+}
+
+/// One decoded laser return.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Return {
+    /// Forward coordinate in metres (ROS velodyne convention).
+    pub x: f32,
+    /// Leftward coordinate in metres.
+    pub y: f32,
+    /// Upward coordinate in metres.
+    pub z: f32,
+    /// Range in metres (raw distance times the distance resolution).
+    pub range: f32,
+    /// Azimuth in degrees, clockwise seen from above, in [0, 360).
+    pub azimuth: f32,
+    /// Elevation in degrees.
+    pub elevation: f32,
+    /// Firing time in seconds past the top of the hour (sensor clock).
+    pub time: f64,
+    /// Zero-based index of the capture record that carried the return.
+    pub packet: u32,
+    /// Raw distance in the packet's 2 mm units.
+    pub raw_distance: u16,
+    /// Intensity byte as reported by the sensor.
+    pub intensity: u8,
+    /// Laser id (firing order in the block, 0..31).
+    pub laser: u8,
+    /// Ring (lasers sorted by elevation, 0 = lowest).
+    pub ring: u8,
+    /// Block (firing) index within the packet, 0..11.
+    pub block: u8,
+    /// Which return of the firing this is.
+    pub kind: ReturnKind,
+}
+
+/// One rotation of the sensor.
+#[derive(Clone, Debug, Default)]
+pub struct Frame {
+    /// Zero-based sweep index within the capture, partial first sweep included.
+    pub index: u32,
+    /// True for a sweep that does not cover a full turn (first or last of a capture).
+    pub partial: bool,
+    /// Returns in capture order.
+    pub returns: Vec<Return>,
+}
+
+impl Frame {
+    /// Time of the first return in the frame, in seconds past the hour.
+    pub fn start_time(&self) -> f64 {
+        self.returns.first().map_or(0.0, |r| r.time)
+    }
+}

@@ -1,0 +1,17 @@
+//! lidar-noise: replays Velodyne HDL-32E captures through modelled LiDAR noise.
+//!
+//! Data flows one way: capture -> decoder -> frame -> noise stages -> detection
+//! filters -> ground -> clusters -> writers.
+
+pub mod calibration;
+pub mod capture;
+pub mod cli;
+pub mod commands;
+pub mod cluster;
+pub mod error;
+pub mod frame;
+pub mod ground;
+pub mod hdl32e;
+pub mod noise;
+pub mod synth;
+pub mod writers;

@@ -1,0 +1,3 @@
+fn main() {
+    std::process::exit(lidar_noise::cli::main());
+}

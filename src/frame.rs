@@ -32,7 +32,8 @@ pub struct Return {
     pub azimuth: f32,
     /// Elevation in degrees.
     pub elevation: f32,
-    /// Firing time in seconds past the top of the hour (sensor clock).
+    /// Firing time in seconds (sensor clock) since the top of the hour in which the
+    /// capture starts; later hours continue past 3600.
     pub time: f64,
     /// Zero-based index of the capture record that carried the return.
     pub packet: u32,

@@ -6,8 +6,8 @@
 pub mod calibration;
 pub mod capture;
 pub mod cli;
-pub mod commands;
 pub mod cluster;
+pub mod commands;
 pub mod error;
 pub mod frame;
 pub mod ground;

@@ -1,1 +1,352 @@
-//! TODO
+//! Streaming reader of pcap and pcapng captures: yields UDP datagrams one at a time.
+//!
+//! Memory stays bounded by the read buffer whatever the capture's length.
+
+pub mod link;
+
+use crate::error::{Error, Result};
+use pcap_parser::pcapng::Block;
+use pcap_parser::traits::PcapReaderIterator;
+use pcap_parser::{PcapBlockOwned, PcapError};
+use serde::Serialize;
+use std::fs::File;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use link::Parsed;
+
+/// Read buffer size; a record larger than this is treated as corrupt (a UDP
+/// datagram is at most 64 KiB plus headers).
+const BUFFER_BYTES: usize = 1 << 18;
+
+/// Container format of a capture.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    /// Classic libpcap.
+    Pcap,
+    /// pcapng.
+    Pcapng,
+}
+
+/// Counters of what the reader met, for `info` and diagnostics.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct CaptureStats {
+    /// Packet records read (pcap records, pcapng enhanced and simple packet blocks).
+    pub records: u64,
+    /// Whole IPv4/UDP datagrams handed on.
+    pub udp: u64,
+    /// IPv4 fragments skipped.
+    pub fragments: u64,
+    /// IPv4 packets of other protocols skipped.
+    pub not_udp: u64,
+    /// Frames that are not IPv4 (or of an unsupported link type) skipped.
+    pub not_ipv4: u64,
+    /// Frames cut short by the snapshot length or with malformed headers.
+    pub malformed: u64,
+    /// Byte offset where the capture ends mid-record, if it does.
+    pub truncated_at: Option<u64>,
+}
+
+/// One UDP datagram from the capture.
+#[derive(Clone, Copy, Debug)]
+pub struct Datagram<'a> {
+    /// Zero-based index of the packet record in the capture.
+    pub record: u32,
+    /// Byte offset of the record in the file.
+    pub offset: u64,
+    /// Capture timestamp in nanoseconds since the Unix epoch.
+    pub ts_ns: u64,
+    /// UDP source port.
+    pub src_port: u16,
+    /// UDP destination port.
+    pub dst_port: u16,
+    /// UDP payload.
+    pub payload: &'a [u8],
+}
+
+/// A streaming capture reader.
+pub struct CaptureReader {
+    inner: Box<dyn PcapReaderIterator + Send>,
+    path: PathBuf,
+    format: Format,
+    /// Link type of each pcapng interface (one entry for classic pcap).
+    linktypes: Vec<i32>,
+    /// Timestamp resolution (units per second) and offset (s) of each interface.
+    ts_units: Vec<(u64, u64)>,
+    nanosecond: bool,
+    pending_consume: usize,
+    position: u64,
+    finished: bool,
+    stats: CaptureStats,
+}
+
+/// Where a datagram sits in the reader's buffer, found before the buffer is re-borrowed.
+struct Found {
+    record: u32,
+    offset: u64,
+    ts_ns: u64,
+    src_port: u16,
+    dst_port: u16,
+    start: usize,
+    len: usize,
+}
+
+impl CaptureReader {
+    /// Opens a capture file.
+    pub fn open(path: &Path) -> Result<Self> {
+        let file = File::open(path).map_err(|e| Error::io(path, e))?;
+        Self::from_reader(file, path)
+    }
+
+    /// Reads a capture from any byte stream; `path` names it in messages.
+    pub fn from_reader(reader: impl Read + Send + 'static, path: &Path) -> Result<Self> {
+        let fail = |message: String| Error::Capture {
+            path: path.to_path_buf(),
+            message,
+        };
+        let inner = pcap_parser::create_reader(BUFFER_BYTES, reader).map_err(|e| match e {
+            PcapError::Eof => fail("the file is empty, not a pcap or pcapng capture".into()),
+            PcapError::ReadError => fail("the file could not be read".into()),
+            PcapError::Incomplete(_) | PcapError::UnexpectedEof => {
+                fail("the file ends inside the capture's file header".into())
+            }
+            _ => fail(
+                "not a pcap or pcapng capture (unknown file header); \
+                 record the sensor with tcpdump, Wireshark or VeloView"
+                    .into(),
+            ),
+        })?;
+        Ok(CaptureReader {
+            inner,
+            path: path.to_path_buf(),
+            format: Format::Pcap,
+            linktypes: Vec::new(),
+            ts_units: Vec::new(),
+            nanosecond: false,
+            pending_consume: 0,
+            position: 0,
+            finished: false,
+            stats: CaptureStats::default(),
+        })
+    }
+
+    /// The capture's path as given.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Container format (known once the first block has been read).
+    pub fn format(&self) -> Format {
+        self.format
+    }
+
+    /// Link type of the first interface, once known.
+    pub fn linktype(&self) -> Option<i32> {
+        self.linktypes.first().copied()
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> &CaptureStats {
+        &self.stats
+    }
+
+    fn error(&self, message: String) -> Error {
+        Error::Capture {
+            path: self.path.clone(),
+            message,
+        }
+    }
+
+    /// Next whole IPv4/UDP datagram, or `None` at the end of the capture.
+    ///
+    /// A capture cut mid-record ends cleanly with `stats().truncated_at` set.
+    pub fn next_datagram(&mut self) -> Result<Option<Datagram<'_>>> {
+        if self.finished {
+            return Ok(None);
+        }
+        if self.pending_consume > 0 {
+            self.inner.consume(self.pending_consume);
+            self.position += self.pending_consume as u64;
+            self.pending_consume = 0;
+        }
+        let found = loop {
+            match self.step()? {
+                Step::Again => continue,
+                Step::End => {
+                    self.finished = true;
+                    return Ok(None);
+                }
+                Step::Found(found) => break found,
+            }
+        };
+        let data = self.inner.data();
+        let payload = data
+            .get(found.start..found.start + found.len)
+            .ok_or_else(|| {
+                self.error(format!(
+                    "internal: payload outside buffer at record {}",
+                    found.record
+                ))
+            })?;
+        Ok(Some(Datagram {
+            record: found.record,
+            offset: found.offset,
+            ts_ns: found.ts_ns,
+            src_port: found.src_port,
+            dst_port: found.dst_port,
+            payload,
+        }))
+    }
+
+    /// Reads one block; leaves a found datagram's bytes in the buffer until the next call.
+    fn step(&mut self) -> Result<Step> {
+        let offset = self.position;
+        let buffer_start = self.inner.data().as_ptr() as usize;
+        let record = self.stats.records;
+        let outcome = match self.inner.next() {
+            Ok((size, block)) => {
+                let mut packet: Option<(i32, u64, &[u8])> = None;
+                match block {
+                    PcapBlockOwned::LegacyHeader(header) => {
+                        self.format = Format::Pcap;
+                        self.nanosecond = header.is_nanosecond_precision();
+                        self.linktypes = vec![header.network.0];
+                        let units = if self.nanosecond { 1_000_000_000 } else { 1_000_000 };
+                        self.ts_units = vec![(units, 0)];
+                    }
+                    PcapBlockOwned::Legacy(b) => {
+                        let frac = if self.nanosecond {
+                            u64::from(b.ts_usec)
+                        } else {
+                            u64::from(b.ts_usec) * 1000
+                        };
+                        let ts = u64::from(b.ts_sec) * 1_000_000_000 + frac;
+                        let lt = self.linktypes.first().copied().unwrap_or(-1);
+                        packet = Some((lt, ts, b.data));
+                    }
+                    PcapBlockOwned::NG(Block::SectionHeader(_)) => {
+                        self.format = Format::Pcapng;
+                        // Interface ids restart in each section.
+                        self.linktypes.clear();
+                        self.ts_units.clear();
+                    }
+                    PcapBlockOwned::NG(Block::InterfaceDescription(idb)) => {
+                        self.format = Format::Pcapng;
+                        self.linktypes.push(idb.linktype.0);
+                        let units = idb.ts_resolution().unwrap_or(1_000_000);
+                        self.ts_units.push((units, idb.ts_offset().max(0) as u64));
+                    }
+                    PcapBlockOwned::NG(Block::EnhancedPacket(epb)) => {
+                        let iface = epb.if_id as usize;
+                        let (units, ts_off) =
+                            self.ts_units.get(iface).copied().unwrap_or((1_000_000, 0));
+                        let raw = (u128::from(epb.ts_high) << 32) | u128::from(epb.ts_low);
+                        let ns = raw * 1_000_000_000 / u128::from(units.max(1))
+                            + u128::from(ts_off) * 1_000_000_000;
+                        let lt = self.linktypes.get(iface).copied().unwrap_or(-1);
+                        let caplen = (epb.caplen as usize).min(epb.data.len());
+                        packet = Some((lt, u64::try_from(ns).unwrap_or(u64::MAX), &epb.data[..caplen]));
+                    }
+                    PcapBlockOwned::NG(Block::SimplePacket(spb)) => {
+                        let lt = self.linktypes.first().copied().unwrap_or(-1);
+                        let len = (spb.origlen as usize).min(spb.data.len());
+                        packet = Some((lt, 0, &spb.data[..len]));
+                    }
+                    PcapBlockOwned::NG(_) => {}
+                }
+                let found = packet.and_then(|(lt, ts_ns, frame)| {
+                    self.stats.records += 1;
+                    match link::parse_frame(lt, frame) {
+                        Parsed::Udp {
+                            src_port,
+                            dst_port,
+                            start,
+                            len,
+                        } => {
+                            self.stats.udp += 1;
+                            let start_in_buffer = frame.as_ptr() as usize - buffer_start + start;
+                            Some(Found {
+                                record: record as u32,
+                                offset,
+                                ts_ns,
+                                src_port,
+                                dst_port,
+                                start: start_in_buffer,
+                                len,
+                            })
+                        }
+                        Parsed::Fragment => {
+                            self.stats.fragments += 1;
+                            None
+                        }
+                        Parsed::NotUdp => {
+                            self.stats.not_udp += 1;
+                            None
+                        }
+                        Parsed::NotIpv4 => {
+                            self.stats.not_ipv4 += 1;
+                            None
+                        }
+                        Parsed::Malformed => {
+                            self.stats.malformed += 1;
+                            None
+                        }
+                    }
+                });
+                Ok((size, found))
+            }
+            Err(e) => Err(match e {
+                PcapError::Eof => Stop::End,
+                PcapError::Incomplete(_) => Stop::Refill,
+                PcapError::UnexpectedEof => Stop::Truncated,
+                PcapError::BufferTooSmall => Stop::Corrupt(format!(
+                    "record {record} at byte offset {offset} claims more than {BUFFER_BYTES} bytes: \
+                     the capture is corrupt from there on"
+                )),
+                PcapError::ReadError => Stop::Corrupt(format!("read error at byte offset {offset}")),
+                _ => Stop::Corrupt(format!(
+                    "malformed record {record} at byte offset {offset}: the capture is corrupt from there on"
+                )),
+            }),
+        };
+        match outcome {
+            Ok((size, Some(mut found))) => {
+                // Keep the bytes in the buffer until the caller is done with them.
+                self.pending_consume = size;
+                found.offset = offset;
+                Ok(Step::Found(found))
+            }
+            Ok((size, None)) => {
+                self.inner.consume(size);
+                self.position += size as u64;
+                Ok(Step::Again)
+            }
+            Err(Stop::End) => Ok(Step::End),
+            Err(Stop::Refill) => {
+                if self.inner.refill().is_err() {
+                    return Err(self.error(format!("read error at byte offset {offset}")));
+                }
+                Ok(Step::Again)
+            }
+            Err(Stop::Truncated) => {
+                self.stats.truncated_at = Some(offset);
+                Ok(Step::End)
+            }
+            Err(Stop::Corrupt(message)) => Err(self.error(message)),
+        }
+    }
+}
+
+enum Step {
+    Again,
+    End,
+    Found(Found),
+}
+
+enum Stop {
+    End,
+    Refill,
+    Truncated,
+    Corrupt(String),
+}

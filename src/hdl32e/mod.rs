@@ -1,1 +1,6 @@
-//! TODO
+//! Velodyne HDL-32E: packet layout, sensor identification, decoding and frames.
+
+pub mod decode;
+pub mod frames;
+pub mod identify;
+pub mod packet;

@@ -1,0 +1,351 @@
+//! Streaming frame reader: capture file to frames of decoded returns, one rotation each.
+//!
+//! A frame starts where the firing azimuth, measured from the cut angle, wraps
+//! (falls by more than half a turn). The first sweep counts as full when it starts
+//! within one firing step of the cut angle, the last when it ends within one step of
+//! it; partial sweeps are numbered like the others but left out unless asked for.
+
+use super::decode::{first_firing_us, DecodeCounts, DualSelect, PacketDecoder};
+use super::identify::{self, Identity, Sample};
+use super::packet::{self, ReturnMode};
+use crate::calibration::Calibration;
+use crate::capture::{CaptureReader, CaptureStats, Format};
+use crate::error::{Error, Result};
+use crate::frame::Frame;
+use serde::Serialize;
+use std::collections::VecDeque;
+use std::path::Path;
+
+/// How to decode a capture.
+#[derive(Clone, Debug)]
+pub struct DecoderOptions {
+    /// Per-laser calibration.
+    pub calibration: Calibration,
+    /// Interpolate each laser's azimuth by its firing time (see [`super::decode`]).
+    pub interpolate_azimuth: bool,
+    /// Returns kept from dual-return captures.
+    pub dual: DualSelect,
+    /// Azimuth in degrees where frames are cut (0 = the azimuth wrap).
+    pub cut_angle_deg: f64,
+    /// Emit the partial first and last sweeps too.
+    pub keep_partial: bool,
+}
+
+impl Default for DecoderOptions {
+    fn default() -> Self {
+        DecoderOptions {
+            calibration: Calibration::builtin(),
+            interpolate_azimuth: true,
+            dual: DualSelect::Both,
+            cut_angle_deg: 0.0,
+            keep_partial: false,
+        }
+    }
+}
+
+/// What a capture contained, accumulated while reading it.
+#[derive(Clone, Debug, Serialize)]
+pub struct CaptureSummary {
+    /// Container format.
+    pub format: Format,
+    /// pcap link type of the (first) interface.
+    pub linktype: i32,
+    /// Name of the link type.
+    pub linktype_name: &'static str,
+    /// Product id byte of the data packets.
+    pub product_id: u8,
+    /// Product name.
+    pub product: &'static str,
+    /// Return mode of the capture.
+    pub return_mode: ReturnMode,
+    /// HDL-32E data packets.
+    pub data_packets: u64,
+    /// Position (telemetry) packets, skipped.
+    pub position_packets: u64,
+    /// Other UDP datagrams, skipped.
+    pub other_udp: u64,
+    /// Data packets whose return mode byte was invalid, skipped.
+    pub bad_data_packets: u64,
+    /// Distinct (source, destination) UDP ports of data packets (at most 8 listed).
+    pub data_ports: Vec<(u16, u16)>,
+    /// Median time between data packets in microseconds.
+    pub packet_period_us: Option<f64>,
+    /// Rotation rate in Hz, from the azimuth advance over sensor time.
+    pub rotation_hz: Option<f64>,
+    /// Sweeps covering a full turn.
+    pub full_frames: u32,
+    /// Partial sweeps (first and last of the capture).
+    pub partial_frames: u32,
+    /// Non-zero returns in the whole capture, partial sweeps included.
+    pub returns: u64,
+    /// Non-zero returns in full frames.
+    pub returns_in_full_frames: u64,
+    /// Sensor time from the first to the last firing, in seconds.
+    pub duration_s: f64,
+    /// Decoder counters.
+    pub decode: DecodeCounts,
+    /// Container-level counters (records, fragments, truncation).
+    pub capture: CaptureStats,
+}
+
+struct Building {
+    frame: Frame,
+    first_rel: u32,
+    first_step: u32,
+    last_rel: u32,
+    last_step: u32,
+}
+
+/// Iterator over the frames of a capture.
+pub struct FrameReader {
+    capture: CaptureReader,
+    decoder: PacketDecoder,
+    keep_partial: bool,
+    cut: u32,
+    building: Option<Building>,
+    ready: VecDeque<Frame>,
+    next_index: u32,
+    prev_rel: Option<u32>,
+    hour_offset_us: f64,
+    prev_ts: Option<u32>,
+    first_time_us: Option<f64>,
+    last_time_us: f64,
+    unwrapped_centideg: u64,
+    prev_azimuth: Option<u16>,
+    summary: CaptureSummary,
+    done: bool,
+}
+
+/// Reads up to [`identify::SAMPLE_PACKETS`] data packets and identifies the sensor.
+pub fn identify_capture(path: &Path) -> Result<Identity> {
+    let mut capture = CaptureReader::open(path)?;
+    let mut sample = Sample::default();
+    while let Some(d) = capture.next_datagram()? {
+        if packet::is_data_packet(d.payload) {
+            sample.push(d.payload, d.ts_ns);
+            if sample.is_full() {
+                break;
+            }
+        }
+    }
+    identify::identify(&sample).map_err(|message| {
+        let linktype = capture.linktype().unwrap_or(-1);
+        let message = if sample.products.is_empty() && !crate::capture::link::is_supported(linktype)
+        {
+            format!("link type {linktype} is not supported (Ethernet, Linux cooked v1/v2, raw IPv4 and BSD loopback are)")
+        } else {
+            message
+        };
+        Error::Capture {
+            path: path.to_path_buf(),
+            message,
+        }
+    })
+}
+
+impl FrameReader {
+    /// Opens a capture, refusing it unless it is an HDL-32E capture.
+    pub fn open(path: &Path, options: &DecoderOptions) -> Result<Self> {
+        let identity = identify_capture(path)?;
+        let capture = CaptureReader::open(path)?;
+        let cut = ((options.cut_angle_deg.rem_euclid(360.0) * 100.0).round() as u32) % 36000;
+        Ok(FrameReader {
+            capture,
+            decoder: PacketDecoder::new(
+                &options.calibration,
+                options.interpolate_azimuth,
+                options.dual,
+            ),
+            keep_partial: options.keep_partial,
+            cut,
+            building: None,
+            ready: VecDeque::new(),
+            next_index: 0,
+            prev_rel: None,
+            hour_offset_us: 0.0,
+            prev_ts: None,
+            first_time_us: None,
+            last_time_us: 0.0,
+            unwrapped_centideg: 0,
+            prev_azimuth: None,
+            summary: CaptureSummary {
+                format: Format::Pcap,
+                linktype: -1,
+                linktype_name: "",
+                product_id: identity.product,
+                product: packet::product_name(identity.product),
+                return_mode: identity.mode,
+                data_packets: 0,
+                position_packets: 0,
+                other_udp: 0,
+                bad_data_packets: 0,
+                data_ports: Vec::new(),
+                packet_period_us: identity.packet_period_us,
+                rotation_hz: None,
+                full_frames: 0,
+                partial_frames: 0,
+                returns: 0,
+                returns_in_full_frames: 0,
+                duration_s: 0.0,
+                decode: DecodeCounts::default(),
+                capture: CaptureStats::default(),
+            },
+            done: false,
+        })
+    }
+
+    /// What the capture contained so far (complete once the iterator is exhausted).
+    pub fn summary(&self) -> CaptureSummary {
+        let mut s = self.summary.clone();
+        s.format = self.capture.format();
+        s.linktype = self.capture.linktype().unwrap_or(-1);
+        s.linktype_name = crate::capture::link::link_name(s.linktype);
+        s.capture = self.capture.stats().clone();
+        if let Some(first) = self.first_time_us {
+            s.duration_s = (self.last_time_us - first) * 1e-6;
+            if s.duration_s > 0.0 {
+                s.rotation_hz = Some(self.unwrapped_centideg as f64 / 36000.0 / s.duration_s);
+            }
+        }
+        s
+    }
+
+    fn finish_frame(&mut self, mut b: Building, last: bool) {
+        let first_ok = b.frame.index > 0 || b.first_rel <= b.first_step.max(1);
+        let last_ok = !last || b.last_rel + b.last_step.max(1) >= 36000;
+        b.frame.partial = !(first_ok && last_ok);
+        if b.frame.partial {
+            self.summary.partial_frames += 1;
+        } else {
+            self.summary.full_frames += 1;
+            self.summary.returns_in_full_frames += b.frame.returns.len() as u64;
+        }
+        if !b.frame.partial || self.keep_partial {
+            self.ready.push_back(b.frame);
+        }
+    }
+
+    fn on_firing(&mut self, azimuth: u16, step: u32) {
+        if let Some(prev) = self.prev_azimuth {
+            let d = (u32::from(azimuth) + 36000 - u32::from(prev)) % 36000;
+            if d < 18000 {
+                self.unwrapped_centideg += u64::from(d);
+            }
+        }
+        self.prev_azimuth = Some(azimuth);
+        let rel = (u32::from(azimuth) + 36000 - self.cut) % 36000;
+        let wrapped = self.prev_rel.is_some_and(|p| rel + 18000 < p);
+        self.prev_rel = Some(rel);
+        if wrapped {
+            if let Some(b) = self.building.take() {
+                self.finish_frame(b, false);
+            }
+        }
+        match &mut self.building {
+            Some(b) => {
+                b.last_rel = rel;
+                b.last_step = step;
+            }
+            None => {
+                let index = self.next_index;
+                self.next_index += 1;
+                self.building = Some(Building {
+                    frame: Frame {
+                        index,
+                        partial: false,
+                        returns: Vec::with_capacity(70_000),
+                    },
+                    first_rel: rel,
+                    first_step: step,
+                    last_rel: rel,
+                    last_step: step,
+                });
+            }
+        }
+    }
+
+    /// Decodes datagrams until a frame is ready or the capture ends.
+    fn pump(&mut self) -> Result<()> {
+        while self.ready.is_empty() && !self.done {
+            let Some(d) = self.capture.next_datagram()? else {
+                self.done = true;
+                if let Some(b) = self.building.take() {
+                    self.finish_frame(b, true);
+                }
+                break;
+            };
+            if d.payload.len() == packet::POSITION_PACKET_BYTES {
+                self.summary.position_packets += 1;
+                continue;
+            }
+            if !packet::is_data_packet(d.payload) {
+                self.summary.other_udp += 1;
+                continue;
+            }
+            let payload: Vec<u8>;
+            let record = d.record;
+            let ports = (d.src_port, d.dst_port);
+            // The datagram borrows the reader; copy the 1206 bytes so frame state can change.
+            payload = d.payload.to_vec();
+            self.decode_packet(&payload, record, ports);
+        }
+        Ok(())
+    }
+
+    fn decode_packet(&mut self, payload: &[u8], record: u32, ports: (u16, u16)) {
+        let Some(mode) = ReturnMode::from_byte(packet::return_mode_byte(payload)) else {
+            self.summary.bad_data_packets += 1;
+            return;
+        };
+        self.summary.data_packets += 1;
+        if self.summary.data_ports.len() < 8 && !self.summary.data_ports.contains(&ports) {
+            self.summary.data_ports.push(ports);
+        }
+        let ts = packet::timestamp_us(payload);
+        if let Some(prev) = self.prev_ts {
+            // The sensor clock restarts every hour: keep time increasing.
+            if ts + 1_800_000_000 < prev {
+                self.hour_offset_us += 3_600_000_000.0;
+            }
+        }
+        self.prev_ts = Some(ts);
+        let (firings, n) = self.decoder.firings(payload, mode);
+        let time0 = first_firing_us(payload, n) + self.hour_offset_us;
+        self.first_time_us.get_or_insert(time0);
+        self.last_time_us = time0 + (n as f64 - 1.0) * packet::FIRING_US;
+        for firing in &firings[..n] {
+            self.on_firing(firing.azimuth, firing.step);
+            let (blocks, count) = self.decoder.blocks_of(mode, firing.index);
+            let Some(b) = self.building.as_mut() else {
+                continue;
+            };
+            let before = b.frame.returns.len();
+            for &(block, kind) in &blocks[..count] {
+                self.decoder.decode_block(
+                    payload,
+                    block,
+                    kind,
+                    firing,
+                    time0,
+                    record,
+                    &mut self.summary.decode,
+                    &mut b.frame.returns,
+                );
+            }
+            self.summary.returns += (b.frame.returns.len() - before) as u64;
+        }
+    }
+}
+
+impl Iterator for FrameReader {
+    type Item = Result<Frame>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if let Err(e) = self.pump() {
+            self.done = true;
+            self.ready.clear();
+            return Some(Err(e));
+        }
+        self.ready.pop_front().map(Ok)
+    }
+}

@@ -13,5 +13,6 @@ pub mod frame;
 pub mod ground;
 pub mod hdl32e;
 pub mod noise;
+pub mod options;
 pub mod synth;
 pub mod writers;

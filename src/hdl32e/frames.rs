@@ -15,6 +15,7 @@ use crate::frame::Frame;
 use serde::Serialize;
 use std::collections::VecDeque;
 use std::path::Path;
+use std::sync::Arc;
 
 /// How to decode a capture.
 #[derive(Clone, Debug)]
@@ -118,7 +119,11 @@ pub struct FrameReader {
 
 /// Reads up to [`identify::SAMPLE_PACKETS`] data packets and identifies the sensor.
 pub fn identify_capture(path: &Path) -> Result<Identity> {
-    let mut capture = CaptureReader::open(path)?;
+    identify_in(CaptureReader::open(path)?)
+}
+
+fn identify_in(mut capture: CaptureReader) -> Result<Identity> {
+    let path = capture.path().to_path_buf();
     let mut sample = Sample::default();
     while let Some(d) = capture.next_datagram()? {
         if packet::is_data_packet(d.payload) {
@@ -136,18 +141,40 @@ pub fn identify_capture(path: &Path) -> Result<Identity> {
         } else {
             message
         };
-        Error::Capture {
-            path: path.to_path_buf(),
-            message,
-        }
+        Error::Capture { path, message }
     })
+}
+
+/// Shared bytes usable as a `Cursor` source.
+struct ArcBytes(Arc<[u8]>);
+
+impl AsRef<[u8]> for ArcBytes {
+    fn as_ref(&self) -> &[u8] {
+        &self.0
+    }
 }
 
 impl FrameReader {
     /// Opens a capture, refusing it unless it is an HDL-32E capture.
     pub fn open(path: &Path, options: &DecoderOptions) -> Result<Self> {
-        let identity = identify_capture(path)?;
-        let capture = CaptureReader::open(path)?;
+        Self::with_source(|| CaptureReader::open(path), options)
+    }
+
+    /// Reads a capture held in memory; `name` stands for it in messages.
+    pub fn from_bytes(bytes: Arc<[u8]>, name: &Path, options: &DecoderOptions) -> Result<Self> {
+        Self::with_source(
+            || CaptureReader::from_reader(std::io::Cursor::new(ArcBytes(bytes.clone())), name),
+            options,
+        )
+    }
+
+    /// Identifies the sensor on a first reader, then decodes from a second one.
+    fn with_source(
+        open: impl Fn() -> Result<CaptureReader>,
+        options: &DecoderOptions,
+    ) -> Result<Self> {
+        let identity = identify_in(open()?)?;
+        let capture = open()?;
         let cut = ((options.cut_angle_deg.rem_euclid(360.0) * 100.0).round() as u32) % 36000;
         Ok(FrameReader {
             capture,

@@ -1,0 +1,97 @@
+//! `lidar-noise info`: what a capture contains.
+
+use crate::cli::Global;
+use crate::hdl32e::frames::{CaptureSummary, FrameReader};
+use crate::options::DecoderArgs;
+use anyhow::Result;
+use std::io::Write;
+use std::path::PathBuf;
+
+/// Arguments of `info`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Capture files (pcap or pcapng).
+    #[arg(required = true, value_name = "CAPTURE")]
+    pub captures: Vec<PathBuf>,
+    /// Print JSON (one object per capture, one per line) instead of text.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub decoder: DecoderArgs,
+}
+
+/// Reads each capture to the end and prints its summary.
+pub fn run(args: Args, global: Global) -> Result<()> {
+    let options = args.decoder.to_options()?;
+    let stdout = std::io::stdout();
+    let mut out = stdout.lock();
+    for path in &args.captures {
+        let mut reader = FrameReader::open(path, &options)?;
+        for frame in reader.by_ref() {
+            frame?;
+        }
+        let summary = reader.summary();
+        super::warn_truncation(global, path, &summary);
+        if args.json {
+            let mut value = serde_json::to_value(&summary)?;
+            value["file"] = serde_json::Value::from(path.display().to_string());
+            writeln!(out, "{}", serde_json::to_string(&value)?)?;
+        } else {
+            write_text(&mut out, path, &summary)?;
+        }
+    }
+    Ok(())
+}
+
+fn write_text(out: &mut impl Write, path: &std::path::Path, s: &CaptureSummary) -> Result<()> {
+    let ports: Vec<String> = s
+        .data_ports
+        .iter()
+        .map(|(src, dst)| format!("{src}->{dst}"))
+        .collect();
+    writeln!(out, "{}", path.display())?;
+    writeln!(
+        out,
+        "  format        {:?}, link type {} ({})",
+        s.format, s.linktype, s.linktype_name
+    )?;
+    writeln!(
+        out,
+        "  sensor        {} (product id 0x{:02x}), return mode {:?}",
+        s.product, s.product_id, s.return_mode
+    )?;
+    writeln!(
+        out,
+        "  packets       {} records: {} data, {} position, {} other UDP, {} bad data",
+        s.capture.records, s.data_packets, s.position_packets, s.other_udp, s.bad_data_packets
+    )?;
+    writeln!(
+        out,
+        "  skipped       {} fragments, {} non-UDP, {} non-IPv4, {} malformed",
+        s.capture.fragments, s.capture.not_udp, s.capture.not_ipv4, s.capture.malformed
+    )?;
+    writeln!(out, "  data ports    {}", ports.join(", "))?;
+    if let Some(p) = s.packet_period_us {
+        writeln!(out, "  packet period {p:.0} us")?;
+    }
+    match s.rotation_hz {
+        Some(hz) => writeln!(out, "  rotation      {hz:.2} Hz")?,
+        None => writeln!(out, "  rotation      unknown")?,
+    }
+    writeln!(
+        out,
+        "  frames        {} full, {} partial",
+        s.full_frames, s.partial_frames
+    )?;
+    writeln!(
+        out,
+        "  returns       {} in all, {} in full frames ({} empty slots)",
+        s.returns, s.returns_in_full_frames, s.decode.zero_distance
+    )?;
+    writeln!(out, "  duration      {:.3} s", s.duration_s)?;
+    match s.capture.truncated_at {
+        Some(offset) => writeln!(out, "  truncated     at byte offset {offset}")?,
+        None => writeln!(out, "  truncated     no")?,
+    }
+    Ok(())
+}

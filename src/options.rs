@@ -1,0 +1,102 @@
+//! Validation of command-line values into the plain types the library takes.
+
+use crate::calibration::Calibration;
+use crate::error::{Error, Result};
+use crate::hdl32e::decode::DualSelect;
+use crate::hdl32e::frames::DecoderOptions;
+use std::ops::RangeInclusive;
+use std::path::PathBuf;
+
+/// Decoder settings as given on the command line.
+#[derive(Clone, Debug, clap::Args)]
+pub struct DecoderArgs {
+    /// Per-laser calibration: ROS YAML or VeloView XML (default: the manual's table).
+    #[arg(long, value_name = "FILE")]
+    pub calibration: Option<PathBuf>,
+    /// Use the block azimuth for every laser instead of interpolating by firing time.
+    #[arg(long)]
+    pub no_interpolate: bool,
+    /// Returns to keep from dual-return captures.
+    #[arg(long, value_enum, default_value_t = DualSelect::Both)]
+    pub dual: DualSelect,
+    /// Azimuth in degrees where frames are cut.
+    #[arg(
+        long,
+        value_name = "DEG",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
+    pub cut_angle: f64,
+    /// Also output the partial first and last sweeps of the capture.
+    #[arg(long)]
+    pub keep_partial: bool,
+}
+
+impl DecoderArgs {
+    /// Checks the values and loads the calibration.
+    pub fn to_options(&self) -> Result<DecoderOptions> {
+        if !self.cut_angle.is_finite() {
+            return Err(Error::Invalid(format!(
+                "--cut-angle {}: give an angle in degrees, e.g. --cut-angle 90",
+                self.cut_angle
+            )));
+        }
+        let calibration = match &self.calibration {
+            Some(path) => Calibration::from_file(path)?,
+            None => Calibration::builtin(),
+        };
+        Ok(DecoderOptions {
+            calibration,
+            interpolate_azimuth: !self.no_interpolate,
+            dual: self.dual,
+            cut_angle_deg: self.cut_angle,
+            keep_partial: self.keep_partial,
+        })
+    }
+}
+
+/// Parses an inclusive index range: `N`, `A..B`, `A..` or `..B`.
+pub fn parse_range(flag: &str, text: &str) -> Result<RangeInclusive<u32>> {
+    let bad = || {
+        Error::Invalid(format!(
+            "{flag} {text}: expected N, A..B, A.. or ..B with whole numbers (both ends included)"
+        ))
+    };
+    let num = |s: &str| s.trim().parse::<u32>().map_err(|_| bad());
+    let range = match text.split_once("..") {
+        None => {
+            let n = num(text)?;
+            n..=n
+        }
+        Some((a, b)) => {
+            let lo = if a.trim().is_empty() { 0 } else { num(a)? };
+            let hi = if b.trim().is_empty() {
+                u32::MAX
+            } else {
+                num(b.trim_start_matches('='))?
+            };
+            lo..=hi
+        }
+    };
+    if range.start() > range.end() {
+        return Err(bad());
+    }
+    Ok(range)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_are_inclusive_and_checked() {
+        assert_eq!(parse_range("--frames", "3").unwrap(), 3..=3);
+        assert_eq!(parse_range("--frames", "1..10").unwrap(), 1..=10);
+        assert_eq!(parse_range("--frames", "1..=10").unwrap(), 1..=10);
+        assert_eq!(parse_range("--frames", "5..").unwrap(), 5..=u32::MAX);
+        assert_eq!(parse_range("--frames", "..4").unwrap(), 0..=4);
+        assert!(parse_range("--frames", "4..2").is_err());
+        assert!(parse_range("--frames", "x").is_err());
+        assert!(parse_range("--frames", "-1..2").is_err());
+    }
+}

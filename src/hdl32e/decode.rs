@@ -192,6 +192,7 @@ impl PacketDecoder {
         let (s0, c0) = az_deg.to_radians().sin_cos();
         let (sd, cd) = step_deg.to_radians().sin_cos();
         let (mut c, mut s) = (c0, s0);
+        let (az0, step) = (az_deg as f32, step_deg as f32);
         let fire_us = time0_us + firing.index as f64 * packet::FIRING_US;
         out.reserve(LASERS);
         for j in 0..LASERS {
@@ -206,15 +207,22 @@ impl PacketDecoder {
                 counts.zero_distance += 1;
                 continue;
             }
-            let (ca, sa, az) = if t.has_offsets {
+            let mut az = az0 + step * j as f32;
+            let (ca, sa) = if t.has_offsets {
+                az += t.offset_deg[j];
                 (
                     cj * t.cos_off[j] - sj * t.sin_off[j],
                     sj * t.cos_off[j] + cj * t.sin_off[j],
-                    az_deg + step_deg * j as f64 + f64::from(t.offset_deg[j]),
                 )
             } else {
-                (cj, sj, az_deg + step_deg * j as f64)
+                (cj, sj)
             };
+            // Offsets and interpolation move an azimuth at most a few degrees past a turn.
+            if az >= 360.0 {
+                az -= 360.0;
+            } else if az < 0.0 {
+                az += 360.0;
+            }
             let range = f32::from(raw) * self.resolution + t.dist_off[j];
             let xy = range * t.cos_elev[j];
             out.push(Return {
@@ -222,7 +230,7 @@ impl PacketDecoder {
                 y: -xy * sa,
                 z: range * t.sin_elev[j],
                 range,
-                azimuth: az.rem_euclid(360.0) as f32,
+                azimuth: az,
                 elevation: t.elevation[j],
                 time: (fire_us + j as f64 * packet::LASER_US) * 1e-6,
                 packet: record,

@@ -17,6 +17,9 @@ use std::collections::VecDeque;
 use std::path::Path;
 use std::sync::Arc;
 
+/// Returns reserved for a new frame: one 10 Hz turn of an HDL-32E has at most 69,120.
+const FRAME_CAPACITY: usize = 72_000;
+
 /// How to decode a capture.
 #[derive(Clone, Debug)]
 pub struct DecoderOptions {
@@ -115,6 +118,10 @@ pub struct FrameReader {
     prev_azimuth: Option<u16>,
     summary: CaptureSummary,
     done: bool,
+    /// Copy of the current data packet (the datagram borrows the reader).
+    packet: Vec<u8>,
+    /// Buffers of frames handed back through [`FrameReader::recycle`].
+    spare: Vec<Vec<crate::frame::Return>>,
 }
 
 /// Reads up to [`identify::SAMPLE_PACKETS`] data packets and identifies the sensor.
@@ -218,7 +225,18 @@ impl FrameReader {
                 capture: CaptureStats::default(),
             },
             done: false,
+            packet: Vec::with_capacity(packet::DATA_PACKET_BYTES),
+            spare: Vec::new(),
         })
+    }
+
+    /// Hands a finished frame's buffer back for reuse, sparing an allocation per frame.
+    pub fn recycle(&mut self, frame: Frame) {
+        let mut returns = frame.returns;
+        returns.clear();
+        if self.spare.len() < 2 {
+            self.spare.push(returns);
+        }
     }
 
     /// What the capture contained so far (complete once the iterator is exhausted).
@@ -280,7 +298,10 @@ impl FrameReader {
                     frame: Frame {
                         index,
                         partial: false,
-                        returns: Vec::with_capacity(70_000),
+                        returns: self
+                            .spare
+                            .pop()
+                            .unwrap_or_else(|| Vec::with_capacity(FRAME_CAPACITY)),
                     },
                     first_rel: rel,
                     first_step: step,
@@ -309,12 +330,14 @@ impl FrameReader {
                 self.summary.other_udp += 1;
                 continue;
             }
-            let payload: Vec<u8>;
             let record = d.record;
             let ports = (d.src_port, d.dst_port);
             // The datagram borrows the reader; copy the 1206 bytes so frame state can change.
-            payload = d.payload.to_vec();
+            let mut payload = std::mem::take(&mut self.packet);
+            payload.clear();
+            payload.extend_from_slice(d.payload);
             self.decode_packet(&payload, record, ports);
+            self.packet = payload;
         }
         Ok(())
     }

@@ -1,6 +1,12 @@
 //! Per-laser calibration: elevation, azimuth offset and ring of each HDL-32E laser.
+//!
+//! [`Calibration::from_file`] reads the two formats users have: the ROS velodyne
+//! driver's YAML ([`yaml`]) and VeloView's XML ([`xml`]).
 
-use crate::error::Result;
+pub mod xml;
+pub mod yaml;
+
+use crate::error::{Error, Result};
 use std::path::Path;
 
 /// Number of lasers in an HDL-32E.
@@ -11,8 +17,15 @@ pub const LASERS: usize = 32;
 pub struct LaserCal {
     /// Elevation angle in degrees (positive up).
     pub elevation_deg: f64,
-    /// Azimuth offset in degrees added to the block azimuth (ROS `rot_correction`,
-    /// converted to degrees, same sign).
+    /// Azimuth offset in degrees: point azimuth = block azimuth + `azimuth_offset_deg`
+    /// (both clockwise seen from above, as in the packet).
+    ///
+    /// Note the sign: the ROS driver (`rawdata.cc`, `cos(a - rot)` via
+    /// `cos_rot_table_ * cos_rot_correction + sin_rot_table_ * sin_rot_correction`) and
+    /// VeloView (`realAzimuth = azimuth/100 - rotationalCorrection`) both compute the
+    /// point azimuth as block azimuth MINUS the rotational correction, so this field is
+    /// the NEGATED ROS `rot_correction` (radians, converted to degrees) or VeloView
+    /// `rotCorrection_` (degrees).
     pub azimuth_offset_deg: f64,
     /// Additive distance correction in metres (ROS `dist_correction`).
     pub distance_offset_m: f64,
@@ -54,12 +67,24 @@ impl Calibration {
         }
     }
 
-    /// Reads a ROS YAML or VeloView XML calibration file.
+    /// Reads a ROS YAML or VeloView XML calibration file, telling them apart by content.
+    ///
+    /// A file whose first non-blank character is `<` is XML, anything else is YAML; the
+    /// extension is not trusted because users rename these files freely.
     pub fn from_file(path: &Path) -> Result<Self> {
-        Err(crate::error::Error::Config {
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let text = String::from_utf8(bytes).map_err(|e| Error::Config {
             path: path.to_path_buf(),
-            message: "calibration files are not supported yet".into(),
-        })
+            message: format!(
+                "not a text file (invalid UTF-8 at byte {})",
+                e.utf8_error().valid_up_to()
+            ),
+        })?;
+        if looks_like_xml(&text) {
+            xml::parse_str(&text, path)
+        } else {
+            yaml::parse_str(&text, path)
+        }
     }
 
     /// Ring of each laser: laser ids sorted by elevation, 0 = lowest.
@@ -89,6 +114,131 @@ impl Calibration {
     }
 }
 
+/// True when the first non-blank character (after an optional BOM) is `<`.
+fn looks_like_xml(text: &str) -> bool {
+    text.trim_start_matches('\u{feff}')
+        .trim_start()
+        .starts_with('<')
+}
+
+/// One laser entry as read from a file, before validation.
+#[derive(Clone, Debug)]
+struct RawLaser {
+    /// Laser id as written in the file.
+    id: i64,
+    /// Where the entry is, for messages ("lasers[3] (line 12)").
+    place: String,
+    /// Elevation in degrees.
+    elevation_deg: f64,
+    /// Azimuth offset in degrees, already in the `azimuth_offset_deg` sign convention.
+    azimuth_offset_deg: f64,
+    /// Distance offset in metres.
+    distance_offset_m: f64,
+    /// Corrections we do not model, by file key, with their values (must be zero).
+    unsupported: Vec<(&'static str, f64)>,
+}
+
+impl RawLaser {
+    /// True for an all-zero entry (the unused upper-block slots of HDL-32E files).
+    fn is_placeholder(&self) -> bool {
+        self.elevation_deg == 0.0
+            && self.azimuth_offset_deg == 0.0
+            && self.distance_offset_m == 0.0
+            && self.unsupported.iter().all(|&(_, v)| v == 0.0)
+    }
+}
+
+/// Checks the entries of a file and builds the calibration.
+///
+/// Real HDL-32E files (ROS `32db.yaml`, VeloView `HDL-32.xml`) carry 64 entries of
+/// which ids 32..63 are all-zero placeholders; those are skipped. Any non-zero entry
+/// outside 0..31 is an error, as is a missing or repeated id in 0..31.
+fn assemble(path: &Path, raw: Vec<RawLaser>, distance_resolution_m: f64) -> Result<Calibration> {
+    let err = |message: String| Error::Config {
+        path: path.to_path_buf(),
+        message,
+    };
+    if !(distance_resolution_m.is_finite() && distance_resolution_m > 0.0) {
+        return Err(err(format!(
+            "distance resolution must be a positive number of metres, got {distance_resolution_m}"
+        )));
+    }
+    let mut slots: [Option<LaserCal>; LASERS] = [None; LASERS];
+    let mut places: [Option<String>; LASERS] = std::array::from_fn(|_| None);
+    for laser in raw {
+        let id = laser.id;
+        let in_range = (0..LASERS as i64).contains(&id);
+        if !in_range {
+            if id >= LASERS as i64 && laser.is_placeholder() {
+                continue;
+            }
+            return Err(err(format!(
+                "{}: laser id {id} is outside 0..{} (an HDL-32E has {LASERS} lasers; only \
+                 all-zero placeholder entries may use other ids)",
+                laser.place,
+                LASERS - 1
+            )));
+        }
+        let idx = id as usize;
+        if let Some(first) = &places[idx] {
+            return Err(err(format!(
+                "{}: duplicate laser id {id} (first defined at {first})",
+                laser.place
+            )));
+        }
+        for &(key, value) in &laser.unsupported {
+            if value != 0.0 {
+                return Err(err(format!(
+                    "{}: laser {id}: `{key}` = {value} is not supported (only zero \
+                     horizontal/vertical offset corrections can be used)",
+                    laser.place
+                )));
+            }
+        }
+        for (what, value) in [
+            ("elevation", laser.elevation_deg),
+            ("rotational correction", laser.azimuth_offset_deg),
+            ("distance correction", laser.distance_offset_m),
+        ] {
+            if !value.is_finite() {
+                return Err(err(format!(
+                    "{}: laser {id}: {what} is not a finite number",
+                    laser.place
+                )));
+            }
+        }
+        if laser.elevation_deg.abs() > 90.0 {
+            return Err(err(format!(
+                "{}: laser {id}: elevation {} degrees is outside [-90, 90] (radians and degrees mixed up?)",
+                laser.place, laser.elevation_deg
+            )));
+        }
+        slots[idx] = Some(LaserCal {
+            elevation_deg: laser.elevation_deg,
+            azimuth_offset_deg: laser.azimuth_offset_deg,
+            distance_offset_m: laser.distance_offset_m,
+        });
+        places[idx] = Some(laser.place);
+    }
+    let missing: Vec<String> = (0..LASERS)
+        .filter(|&i| slots[i].is_none())
+        .map(|i| i.to_string())
+        .collect();
+    if !missing.is_empty() {
+        return Err(err(format!(
+            "missing laser id(s) {}: an HDL-32E calibration needs ids 0..{} exactly once",
+            missing.join(", "),
+            LASERS - 1
+        )));
+    }
+    let lasers = slots.map(|s| s.expect("checked above: every slot is filled"));
+    Ok(Calibration {
+        lasers,
+        distance_resolution_m,
+        source: path.display().to_string(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -99,8 +249,10 @@ mod tests {
         let rings = cal.rings();
         assert_eq!(rings[0], 0, "laser 0 is the lowest");
         assert_eq!(rings[31], 31, "laser 31 is the highest");
-        assert_eq!(rings[30], 19);
-        assert_eq!(rings[7], 15);
+        // Laser 30 (-10.67) is the highest of the 16 even (lower) lasers; laser 7
+        // (-5.33) is the fourth odd one above it.
+        assert_eq!(rings[30], 15);
+        assert_eq!(rings[7], 19);
         let mut seen = rings.to_vec();
         seen.sort();
         assert_eq!(seen, (0..32).collect::<Vec<u8>>());
@@ -108,17 +260,90 @@ mod tests {
 
     #[test]
     fn builtin_table_matches_the_formula() {
-        for id in 0..LASERS {
+        for (id, &table) in BUILTIN_ELEVATION_DEG.iter().enumerate() {
             let formula = if id % 2 == 0 {
                 -30.67 + (id / 2) as f64 * 1.333
             } else {
                 -9.33 + ((id - 1) / 2) as f64 * 1.333
             };
             assert!(
-                (BUILTIN_ELEVATION_DEG[id] - formula).abs() < 0.01,
-                "laser {id}: table {} formula {formula}",
-                BUILTIN_ELEVATION_DEG[id]
+                // The manual's steps are 4/3 degree rounded to 0.01, the formula's 1.333.
+                (table - formula).abs() < 0.015,
+                "laser {id}: table {table} formula {formula}"
             );
         }
+    }
+
+    fn fixture(name: &str) -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/calibration")
+            .join(name)
+    }
+
+    fn assert_matches_builtin(cal: &Calibration) {
+        let builtin = Calibration::builtin();
+        for id in 0..LASERS {
+            let (a, b) = (cal.lasers[id], builtin.lasers[id]);
+            assert!(
+                (a.elevation_deg - b.elevation_deg).abs() < 1e-9,
+                "laser {id}"
+            );
+            assert!((a.azimuth_offset_deg - b.azimuth_offset_deg).abs() < 1e-9);
+            assert!((a.distance_offset_m - b.distance_offset_m).abs() < 1e-9);
+        }
+        assert!((cal.distance_resolution_m - builtin.distance_resolution_m).abs() < 1e-15);
+    }
+
+    #[test]
+    fn fixture_files_match_the_builtin_table() {
+        for name in ["hdl32e_ros.yaml", "hdl32e_veloview.xml"] {
+            let path = fixture(name);
+            let cal = Calibration::from_file(&path).unwrap();
+            assert_matches_builtin(&cal);
+            assert_eq!(cal.source, path.display().to_string());
+        }
+    }
+
+    #[test]
+    fn format_is_detected_by_content_not_extension() {
+        let dir = tempfile::tempdir().unwrap();
+        let yaml_as_xml = dir.path().join("calib.xml");
+        std::fs::copy(fixture("hdl32e_ros.yaml"), &yaml_as_xml).unwrap();
+        assert_matches_builtin(&Calibration::from_file(&yaml_as_xml).unwrap());
+        let xml_as_yaml = dir.path().join("calib.yaml");
+        std::fs::copy(fixture("hdl32e_veloview.xml"), &xml_as_yaml).unwrap();
+        assert_matches_builtin(&Calibration::from_file(&xml_as_yaml).unwrap());
+    }
+
+    #[test]
+    fn malformed_fixtures_name_file_and_line() {
+        let path = fixture("duplicate_id.yaml");
+        let m = Calibration::from_file(&path).unwrap_err().to_string();
+        assert!(m.starts_with(&path.display().to_string()), "{m}");
+        assert!(
+            m.contains("lasers[9] (line 12): duplicate laser id 8"),
+            "{m}"
+        );
+
+        let path = fixture("wrong_type.xml");
+        let m = Calibration::from_file(&path).unwrap_err().to_string();
+        assert!(m.starts_with(&path.display().to_string()), "{m}");
+        assert!(
+            m.contains("line 40: <rotCorrection_> holds \"zero\""),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn missing_and_binary_files_are_errors() {
+        let m = Calibration::from_file(Path::new("/nonexistent/calib.yaml"))
+            .unwrap_err()
+            .to_string();
+        assert!(m.contains("/nonexistent/calib.yaml"), "{m}");
+        let dir = tempfile::tempdir().unwrap();
+        let bin = dir.path().join("calib.bin");
+        std::fs::write(&bin, [0xffu8, 0xfe, 0x00, 0x80]).unwrap();
+        let m = Calibration::from_file(&bin).unwrap_err().to_string();
+        assert!(m.contains("invalid UTF-8"), "{m}");
     }
 }

@@ -1,0 +1,273 @@
+//! VeloView calibration XML (boost serialization, e.g. VeloView's `share/HDL-32.xml`).
+//!
+//! Layout: `<boost_serialization><DB>` holding `<distLSB_>` (centimetres) and
+//! `<points_>`, a list of `<item><px>` with `<id_>`, `<rotCorrection_>` and
+//! `<vertCorrection_>` (degrees), `<distCorrection_>`, `<vertOffsetCorrection_>` and
+//! `<horizOffsetCorrection_>` (centimetres) and intensity keys. Units follow VeloView's
+//! `vtkVelodynePacketInterpreter::LoadCalibration`, which divides distances and
+//! `distLSB_` by 100 and keeps angles in degrees. `distCorrectionX_`/`Y_`,
+//! `focalDistance_`, `focalSlope_`, `enabled_`, colours and intensity limits are ignored
+//! (VeloView applies neither two-point nor intensity correction to the HDL-32E).
+
+use super::{assemble, Calibration, RawLaser};
+use crate::error::{Error, Result};
+use roxmltree::{Document, Node};
+use std::path::Path;
+
+/// VeloView's default distance unit, in centimetres (2 mm).
+const DEFAULT_DIST_LSB_CM: f64 = 0.2;
+
+/// Parses VeloView XML calibration text; `path` is only used in messages and as the source.
+pub fn parse_str(text: &str, path: &Path) -> Result<Calibration> {
+    let err = |message: String| Error::Config {
+        path: path.to_path_buf(),
+        message,
+    };
+    // VeloView files start with `<!DOCTYPE boost_serialization>`, which roxmltree
+    // refuses unless DTDs are allowed (it still expands no external entities).
+    let options = roxmltree::ParsingOptions {
+        allow_dtd: true,
+        ..Default::default()
+    };
+    // roxmltree's message already ends with "at L:C".
+    let doc = Document::parse_with_options(text, options)
+        .map_err(|e| err(format!("not a well-formed XML file: {e}")))?;
+    let line_of = |node: Node| doc.text_pos_at(node.range().start).row;
+
+    let db = doc
+        .descendants()
+        .find(|n| n.has_tag_name("DB"))
+        .ok_or_else(|| {
+            err("no <DB> element: not a VeloView calibration file (expected <boost_serialization><DB>)".into())
+        })?;
+    let dist_lsb_cm = match child(db, "distLSB_") {
+        Some(node) => number(node, &line_of).map_err(err)?,
+        None => DEFAULT_DIST_LSB_CM,
+    };
+    let points = child(db, "points_").ok_or_else(|| {
+        err(format!(
+            "<DB> at line {} has no <points_> list",
+            line_of(db)
+        ))
+    })?;
+
+    let mut raw = Vec::new();
+    for (i, item) in points
+        .children()
+        .filter(|n| n.has_tag_name("item"))
+        .enumerate()
+    {
+        let px = child(item, "px").ok_or_else(|| {
+            err(format!(
+                "points_ item {i} at line {} has no <px>",
+                line_of(item)
+            ))
+        })?;
+        let place = format!("points_ item {i} (line {})", line_of(px));
+        let required = |name: &str| -> Result<f64> {
+            let node = child(px, name).ok_or_else(|| err(format!("{place}: missing <{name}>")))?;
+            number(node, &line_of).map_err(err)
+        };
+        let optional = |name: &str| -> Result<f64> {
+            match child(px, name) {
+                Some(node) => number(node, &line_of).map_err(err),
+                None => Ok(0.0),
+            }
+        };
+        let id_value = required("id_")?;
+        if id_value.fract() != 0.0 || id_value.abs() > 1e9 {
+            return Err(err(format!("{place}: <id_> {id_value} is not an integer")));
+        }
+        let rot_deg = required("rotCorrection_")?;
+        let vert_deg = required("vertCorrection_")?;
+        let dist_cm = optional("distCorrection_")?;
+        raw.push(RawLaser {
+            id: id_value as i64,
+            place,
+            elevation_deg: vert_deg,
+            // VeloView: realAzimuth = azimuth/100 - rotationalCorrection.
+            azimuth_offset_deg: -rot_deg,
+            distance_offset_m: dist_cm / 100.0,
+            unsupported: vec![
+                (
+                    "horizOffsetCorrection_",
+                    optional("horizOffsetCorrection_")?,
+                ),
+                ("vertOffsetCorrection_", optional("vertOffsetCorrection_")?),
+            ],
+        });
+    }
+    assemble(path, raw, dist_lsb_cm / 100.0)
+}
+
+/// First child element called `name`.
+fn child<'a, 'i>(node: Node<'a, 'i>, name: &str) -> Option<Node<'a, 'i>> {
+    node.children().find(|n| n.has_tag_name(name))
+}
+
+/// Text of an element as a number; the error names the element and its line.
+fn number(node: Node, line_of: &dyn Fn(Node) -> u32) -> std::result::Result<f64, String> {
+    let text = node.text().unwrap_or("").trim();
+    text.parse::<f64>().map_err(|_| {
+        format!(
+            "line {}: <{}> holds {text:?}, expected a number",
+            line_of(node),
+            node.tag_name().name()
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibration::{BUILTIN_ELEVATION_DEG, LASERS};
+    use std::path::PathBuf;
+
+    fn fake_path() -> PathBuf {
+        PathBuf::from("/calib/test.xml")
+    }
+
+    /// VeloView-style XML, one `<px>` field per line like VeloView writes it.
+    fn veloview_xml(ids: &[i64], vert_deg: &[f64], rot_deg: f64, horiz_cm: f64) -> String {
+        let mut s = String::from(
+            "<?xml version=\"1.0\" encoding=\"UTF-8\" standalone=\"yes\" ?>\n\
+             <!DOCTYPE boost_serialization>\n\
+             <boost_serialization signature=\"serialization::archive\" version=\"4\">\n\
+             <DB class_id=\"0\" tracking_level=\"1\" version=\"0\" object_id=\"_0\">\n\
+             \t<distLSB_>0.2</distLSB_>\n\
+             \t<points_ class_id=\"7\" tracking_level=\"0\" version=\"0\">\n\
+             \t\t<count>32</count>\n\
+             \t\t<item_version>1</item_version>\n",
+        );
+        for (&id, &v) in ids.iter().zip(vert_deg) {
+            s.push_str(&format!(
+                "\t\t<item>\n\t\t\t<px>\n\t\t\t\t<id_>{id}</id_>\n\
+                 \t\t\t\t<rotCorrection_>{rot_deg:?}</rotCorrection_>\n\
+                 \t\t\t\t<vertCorrection_>{v:?}</vertCorrection_>\n\
+                 \t\t\t\t<distCorrection_>0</distCorrection_>\n\
+                 \t\t\t\t<vertOffsetCorrection_>0</vertOffsetCorrection_>\n\
+                 \t\t\t\t<horizOffsetCorrection_>{horiz_cm:?}</horizOffsetCorrection_>\n\
+                 \t\t\t</px>\n\t\t</item>\n"
+            ));
+        }
+        s.push_str("\t</points_>\n</DB>\n</boost_serialization>\n");
+        s
+    }
+
+    fn ids() -> Vec<i64> {
+        (0..32).collect()
+    }
+
+    #[test]
+    fn builtin_angles_round_trip() {
+        let text = veloview_xml(&ids(), &BUILTIN_ELEVATION_DEG, 0.0, 0.0);
+        let cal = parse_str(&text, &fake_path()).unwrap();
+        let builtin = Calibration::builtin();
+        for id in 0..LASERS {
+            let (a, b) = (cal.lasers[id], builtin.lasers[id]);
+            assert!(
+                (a.elevation_deg - b.elevation_deg).abs() < 1e-9,
+                "laser {id}"
+            );
+            assert!((a.azimuth_offset_deg - b.azimuth_offset_deg).abs() < 1e-9);
+            assert!((a.distance_offset_m - b.distance_offset_m).abs() < 1e-9);
+        }
+        // distLSB_ 0.2 cm = 2 mm.
+        assert!((cal.distance_resolution_m - 0.002).abs() < 1e-15);
+        assert_eq!(cal.rings(), builtin.rings());
+    }
+
+    #[test]
+    fn rot_correction_sign_and_units() {
+        let text = veloview_xml(&ids(), &BUILTIN_ELEVATION_DEG, -1.5, 0.0)
+            .replace("<distCorrection_>0<", "<distCorrection_>3.5<");
+        let cal = parse_str(&text, &fake_path()).unwrap();
+        assert_eq!(cal.lasers[7].azimuth_offset_deg, 1.5);
+        assert!((cal.lasers[7].distance_offset_m - 0.035).abs() < 1e-15);
+    }
+
+    #[test]
+    fn placeholders_above_31_are_skipped_like_hdl32_xml() {
+        let mut all_ids = ids();
+        let mut vert = BUILTIN_ELEVATION_DEG.to_vec();
+        all_ids.extend(32..64);
+        vert.extend(std::iter::repeat_n(0.0, 32));
+        assert!(parse_str(&veloview_xml(&all_ids, &vert, 0.0, 0.0), &fake_path()).is_ok());
+        // A non-zero entry at id 40 is not a placeholder.
+        vert[40] = 3.0;
+        let m = parse_str(&veloview_xml(&all_ids, &vert, 0.0, 0.0), &fake_path())
+            .unwrap_err()
+            .to_string();
+        assert!(m.contains("laser id 40 is outside 0..31"), "{m}");
+        assert!(m.contains("points_ item 40 (line"), "{m}");
+    }
+
+    #[test]
+    fn missing_laser_is_named() {
+        let ids: Vec<i64> = (0..32).filter(|&i| i != 0).collect();
+        let m = parse_str(
+            &veloview_xml(&ids, &BUILTIN_ELEVATION_DEG, 0.0, 0.0),
+            &fake_path(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(m.contains("/calib/test.xml"), "{m}");
+        assert!(m.contains("missing laser id(s) 0"), "{m}");
+    }
+
+    #[test]
+    fn duplicate_id_names_line() {
+        let mut ids = ids();
+        ids[1] = 0;
+        let m = parse_str(
+            &veloview_xml(&ids, &BUILTIN_ELEVATION_DEG, 0.0, 0.0),
+            &fake_path(),
+        )
+        .unwrap_err()
+        .to_string();
+        // 8 header lines, 10 lines per item, <px> is the 2nd line of an item.
+        assert!(m.contains("points_ item 1 (line 20)"), "{m}");
+        assert!(
+            m.contains("duplicate laser id 0 (first defined at points_ item 0 (line 10))"),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn wrong_type_names_element_and_line() {
+        let text = veloview_xml(&ids(), &BUILTIN_ELEVATION_DEG, 0.0, 0.0).replacen(
+            "<vertCorrection_>-30.67<",
+            "<vertCorrection_>low<",
+            1,
+        );
+        let m = parse_str(&text, &fake_path()).unwrap_err().to_string();
+        assert!(m.contains("/calib/test.xml"), "{m}");
+        assert!(
+            m.contains("line 13: <vertCorrection_> holds \"low\""),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn offsets_are_refused_with_laser_and_key() {
+        let m = parse_str(
+            &veloview_xml(&ids(), &BUILTIN_ELEVATION_DEG, 0.0, 2.6),
+            &fake_path(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(m.contains("laser 0"), "{m}");
+        assert!(m.contains("horizOffsetCorrection_"), "{m}");
+        assert!(m.contains("not supported"), "{m}");
+    }
+
+    #[test]
+    fn malformed_xml_and_wrong_root() {
+        let m = parse_str("<DB><points_></DB>", &fake_path())
+            .unwrap_err()
+            .to_string();
+        assert!(m.contains("/calib/test.xml") && m.contains("1:"), "{m}");
+        let m = parse_str("<other/>", &fake_path()).unwrap_err().to_string();
+        assert!(m.contains("no <DB> element"), "{m}");
+    }
+}

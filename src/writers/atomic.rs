@@ -1,0 +1,183 @@
+//! All-or-nothing file output: write to a temporary file beside the target, rename on success.
+//!
+//! A crash, an error or Ctrl-C mid-write leaves at most a stray `.NAME.*.tmp` file (removed
+//! on drop where the process survives), never a truncated output. Paths that are inputs of
+//! the run are refused as targets so a typo cannot overwrite a capture.
+
+use crate::error::{Error, Result};
+use std::fs;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+/// Size of the write buffer between the writer closure and the temporary file.
+const BUFFER_BYTES: usize = 1 << 20;
+
+/// Writes `path` through `write`, atomically, refusing to overwrite any of `protected_inputs`.
+///
+/// `write` receives a buffered writer onto a temporary file created in `path`'s folder
+/// (so the final rename never crosses file systems). Only when `write` returns `Ok` and
+/// the buffer is flushed is the file renamed onto `path`, replacing any existing file.
+/// The folder must exist. The file gets mode 0644 on Unix (temporary files are 0600).
+pub fn write_atomically<F>(path: &Path, protected_inputs: &[&Path], write: F) -> Result<()>
+where
+    F: FnOnce(&mut dyn Write) -> std::io::Result<()>,
+{
+    refuse_inputs(path, protected_inputs)?;
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .ok_or_else(|| Error::Invalid(format!("{}: not a file name", path.display())))?;
+    let prefix = format!(".{}.", name.to_string_lossy());
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(".tmp");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(fs::Permissions::from_mode(0o644));
+    }
+    let mut tmp = builder.tempfile_in(&dir).map_err(|e| Error::io(path, e))?;
+    {
+        let mut out = BufWriter::with_capacity(BUFFER_BYTES, tmp.as_file_mut());
+        write(&mut out).map_err(|e| Error::io(path, e))?;
+        out.flush().map_err(|e| Error::io(path, e))?;
+    }
+    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
+    Ok(())
+}
+
+/// Errors when `target` names the same file as one of `inputs`.
+///
+/// Paths are compared canonicalized (symlinks and `..` resolved; a target that does not
+/// exist yet is resolved through its folder), and on Unix also by device and inode so a
+/// hard link to an input is caught too.
+pub fn refuse_inputs(target: &Path, inputs: &[&Path]) -> Result<()> {
+    let target_resolved = resolve(target);
+    let target_meta = fs::metadata(target).ok();
+    for input in inputs {
+        let same_path = match (&target_resolved, resolve(input)) {
+            (Some(a), Some(b)) => *a == b,
+            _ => false,
+        };
+        let same_file = match (&target_meta, fs::metadata(input).ok()) {
+            (Some(a), Some(b)) => same_inode(a, &b),
+            _ => false,
+        };
+        if same_path || same_file {
+            return Err(Error::Invalid(format!(
+                "{}: refusing to overwrite an input file ({})",
+                target.display(),
+                input.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Canonical form of `path`, or of its folder joined with its name when it does not exist.
+fn resolve(path: &Path) -> Option<PathBuf> {
+    if let Ok(p) = fs::canonicalize(path) {
+        return Some(p);
+    }
+    let name = path.file_name()?;
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    fs::canonicalize(dir).ok().map(|d| d.join(name))
+}
+
+#[cfg(unix)]
+fn same_inode(a: &fs::Metadata, b: &fs::Metadata) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    a.dev() == b.dev() && a.ino() == b.ino()
+}
+
+#[cfg(not(unix))]
+fn same_inode(_: &fs::Metadata, _: &fs::Metadata) -> bool {
+    false
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp_entries(dir: &Path) -> Vec<String> {
+        fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".tmp"))
+            .collect()
+    }
+
+    #[test]
+    fn writes_and_replaces_on_success() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out.txt");
+        fs::write(&out, "old").unwrap();
+        write_atomically(&out, &[], |w| w.write_all(b"new contents")).unwrap();
+        assert_eq!(fs::read_to_string(&out).unwrap(), "new contents");
+        assert!(tmp_entries(dir.path()).is_empty());
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = fs::metadata(&out).unwrap().permissions().mode() & 0o777;
+            assert_eq!(mode, 0o644);
+        }
+    }
+
+    #[test]
+    fn failure_keeps_old_file_and_leaves_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out.txt");
+        fs::write(&out, "old").unwrap();
+        let err = write_atomically(&out, &[], |w| {
+            w.write_all(b"partial")?;
+            Err(std::io::Error::other("disk on fire"))
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("out.txt"), "{err}");
+        assert!(err.to_string().contains("disk on fire"), "{err}");
+        assert_eq!(fs::read_to_string(&out).unwrap(), "old");
+        assert!(tmp_entries(dir.path()).is_empty());
+    }
+
+    #[test]
+    fn refuses_inputs_by_other_spellings_symlinks_and_hard_links() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("capture.pcap");
+        fs::write(&input, "precious").unwrap();
+        let sub = dir.path().join("sub");
+        fs::create_dir(&sub).unwrap();
+        let dotted = sub.join("..").join("capture.pcap");
+        let mut targets = vec![input.clone(), dotted];
+        #[cfg(unix)]
+        {
+            let link = dir.path().join("link.pcap");
+            std::os::unix::fs::symlink(&input, &link).unwrap();
+            let hard = dir.path().join("hard.pcap");
+            fs::hard_link(&input, &hard).unwrap();
+            targets.push(link);
+            targets.push(hard);
+        }
+        for target in &targets {
+            let err = write_atomically(target, &[&input], |w| w.write_all(b"x")).unwrap_err();
+            assert!(err.to_string().contains("refusing to overwrite"), "{err}");
+        }
+        assert_eq!(fs::read_to_string(&input).unwrap(), "precious");
+        // A different file in the same folder is fine.
+        let other = dir.path().join("frame.ply");
+        write_atomically(&other, &[&input], |w| w.write_all(b"x")).unwrap();
+        assert_eq!(fs::read(&other).unwrap(), b"x");
+    }
+
+    #[test]
+    fn missing_folder_is_an_error_naming_the_target() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("no/such/dir/out.ply");
+        let err = write_atomically(&out, &[], |w| w.write_all(b"x")).unwrap_err();
+        assert!(err.to_string().contains("out.ply"), "{err}");
+    }
+}

@@ -1,0 +1,402 @@
+//! PLY point-cloud output of one frame (binary little-endian by default, or ASCII).
+//!
+//! One `vertex` element (the name CloudCompare, Open3D and MeshLab look for) with a fixed
+//! property list, then optional per-point columns:
+//!
+//! | property | type | meaning |
+//! |---|---|---|
+//! | `x`, `y`, `z` | float | metres, ROS velodyne axes (x forward, y left, z up) |
+//! | `intensity` | uchar | intensity byte from the sensor |
+//! | `ring` | uchar | ring, 0 = lowest laser |
+//! | `laser` | uchar | laser id (firing order) |
+//! | `azimuth` | float | degrees, clockwise from above |
+//! | `range` | float | metres |
+//! | `time` | float | seconds since the frame start time given by the caller |
+//! | `range_clean` | float | optional: range before noise was applied |
+//! | `power` | float | optional: received power (model units) |
+//! | `fate` | uchar | optional: what the noise/detection stages did (codes in comments) |
+//! | `ground` | uchar | optional: 1 = ground, 0 = not |
+//! | `cluster` | int | optional: cluster id, -1 = none |
+//!
+//! No 64-bit properties: many readers (Open3D among them) reject or mangle them, which is
+//! also why `time` is relative to the frame and stored as float (about 0.1 µs resolution
+//! over a 0.1 s sweep). Provenance goes in `comment` lines.
+
+use super::Output;
+use crate::error::{Error, Result};
+use crate::frame::Return;
+use std::fmt::Write as _;
+use std::io::Write;
+
+/// The fixed properties every file has, in order, as (name, PLY type).
+pub const BASE_PROPERTIES: [(&str, &str); 9] = [
+    ("x", "float"),
+    ("y", "float"),
+    ("z", "float"),
+    ("intensity", "uchar"),
+    ("ring", "uchar"),
+    ("laser", "uchar"),
+    ("azimuth", "float"),
+    ("range", "float"),
+    ("time", "float"),
+];
+
+/// The optional properties, in the order they are written when present, as (name, PLY type).
+pub const OPTIONAL_PROPERTIES: [(&str, &str); 5] = [
+    ("range_clean", "float"),
+    ("power", "float"),
+    ("fate", "uchar"),
+    ("ground", "uchar"),
+    ("cluster", "int"),
+];
+
+/// Extra per-point columns; each present slice must have one value per return.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PlyColumns<'a> {
+    /// Range before noise, metres (`float range_clean`).
+    pub range_clean: Option<&'a [f32]>,
+    /// Received power, model units (`float power`).
+    pub power: Option<&'a [f32]>,
+    /// Fate code of each point (`uchar fate`); describe the codes in the comments.
+    pub fate: Option<&'a [u8]>,
+    /// Ground flag, 1 = ground (`uchar ground`).
+    pub ground: Option<&'a [u8]>,
+    /// Cluster id, -1 = none (`int cluster`).
+    pub cluster: Option<&'a [i32]>,
+}
+
+impl PlyColumns<'_> {
+    /// Length of each present column with its name, in file order.
+    fn lengths(&self) -> [(&'static str, Option<usize>); 5] {
+        [
+            ("range_clean", self.range_clean.map(<[f32]>::len)),
+            ("power", self.power.map(<[f32]>::len)),
+            ("fate", self.fate.map(<[u8]>::len)),
+            ("ground", self.ground.map(<[u8]>::len)),
+            ("cluster", self.cluster.map(<[i32]>::len)),
+        ]
+    }
+}
+
+/// How the payload is encoded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PlyEncoding {
+    /// `binary_little_endian 1.0`: compact and fast (the default).
+    #[default]
+    BinaryLittleEndian,
+    /// `ascii 1.0`: human-readable; floats are written in shortest round-trip form.
+    Ascii,
+}
+
+/// One frame ready to be written as PLY.
+#[derive(Clone, Copy, Debug)]
+pub struct PlyFrame<'a> {
+    /// The points, in the order they are written.
+    pub returns: &'a [Return],
+    /// Optional extra columns.
+    pub columns: PlyColumns<'a>,
+    /// Time subtracted from each return's time to give the `time` property (seconds).
+    pub frame_start_time: f64,
+    /// Source file, for the provenance comment.
+    pub source: &'a str,
+    /// Frame index within the source, for the provenance comment.
+    pub frame_index: u32,
+    /// Extra comment lines (e.g. fate codes), one per entry, without `comment `.
+    pub comments: &'a [String],
+    /// Payload encoding.
+    pub encoding: PlyEncoding,
+}
+
+impl<'a> PlyFrame<'a> {
+    /// A binary frame with no extra columns or comments.
+    pub fn new(
+        returns: &'a [Return],
+        source: &'a str,
+        frame_index: u32,
+        frame_start_time: f64,
+    ) -> Self {
+        PlyFrame {
+            returns,
+            columns: PlyColumns::default(),
+            frame_start_time,
+            source,
+            frame_index,
+            comments: &[],
+            encoding: PlyEncoding::default(),
+        }
+    }
+
+    /// Checks that every present column has one value per return.
+    pub fn check(&self) -> Result<()> {
+        let n = self.returns.len();
+        for (name, len) in self.columns.lengths() {
+            if let Some(len) = len {
+                if len != n {
+                    return Err(Error::Invalid(format!(
+                        "PLY column `{name}` has {len} values for {n} points (frame {} of {})",
+                        self.frame_index, self.source
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The header text, from `ply` to `end_header` inclusive.
+    pub fn header(&self) -> String {
+        let mut h = String::with_capacity(1024);
+        h.push_str("ply\n");
+        h.push_str(match self.encoding {
+            PlyEncoding::BinaryLittleEndian => "format binary_little_endian 1.0\n",
+            PlyEncoding::Ascii => "format ascii 1.0\n",
+        });
+        let mut comment = |text: &str| {
+            // A line break inside a comment would end the header line early.
+            let clean: String = text
+                .chars()
+                .map(|c| if c == '\n' || c == '\r' { ' ' } else { c })
+                .collect();
+            h.push_str("comment ");
+            h.push_str(&clean);
+            h.push('\n');
+        };
+        comment(&format!("lidar-noise {}", env!("CARGO_PKG_VERSION")));
+        comment(&format!("source {}", self.source));
+        comment(&format!("frame {}", self.frame_index));
+        comment(&format!(
+            "time is seconds since {:.6} s past the hour",
+            self.frame_start_time
+        ));
+        for c in self.comments {
+            comment(c);
+        }
+        let _ = writeln!(h, "element vertex {}", self.returns.len());
+        for (name, ty) in BASE_PROPERTIES.iter().chain(self.present_optional()) {
+            let _ = writeln!(h, "property {ty} {name}");
+        }
+        h.push_str("end_header\n");
+        h
+    }
+
+    /// The optional properties present in this frame, in file order.
+    fn present_optional(&self) -> impl Iterator<Item = &'static (&'static str, &'static str)> {
+        let present = self.columns.lengths().map(|(_, len)| len.is_some());
+        OPTIONAL_PROPERTIES
+            .iter()
+            .zip(present)
+            .filter_map(|(p, here)| here.then_some(p))
+    }
+
+    /// Bytes per point in the binary encoding.
+    fn stride(&self) -> usize {
+        let c = &self.columns;
+        27 + 4 * usize::from(c.range_clean.is_some())
+            + 4 * usize::from(c.power.is_some())
+            + usize::from(c.fate.is_some())
+            + usize::from(c.ground.is_some())
+            + 4 * usize::from(c.cluster.is_some())
+    }
+
+    /// Writes the whole file (header and payload) to `out`.
+    pub fn write<W: Write + ?Sized>(&self, out: &mut W) -> std::io::Result<()> {
+        self.check()
+            .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()))?;
+        out.write_all(self.header().as_bytes())?;
+        match self.encoding {
+            PlyEncoding::BinaryLittleEndian => self.write_binary(out),
+            PlyEncoding::Ascii => self.write_ascii(out),
+        }
+    }
+
+    /// Binary payload, encoded in chunks so the writer sees few large writes.
+    fn write_binary<W: Write + ?Sized>(&self, out: &mut W) -> std::io::Result<()> {
+        const CHUNK_POINTS: usize = 8192;
+        let c = self.columns;
+        let mut buf: Vec<u8> = Vec::with_capacity(self.stride() * CHUNK_POINTS);
+        for (chunk_no, chunk) in self.returns.chunks(CHUNK_POINTS).enumerate() {
+            buf.clear();
+            let base = chunk_no * CHUNK_POINTS;
+            for (k, r) in chunk.iter().enumerate() {
+                let i = base + k;
+                buf.extend_from_slice(&r.x.to_le_bytes());
+                buf.extend_from_slice(&r.y.to_le_bytes());
+                buf.extend_from_slice(&r.z.to_le_bytes());
+                buf.extend_from_slice(&[r.intensity, r.ring, r.laser]);
+                buf.extend_from_slice(&r.azimuth.to_le_bytes());
+                buf.extend_from_slice(&r.range.to_le_bytes());
+                buf.extend_from_slice(&self.relative_time(r).to_le_bytes());
+                if let Some(v) = c.range_clean {
+                    buf.extend_from_slice(&v[i].to_le_bytes());
+                }
+                if let Some(v) = c.power {
+                    buf.extend_from_slice(&v[i].to_le_bytes());
+                }
+                if let Some(v) = c.fate {
+                    buf.push(v[i]);
+                }
+                if let Some(v) = c.ground {
+                    buf.push(v[i]);
+                }
+                if let Some(v) = c.cluster {
+                    buf.extend_from_slice(&v[i].to_le_bytes());
+                }
+            }
+            out.write_all(&buf)?;
+        }
+        Ok(())
+    }
+
+    /// ASCII payload: one line per point, values separated by single spaces.
+    fn write_ascii<W: Write + ?Sized>(&self, out: &mut W) -> std::io::Result<()> {
+        let c = self.columns;
+        let mut line = String::with_capacity(256);
+        for (i, r) in self.returns.iter().enumerate() {
+            line.clear();
+            // `{}` on f32 prints the shortest text that parses back to the same f32.
+            let _ = write!(
+                line,
+                "{} {} {} {} {} {} {} {} {}",
+                r.x,
+                r.y,
+                r.z,
+                r.intensity,
+                r.ring,
+                r.laser,
+                r.azimuth,
+                r.range,
+                self.relative_time(r)
+            );
+            if let Some(v) = c.range_clean {
+                let _ = write!(line, " {}", v[i]);
+            }
+            if let Some(v) = c.power {
+                let _ = write!(line, " {}", v[i]);
+            }
+            if let Some(v) = c.fate {
+                let _ = write!(line, " {}", v[i]);
+            }
+            if let Some(v) = c.ground {
+                let _ = write!(line, " {}", v[i]);
+            }
+            if let Some(v) = c.cluster {
+                let _ = write!(line, " {}", v[i]);
+            }
+            line.push('\n');
+            out.write_all(line.as_bytes())?;
+        }
+        Ok(())
+    }
+
+    /// The `time` property of a return: seconds since the frame start, as f32.
+    fn relative_time(&self, r: &Return) -> f32 {
+        (r.time - self.frame_start_time) as f32
+    }
+}
+
+impl Output for PlyFrame<'_> {
+    fn extension(&self) -> &'static str {
+        "ply"
+    }
+
+    fn write_to(&self, out: &mut dyn Write) -> std::io::Result<()> {
+        self.write(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::ReturnKind;
+
+    fn ret(i: u32) -> Return {
+        Return {
+            x: i as f32 * 0.5,
+            y: -(i as f32) * 0.25,
+            z: 1.0 / (i as f32 + 3.0),
+            range: 10.0 + i as f32,
+            azimuth: (i as f32 * 7.3) % 360.0,
+            elevation: -10.0,
+            time: 1200.0 + i as f64 * 1e-5,
+            packet: i / 384,
+            raw_distance: 5000 + i as u16,
+            intensity: (i * 3 % 256) as u8,
+            laser: (i % 32) as u8,
+            ring: (31 - i % 32) as u8,
+            block: (i % 12) as u8,
+            kind: ReturnKind::Strongest,
+        }
+    }
+
+    #[test]
+    fn header_lists_properties_in_order() {
+        let returns: Vec<Return> = (0..3).map(ret).collect();
+        let fate = [0u8, 1, 2];
+        let cluster = [-1i32, 0, 5];
+        let mut frame = PlyFrame::new(&returns, "a.pcap", 7, 1200.0);
+        frame.columns.fate = Some(&fate);
+        frame.columns.cluster = Some(&cluster);
+        let h = frame.header();
+        let props: Vec<&str> = h.lines().filter(|l| l.starts_with("property")).collect();
+        assert_eq!(
+            props,
+            [
+                "property float x",
+                "property float y",
+                "property float z",
+                "property uchar intensity",
+                "property uchar ring",
+                "property uchar laser",
+                "property float azimuth",
+                "property float range",
+                "property float time",
+                "property uchar fate",
+                "property int cluster",
+            ]
+        );
+        assert!(h.starts_with("ply\nformat binary_little_endian 1.0\n"));
+        assert!(h.contains("\nelement vertex 3\n"));
+        assert!(h.ends_with("end_header\n"));
+    }
+
+    #[test]
+    fn binary_size_is_header_plus_stride_times_points() {
+        let returns: Vec<Return> = (0..10_000).map(ret).collect();
+        let power = vec![0.5f32; returns.len()];
+        let mut frame = PlyFrame::new(&returns, "a.pcap", 0, 1200.0);
+        frame.columns.power = Some(&power);
+        let mut out = Vec::new();
+        frame.write(&mut out).unwrap();
+        // Base: 6 floats (x y z azimuth range time) + 3 uchars; power: 1 float.
+        assert_eq!(
+            out.len(),
+            frame.header().len() + returns.len() * (6 * 4 + 3 + 4)
+        );
+    }
+
+    #[test]
+    fn mismatched_column_is_refused() {
+        let returns: Vec<Return> = (0..3).map(ret).collect();
+        let ground = [1u8, 0];
+        let mut frame = PlyFrame::new(&returns, "a.pcap", 4, 0.0);
+        frame.columns.ground = Some(&ground);
+        let m = frame.check().unwrap_err().to_string();
+        assert!(m.contains("`ground` has 2 values for 3 points"), "{m}");
+        assert!(frame.write(&mut Vec::new()).is_err());
+    }
+
+    #[test]
+    fn comment_line_breaks_cannot_break_the_header() {
+        let returns: Vec<Return> = (0..1).map(ret).collect();
+        let comments = vec!["fate 0 = kept\nend_header".to_string()];
+        let mut frame = PlyFrame::new(&returns, "evil\nname.pcap", 0, 0.0);
+        frame.comments = &comments;
+        let h = frame.header();
+        assert_eq!(
+            h.matches("end_header").count(),
+            2,
+            "one in the comment, one real"
+        );
+        assert_eq!(h.lines().filter(|l| *l == "end_header").count(), 1);
+        assert!(h.contains("comment source evil name.pcap\n"));
+    }
+}

@@ -1,9 +1,12 @@
 //! `lidar-noise convert`: one PLY per frame.
 
 use crate::cli::Global;
-use crate::options::DecoderArgs;
-use anyhow::Result;
-use std::path::PathBuf;
+use crate::hdl32e::frames::FrameReader;
+use crate::options::{parse_range, DecoderArgs};
+use crate::writers::ply::{PlyEncoding, PlyFrame};
+use crate::writers::write_file;
+use anyhow::{Context, Result};
+use std::path::{Path, PathBuf};
 
 /// Arguments of `convert`.
 #[derive(Debug, clap::Args)]
@@ -11,10 +14,10 @@ pub struct Args {
     /// Capture file (pcap or pcapng).
     #[arg(value_name = "CAPTURE")]
     pub capture: PathBuf,
-    /// Output folder (created if missing).
+    /// Output folder (created if missing); frames are written as frame_NNNNN.ply.
     #[arg(short, long, value_name = "DIR")]
     pub output: PathBuf,
-    /// Frames to write, by sweep index: N, A..B (inclusive), A.. or ..B.
+    /// Frames to write, by sweep index: N, A..B (both included), A.. or ..B.
     #[arg(long, value_name = "RANGE")]
     pub frames: Option<String>,
     /// Write ASCII PLY instead of binary little-endian.
@@ -24,7 +27,72 @@ pub struct Args {
     pub decoder: DecoderArgs,
 }
 
+/// File name of a frame's PLY.
+pub fn frame_file_name(index: u32) -> String {
+    format!("frame_{index:05}.ply")
+}
+
 /// Decodes the capture and writes the selected frames.
-pub fn run(_args: Args, _global: Global) -> Result<()> {
-    anyhow::bail!("convert is not implemented yet")
+pub fn run(args: Args, global: Global) -> Result<()> {
+    let options = args.decoder.to_options()?;
+    let range = match &args.frames {
+        Some(text) => parse_range("--frames", text)?,
+        None => 0..=u32::MAX,
+    };
+    let mut reader = FrameReader::open(&args.capture, &options)?;
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("cannot create the output folder {}", args.output.display()))?;
+    let source = args.capture.display().to_string();
+    let progress = super::progress(global, "frames");
+    let mut written = 0u32;
+    while let Some(frame) = reader.next() {
+        let frame = frame?;
+        if frame.index > *range.end() {
+            break;
+        }
+        if range.contains(&frame.index) {
+            let path = args.output.join(frame_file_name(frame.index));
+            let ply = PlyFrame {
+                encoding: if args.ascii {
+                    PlyEncoding::Ascii
+                } else {
+                    PlyEncoding::BinaryLittleEndian
+                },
+                ..PlyFrame::new(&frame.returns, &source, frame.index, frame.start_time())
+            };
+            write_file(&ply, &path, &[args.capture.as_path()])?;
+            written += 1;
+            progress.inc(1);
+        }
+        reader.recycle(frame);
+    }
+    progress.finish_and_clear();
+    let summary = reader.summary();
+    super::warn_truncation(global, &args.capture, &summary);
+    if written == 0 {
+        anyhow::bail!(
+            "{}: no frame in {} (the capture has {} full frames{}); pick others with --frames \
+             or add --keep-partial",
+            args.capture.display(),
+            args.frames.as_deref().unwrap_or("the capture"),
+            summary.full_frames,
+            if summary.partial_frames > 0 {
+                ", partial sweeps left out"
+            } else {
+                ""
+            }
+        );
+    }
+    if !global.quiet {
+        eprintln!(
+            "{}: wrote {written} frames to {}",
+            args.capture.display(),
+            display(&args.output)
+        );
+    }
+    Ok(())
+}
+
+fn display(path: &Path) -> String {
+    path.display().to_string()
 }

@@ -17,3 +17,19 @@ pub fn warn_truncation(global: Global, path: &Path, summary: &CaptureSummary) {
         ));
     }
 }
+
+/// A progress spinner on stderr, hidden when quiet or when stderr is not a terminal.
+pub fn progress(global: Global, unit: &'static str) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if global.quiet || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new_spinner();
+    if let Ok(style) = indicatif::ProgressStyle::with_template(&format!(
+        "{{spinner}} {{pos}} {unit} {{elapsed}} {{msg}}"
+    )) {
+        bar.set_style(style);
+    }
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    bar
+}

@@ -34,8 +34,16 @@
 //!   angle is at most the initial angle. Ground grows breadth-first over 4-neighbours
 //!   (the bridged cells above and below, and the same row in the adjacent columns,
 //!   wrapping around in azimuth) to cells whose angle differs by less than the angle
-//!   delta from the cell it is reached from. The relation is symmetric, so the result is
-//!   the union of the connected components holding a seed: independent of visiting order.
+//!   delta from the cell it is reached from, and (our addition) whose own angle is at
+//!   most the initial angle. The relation is symmetric, so the result is the union of
+//!   the connected components holding a seed: independent of visiting order.
+//! - **Why the cap on grown cells.** Without it the ground leaks up walls. Where a ring's
+//!   ground circle meets a wall, the next ring hits the wall just above its foot, and
+//!   along the ring the slope from the ground cell to that wall hit rises smoothly from 0
+//!   to 90 degrees, by less than the delta per 0.2 degree column; once it nears 90 the
+//!   wall's own vertical cells join. Real range noise usually breaks such chains, clean
+//!   data never does (a synthetic street lost 14 % precision to it). A cell steeper than
+//!   the seed limit is not drivable ground anyway, so the seed limit caps growth too.
 
 use crate::frame::Return;
 use std::collections::VecDeque;
@@ -190,7 +198,8 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
                 }
                 let nb = nb as usize;
                 // Empty cells have a NaN angle and fail the comparison.
-                if !ground[nb] && (angle[nb] - a).abs() < delta {
+                let an = angle[nb];
+                if !ground[nb] && an <= initial && (an - a).abs() < delta {
                     ground[nb] = true;
                     queue.push_back(nb as u32);
                 }

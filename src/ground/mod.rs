@@ -124,7 +124,10 @@ mod tests {
         assert_eq!(opts.method, GroundMethod::Ransac);
         assert_eq!(opts.max_angle_delta_deg, 4.0);
         assert_eq!(opts.ransac_iterations, 7);
-        assert_eq!(opts.initial_angle_deg, 30.0, "missing keys take the default");
+        assert_eq!(
+            opts.initial_angle_deg, 30.0,
+            "missing keys take the default"
+        );
         let opts: GroundOptions = toml::from_str("method = \"range-image\"").unwrap();
         assert_eq!(opts.method, GroundMethod::RangeImage);
         let opts: GroundOptions = toml::from_str("method = \"none\"").unwrap();

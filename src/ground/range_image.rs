@@ -31,7 +31,7 @@
 //!   jumps from 8.5 m to 26 m, so no range test could bridge it, and every column would
 //!   be cut in two.
 //! - **Seeds and growth.** In each column the lowest valid cell seeds the ground if its
-//!   angle is at most the initial angle. Ground grows breadth-first over 4-neighbours
+//!   angle is at most the initial angle. Ground grows (flood fill) over 4-neighbours
 //!   (the bridged cells above and below, and the same row in the adjacent columns,
 //!   wrapping around in azimuth) to cells whose angle differs by less than the angle
 //!   delta from the cell it is reached from, and (our addition) whose own angle is at
@@ -46,7 +46,6 @@
 //!   the seed limit is not drivable ground anyway, so the seed limit caps growth too.
 
 use crate::frame::Return;
-use std::collections::VecDeque;
 
 /// Largest number of consecutive empty rows a column is bridged across.
 pub const MAX_HOLE_ROWS: usize = 5;
@@ -58,7 +57,7 @@ pub const DEFAULT_COLUMN_WIDTH_DEG: f64 = 0.2;
 const NONE: u32 = u32::MAX;
 
 /// Number of azimuth steps sampled to estimate the column width.
-const STEP_SAMPLES: usize = 4096;
+const STEP_SAMPLES: usize = 1024;
 
 /// Number of columns of the range image for this frame (see the module notes).
 pub fn column_count(returns: &[Return]) -> usize {
@@ -107,14 +106,16 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
     }
 
     // Column-major cells (col * rows + row) keep a column contiguous for the angle pass.
-    let mut rep = vec![NONE; rows * cols];
+    let cells = rows * cols;
+    let mut rep = vec![NONE; cells];
     let mut cell_of = vec![NONE; n];
     for (i, r) in returns.iter().enumerate() {
         if !(r.x.is_finite() && r.y.is_finite() && r.z.is_finite() && r.azimuth.is_finite()) {
             continue;
         }
         let ring = r.ring as usize;
-        let bin = ((f64::from(r.azimuth) - phase[ring]) / width).round() as i64;
+        // Nearest bin; the cast saturates and rem_euclid below keeps it in range.
+        let bin = ((f64::from(r.azimuth) - phase[ring]) / width + 0.5).floor() as i64;
         let col = bin.rem_euclid(cols as i64) as usize;
         let cell = col * rows + ring;
         cell_of[i] = cell as u32;
@@ -124,19 +125,23 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         }
     }
 
-    // Bridged vertical links and angles.
-    let mut up = vec![NONE; rows * cols];
-    let mut down = vec![NONE; rows * cols];
-    let mut angle = vec![f32::NAN; rows * cols];
-    let horiz = |i: u32| {
-        let r = &returns[i as usize];
-        (r.x.hypot(r.y), r.z)
-    };
-    let slope = |a: u32, b: u32| {
-        let (da, za) = horiz(a);
-        let (db, zb) = horiz(b);
+    // Horizontal distance and height of each cell's return, gathered once.
+    let mut dz = vec![(0.0f32, 0.0f32); cells];
+    for (cell, &i) in rep.iter().enumerate() {
+        if i != NONE {
+            let r = &returns[i as usize];
+            dz[cell] = ((r.x * r.x + r.y * r.y).sqrt(), r.z);
+        }
+    }
+    let slope = |a: usize, b: usize| {
+        let ((da, za), (db, zb)) = (dz[a], dz[b]);
         (zb - za).abs().atan2((db - da).abs()).to_degrees()
     };
+
+    // Bridged vertical links and angles.
+    let mut up = vec![NONE; cells];
+    let mut down = vec![NONE; cells];
+    let mut angle = vec![f32::NAN; cells];
     for col in 0..cols {
         let base = col * rows;
         let mut prev: Option<usize> = None;
@@ -155,25 +160,26 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         }
         for row in 0..rows {
             let cell = base + row;
-            let me = rep[cell];
-            if me == NONE {
+            if rep[cell] == NONE {
                 continue;
             }
             angle[cell] = if up[cell] != NONE {
-                slope(me, rep[up[cell] as usize])
+                slope(cell, up[cell] as usize)
             } else if down[cell] != NONE {
-                slope(rep[down[cell] as usize], me)
+                slope(down[cell] as usize, cell)
             } else {
                 f32::NAN
             };
         }
     }
 
-    // Seeds and breadth-first growth.
+    // Seeds and growth.
     let initial = initial_angle_deg as f32;
     let delta = max_angle_delta_deg as f32;
-    let mut ground = vec![false; rows * cols];
-    let mut queue: VecDeque<u32> = VecDeque::new();
+    let mut ground = vec![false; cells];
+    // A stack, not a queue: the grown set does not depend on the visiting order.
+    let mut stack: Vec<u32> = Vec::new();
+    let wrap = (cols - 1) * rows;
     for col in 0..cols {
         let base = col * rows;
         let Some(lowest) = (base..base + rows).find(|&c| rep[c] != NONE) else {
@@ -185,12 +191,12 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
             continue;
         }
         ground[lowest] = true;
-        queue.push_back(lowest as u32);
-        while let Some(cur) = queue.pop_front() {
+        stack.push(lowest as u32);
+        while let Some(cur) = stack.pop() {
             let cur = cur as usize;
-            let (c, r) = (cur / rows, cur % rows);
-            let left = ((c + cols - 1) % cols) * rows + r;
-            let right = ((c + 1) % cols) * rows + r;
+            // Same row in the adjacent columns, wrapping around in azimuth.
+            let left = if cur >= rows { cur - rows } else { cur + wrap };
+            let right = if cur < wrap { cur + rows } else { cur - wrap };
             let a = angle[cur];
             for nb in [up[cur], down[cur], left as u32, right as u32] {
                 if nb == NONE {
@@ -201,7 +207,7 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
                 let an = angle[nb];
                 if !ground[nb] && an <= initial && (an - a).abs() < delta {
                     ground[nb] = true;
-                    queue.push_back(nb as u32);
+                    stack.push(nb as u32);
                 }
             }
         }

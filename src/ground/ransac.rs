@@ -55,7 +55,11 @@ pub fn segment(
         return labels;
     }
     let min_up = max_tilt_deg.to_radians().cos();
-    let inliers = |plane: &Plane| pts.iter().filter(|&&p| plane.distance(p) <= threshold_m).count();
+    let inliers = |plane: &Plane| {
+        pts.iter()
+            .filter(|&&p| plane.distance(p) <= threshold_m)
+            .count()
+    };
 
     let mut best: Option<(Plane, usize)> = None;
     for _ in 0..iterations {
@@ -95,7 +99,8 @@ pub fn segment(
 fn plane_through(a: DVec3, b: DVec3, c: DVec3) -> Option<Plane> {
     let n = (b - a).cross(c - a);
     let len = n.length();
-    if !(len > 1e-9) {
+    // Also rejects NaN lengths.
+    if len.is_nan() || len <= 1e-9 {
         return None;
     }
     let n = if n.z < 0.0 { -n / len } else { n / len };
@@ -126,7 +131,7 @@ fn refine(pts: &[DVec3], plane: &Plane, threshold_m: f64) -> Option<Plane> {
         syz += q.y * q.z;
     }
     let det = sxx * syy - sxy * sxy;
-    if !(det.abs() > 1e-12 * (sxx * syy).max(1e-300)) {
+    if det.is_nan() || det.abs() <= 1e-12 * (sxx * syy).max(1e-300) {
         return None;
     }
     let a = (sxz * syy - syz * sxy) / det;

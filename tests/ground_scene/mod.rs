@@ -165,12 +165,7 @@ pub fn make_return(range: f64, azimuth: f64, elevation: f64, laser: u8, ring: u8
 pub fn precision_recall_where(predicted: &[bool], truth: &[bool], mask: &[bool]) -> (f64, f64) {
     assert_eq!(predicted.len(), truth.len());
     let (mut tp, mut fp, mut fneg) = (0usize, 0usize, 0usize);
-    for ((&p, &t), _) in predicted
-        .iter()
-        .zip(truth)
-        .zip(mask)
-        .filter(|(_, &m)| m)
-    {
+    for ((&p, &t), _) in predicted.iter().zip(truth).zip(mask).filter(|(_, &m)| m) {
         match (p, t) {
             (true, true) => tp += 1,
             (true, false) => fp += 1,

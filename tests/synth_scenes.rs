@@ -73,7 +73,10 @@ fn other_impossible_values_are_refused() {
     let e = err("frames = 0\n[sensor]\nheight_m = 1.9\n");
     assert!(e.contains("frames") && e.contains("line 1"), "{e}");
     let e = err("[sensor]\nheight_m = 1.9\n[ground]\nslope_deg = \"steep\"\n");
-    assert!(e.contains("line 4"), "{e}");
+    assert!(
+        e.contains("line 4") && e.contains("ground.slope_deg"),
+        "{e}"
+    );
     assert!(Scene::preset("nowhere").is_err());
 }
 

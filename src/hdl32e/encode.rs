@@ -111,7 +111,7 @@ pub fn encode_position_packet(timestamp_us: u32) -> [u8; POSITION_PAYLOAD_LEN] {
     );
     let checksum = body.bytes().fold(0u8, |acc, b| acc ^ b);
     let sentence = format!("${body}*{checksum:02X}\r\n");
-    // The sentence is at most 72 bytes (NMEA limit), far inside the packet.
+    // The sentence is at most 82 bytes (NMEA limit), far inside the packet.
     out[206..206 + sentence.len()].copy_from_slice(sentence.as_bytes());
     out
 }
@@ -155,6 +155,6 @@ mod tests {
         let (body, tail) = s[1..].split_once('*').unwrap();
         let sum = body.bytes().fold(0u8, |a, b| a ^ b);
         assert_eq!(tail.trim_end(), format!("{sum:02X}"));
-        assert!(s.len() <= 72);
+        assert!(s.len() <= 82, "NMEA sentences are at most 82 bytes");
     }
 }

@@ -4,7 +4,10 @@
 //! ends, with the header line `frame,packet,block,laser,label` and one row per
 //! emitted return (raw distance != 0) in capture order:
 //! - `frame`: zero-based rotation index (rotation k starts at the block whose
-//!   azimuth wraps to 0 for the k-th time; the capture starts at azimuth 0.00);
+//!   azimuth wraps to 0 for the k-th time; the capture starts at azimuth 0.00).
+//!   The frame is decided per block by the block azimuth, so a block just before
+//!   the wrap belongs wholly to frame k even where its last lasers' interpolated
+//!   azimuths pass 360°;
 //! - `packet`: zero-based index of the record in the pcap, position packets counted
 //!   (the decoder's `Return::packet`);
 //! - `block`: 0..11 within the packet; `laser`: laser id 0..31;

@@ -335,6 +335,27 @@ fn span_of(source: &str, path: &[Seg<'_>]) -> Option<std::ops::Range<usize>> {
     best
 }
 
+/// Dotted key assigned on one-based line `line` (`table.key`), if the line is
+/// a `key = value` line; the table is the nearest `[table]` or `[[table]]` header above.
+fn key_on_line(source: &str, line: usize) -> Option<String> {
+    let lines: Vec<&str> = source.lines().collect();
+    let text = lines.get(line.checked_sub(1)?)?;
+    let (key, _) = text.split_once('=')?;
+    let key = key.trim();
+    if key.is_empty() || key.starts_with('[') || key.starts_with('#') {
+        return None;
+    }
+    let table = lines[..line - 1].iter().rev().find_map(|l| {
+        let l = l.trim();
+        l.starts_with('[')
+            .then(|| l.trim_matches(|c| c == '[' || c == ']').trim().to_string())
+    });
+    Some(match table {
+        Some(t) if !t.is_empty() => format!("{t}.{key}"),
+        _ => key.to_string(),
+    })
+}
+
 /// One-based line number of a byte offset.
 fn line_of(source: &str, span: std::ops::Range<usize>) -> usize {
     let end = span.start.min(source.len());
@@ -372,7 +393,13 @@ impl Scene {
     pub fn parse(source: &str, origin: &Path, default_name: &str) -> Result<Scene> {
         let file: SceneFile = toml::from_str(source).map_err(|e| {
             let line = e.span().map(|s| line_of(source, s));
-            let message = e.message().trim_end().to_string();
+            let mut message = e.message().trim_end().to_string();
+            // Type errors do not name the key: take it from the offending line.
+            if let Some(key) = line.and_then(|l| key_on_line(source, l)) {
+                if !message.contains(&format!("`{key}`")) {
+                    message = format!("`{key}`: {message}");
+                }
+            }
             Error::Config {
                 path: origin.to_path_buf(),
                 message: match line {

@@ -3,6 +3,7 @@
 //! Memory stays bounded by the read buffer whatever the capture's length.
 
 pub mod link;
+pub mod writer;
 
 use crate::error::{Error, Result};
 use pcap_parser::pcapng::Block;

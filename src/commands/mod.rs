@@ -2,6 +2,7 @@
 
 pub mod convert;
 pub mod info;
+pub mod synth;
 
 use crate::cli::Global;
 use crate::hdl32e::frames::CaptureSummary;

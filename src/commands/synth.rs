@@ -1,0 +1,134 @@
+//! `lidar-noise synth`: writes a synthetic HDL-32E capture with ground-truth labels.
+
+use crate::synth::{labels, objects_json, write_capture, Scene, SynthOptions};
+use anyhow::{bail, Context};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+/// Arguments of `lidar-noise synth`.
+#[derive(Debug, clap::Args)]
+pub struct SynthArgs {
+    /// Scene description (TOML); omit when using --preset.
+    #[arg(
+        value_name = "SCENE.toml",
+        conflicts_with = "preset",
+        required_unless_present = "preset"
+    )]
+    pub scene: Option<PathBuf>,
+    /// Built-in scene: crossroad, parking or empty.
+    #[arg(long, value_name = "NAME")]
+    pub preset: Option<String>,
+    /// Output folder (created if missing).
+    #[arg(short = 'o', long = "output", value_name = "DIR")]
+    pub output: PathBuf,
+    /// Number of full rotations (overrides the scene).
+    #[arg(long)]
+    pub frames: Option<u32>,
+    /// Range-noise seed (overrides the scene).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Cast every laser of a block at the block azimuth instead of interpolating
+    /// towards the next block.
+    #[arg(long)]
+    pub no_interpolation: bool,
+}
+
+/// Runs `lidar-noise synth`: writes DIR/<name>.pcap, DIR/<name>.labels.csv.gz and
+/// DIR/<name>.objects.json, each through a temporary file renamed into place.
+pub fn run(args: SynthArgs) -> anyhow::Result<()> {
+    let mut scene = match (&args.scene, &args.preset) {
+        (Some(path), None) => Scene::from_file(path)?,
+        (None, Some(name)) => Scene::preset(name)?,
+        _ => bail!("give either a scene file or --preset NAME"),
+    };
+    if let Some(frames) = args.frames {
+        if !(1..=100_000).contains(&frames) {
+            bail!("--frames {frames}: must be 1..100000");
+        }
+        scene.frames = frames;
+    }
+    if let Some(seed) = args.seed {
+        scene.seed = seed;
+    }
+    let options = SynthOptions {
+        interpolate: !args.no_interpolation,
+        ..SynthOptions::default()
+    };
+    let dir = &args.output;
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let pcap_path = dir.join(format!("{}.pcap", scene.name));
+    let labels_path = dir.join(format!("{}.labels.{}", scene.name, labels::EXTENSION));
+    let objects_path = dir.join(format!("{}.objects.json", scene.name));
+    if let Some(input) = &args.scene {
+        for out in [&pcap_path, &labels_path, &objects_path] {
+            if same_file(input, out) {
+                bail!(
+                    "{}: refusing to overwrite the input scene file",
+                    out.display()
+                );
+            }
+        }
+    }
+
+    let pcap_tmp = tempfile::NamedTempFile::new_in(dir)
+        .with_context(|| format!("{}: cannot create a temporary file", dir.display()))?;
+    let labels_tmp = tempfile::NamedTempFile::new_in(dir)
+        .with_context(|| format!("{}: cannot create a temporary file", dir.display()))?;
+    let (summary, pcap_w, labels_w) = write_capture(
+        &scene,
+        &options,
+        BufWriter::new(pcap_tmp),
+        BufWriter::new(labels_tmp),
+    )
+    .with_context(|| format!("{}: cannot write", dir.display()))?;
+    let pcap_tmp = pcap_w
+        .into_inner()
+        .map_err(|e| e.into_error())
+        .with_context(|| format!("{}: cannot write", pcap_path.display()))?;
+    let labels_tmp = labels_w
+        .into_inner()
+        .map_err(|e| e.into_error())
+        .with_context(|| format!("{}: cannot write", labels_path.display()))?;
+    let mut objects_tmp = tempfile::NamedTempFile::new_in(dir)
+        .with_context(|| format!("{}: cannot create a temporary file", dir.display()))?;
+    objects_tmp
+        .write_all(objects_json(&scene).as_bytes())
+        .and_then(|_| objects_tmp.write_all(b"\n"))
+        .with_context(|| format!("{}: cannot write", objects_path.display()))?;
+    for (tmp, path) in [
+        (pcap_tmp, &pcap_path),
+        (labels_tmp, &labels_path),
+        (objects_tmp, &objects_path),
+    ] {
+        tmp.as_file()
+            .sync_all()
+            .with_context(|| format!("{}: cannot write", path.display()))?;
+        tmp.persist(path)
+            .with_context(|| format!("{}: cannot rename into place", path.display()))?;
+    }
+    eprintln!(
+        "{}: {} rotations at {} Hz, {} records ({} data, {} position), {} returns",
+        scene.name,
+        summary.frames,
+        scene.sensor.rotation_hz,
+        summary.records,
+        summary.data_packets,
+        summary.position_packets,
+        summary.returns
+    );
+    eprintln!(
+        "wrote {}, {}, {}",
+        pcap_path.display(),
+        labels_path.display(),
+        objects_path.display()
+    );
+    Ok(())
+}
+
+/// True when both paths name the same existing file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
+}

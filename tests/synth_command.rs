@@ -1,0 +1,48 @@
+//! `lidar-noise synth` command: writes the three files, refuses to overwrite its input.
+
+use lidar_noise::commands::synth::{run, SynthArgs};
+use lidar_noise::synth::labels::read_labels_file;
+
+fn args(dir: &std::path::Path) -> SynthArgs {
+    SynthArgs {
+        scene: None,
+        preset: Some("crossroad".into()),
+        output: dir.to_path_buf(),
+        frames: Some(1),
+        seed: Some(3),
+        no_interpolation: false,
+    }
+}
+
+#[test]
+fn writes_capture_labels_and_objects() {
+    let dir = tempfile::tempdir().unwrap();
+    run(args(dir.path())).unwrap();
+    let pcap = std::fs::read(dir.path().join("crossroad.pcap")).unwrap();
+    assert_eq!(&pcap[..4], &[0xd4, 0xc3, 0xb2, 0xa1]);
+    let rows = read_labels_file(&dir.path().join("crossroad.labels.csv.gz")).unwrap();
+    assert!(!rows.is_empty() && rows.iter().all(|r| r.frame == 0));
+    let objects: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("crossroad.objects.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(objects["objects"][0]["id"], 1);
+    assert_eq!(objects["objects"][0]["kind"], "car");
+    // No temporary files left behind.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 3);
+}
+
+#[test]
+fn refuses_to_overwrite_its_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("x.objects.json");
+    std::fs::write(&scene, "name = \"x\"\n[sensor]\nheight_m = 1.9\n").unwrap();
+    let mut a = args(dir.path());
+    a.preset = None;
+    a.scene = Some(scene.clone());
+    let e = run(a).unwrap_err().to_string();
+    assert!(e.contains("overwrite"), "{e}");
+    assert!(std::fs::read_to_string(&scene)
+        .unwrap()
+        .contains("height_m"));
+}

@@ -7,6 +7,7 @@ pub mod calibration;
 pub mod capture;
 pub mod cli;
 pub mod commands;
+pub mod config;
 pub mod cluster;
 pub mod error;
 pub mod frame;

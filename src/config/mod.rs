@@ -197,7 +197,7 @@ impl Config {
     /// The effective settings after overrides as TOML, with the same key names.
     pub fn effective_toml(&self) -> String {
         // Serialising plain numbers, strings and tables cannot fail.
-        toml::to_string_pretty(&self.effective()).unwrap_or_default()
+        toml::to_string(&self.effective()).unwrap_or_default()
     }
 
     /// The effective settings after overrides as JSON, with the same key names.
@@ -214,8 +214,10 @@ impl Config {
             .collect()
     }
 
-    fn effective(&self) -> Effective<'_> {
-        Effective {
+    /// The effective settings as a serialisable value whose fields keep the file's
+    /// order (for embedding in a report next to the tool version).
+    pub fn effective(&self) -> EffectiveConfig<'_> {
+        EffectiveConfig {
             seed: self.seed,
             sensor: &self.sensor,
             power: &self.power,
@@ -236,7 +238,7 @@ impl Config {
 
 /// The serialised form of a configuration (key names as in the file).
 #[derive(Serialize)]
-struct Effective<'a> {
+pub struct EffectiveConfig<'a> {
     seed: u64,
     sensor: &'a SensorConfig,
     power: &'a PowerConfig,
@@ -249,7 +251,7 @@ struct Effective<'a> {
 }
 
 /// A stage's `type` followed by its options in their documented order.
-struct StageSettings {
+pub struct StageSettings {
     kind: &'static str,
     options: Vec<(&'static str, toml::Value)>,
 }

@@ -170,7 +170,10 @@ impl<'a> Section<'a> {
             Some(s) if choices.contains(&s) => Ok(Some(s)),
             Some(s) => Err(self.error(
                 key,
-                format!("unknown value \"{s}\" (expected one of: {})", choices.join(", ")),
+                format!(
+                    "unknown value \"{s}\" (expected one of: {})",
+                    choices.join(", ")
+                ),
             )),
         }
     }
@@ -251,7 +254,11 @@ impl<'a> Section<'a> {
             .iter()
             .enumerate()
             .map(|(i, item)| match item {
-                Value::Table(t) => Ok(Section::new(t, format!("{}[{i}]", self.key_path(key)), self.ctx)),
+                Value::Table(t) => Ok(Section::new(
+                    t,
+                    format!("{}[{i}]", self.key_path(key)),
+                    self.ctx,
+                )),
                 _ => Err(self.error(&format!("{key}[{i}]"), expected("a table", item))),
             })
             .collect()
@@ -265,9 +272,10 @@ impl<'a> Section<'a> {
             self.path.clone()
         };
         // Point at the table: the key itself has no line.
-        self.ctx
-            .locator
-            .error(&self.key_path(key), format!("required key missing in {here}"))
+        self.ctx.locator.error(
+            &self.key_path(key),
+            format!("required key missing in {here}"),
+        )
     }
 
     /// Fails on the first key of this table that was never asked for.

@@ -72,7 +72,9 @@ impl Occlusion {
                 e >= lo - ELEVATION_SLACK_DEG && e <= hi + ELEVATION_SLACK_DEG
             }
         };
-        beam && self.azimuth_deg.is_none_or(|s| in_sector(f64::from(azimuth), s))
+        beam && self
+            .azimuth_deg
+            .is_none_or(|s| in_sector(f64::from(azimuth), s))
     }
 }
 
@@ -153,7 +155,10 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
     if given.len() > 1 {
         return Err(opts.error(
             given[1],
-            format!("give only one of lasers, rings, elevation_deg (found {})", given.join(" and ")),
+            format!(
+                "give only one of lasers, rings, elevation_deg (found {})",
+                given.join(" and ")
+            ),
         ));
     }
     let selection = if let Some(ids) = opts.id_list("lasers", 31)? {

@@ -84,7 +84,10 @@ impl NoiseStage for Rain {
 
     fn describe(&self) -> String {
         let noise = match self.range_noise {
-            RangeNoise::Goodin => format!("Gaussian range noise sigma = {:.4} x range", self.sigma_per_m),
+            RangeNoise::Goodin => format!(
+                "Gaussian range noise sigma = {:.4} x range",
+                self.sigma_per_m
+            ),
             RangeNoise::Mavs => "uniform range noise +-1.5 cm (MAVS)".into(),
         };
         format!(
@@ -113,7 +116,7 @@ impl NoiseStage for Rain {
             .zip(frame.fate.iter())
         {
             // Draw before looking at the fate: one draw per return keeps streams aligned.
-            let offset_per_m_or_abs = match self.range_noise {
+            let draw = match self.range_noise {
                 RangeNoise::Goodin => rng.sample::<f64, _>(StandardNormal),
                 RangeNoise::Mavs => MAVS_JITTER_M * (2.0 * rng.random::<f64>() - 1.0),
             };
@@ -123,8 +126,8 @@ impl NoiseStage for Rain {
             let r_i = f64::from(*range);
             *power *= (-two_alpha * r_i).exp();
             let delta = match self.range_noise {
-                RangeNoise::Goodin => self.sigma_per_m * r_i * offset_per_m_or_abs,
-                RangeNoise::Mavs => offset_per_m_or_abs,
+                RangeNoise::Goodin => self.sigma_per_m * r_i * draw,
+                RangeNoise::Mavs => draw,
             };
             *range = (r_i + delta) as f32;
         }

@@ -2,18 +2,56 @@
 //!
 //! Counts and range-change sums are exact and merge in any order: the range change of
 //! each kept return, R_n - R_i, is quantised to whole nanometres and summed in i128.
-//! The 95th percentile is of the absolute change |R_n - R_i|, from a sparse histogram
-//! of 0.1 mm bins that merges exactly; it is reported as the upper edge of the bin where
-//! 95 % of the returns are reached (capped at the largest change), so it is at most
-//! 0.1 mm above the exact value.
+//! The 95th percentile is of the absolute change |R_n - R_i|, from a fixed histogram
+//! that merges exactly: 0.1 mm bins below 0.1 m, 1 mm bins to 1 m, 1 cm bins to 10 m,
+//! 10 cm bins to 100 m (3,700 bins, at most 1 % wide relative to their value) plus one
+//! overflow bin. It is reported as the upper edge of the bin where 95 % of the returns
+//! are reached, capped at the largest change, so it is never below the exact value and
+//! at most one bin width (0.1 mm for changes under 10 cm) above it.
 
 use crate::noise::{Fate, NoisyFrame};
 use serde::ser::SerializeStruct;
 use serde::{Serialize, Serializer};
-use std::collections::BTreeMap;
 
-/// Histogram bin width of absolute range changes, in nanometres (0.1 mm).
-const BIN_NM: u64 = 100_000;
+/// Decades of the absolute-change histogram: (upper end in nm, bin width in nm).
+const DECADES: [(u64, u64); 4] = [
+    (100_000_000, 100_000),
+    (1_000_000_000, 1_000_000),
+    (10_000_000_000, 10_000_000),
+    (100_000_000_000, 100_000_000),
+];
+
+/// Bins per decade after the first one (the first has 1,000).
+const BINS: usize = 1000 + 3 * 900 + 1;
+
+/// Histogram bin of an absolute change in nanometres.
+fn bin_of(abs_nm: u64) -> usize {
+    let mut first_bin = 0u64;
+    let mut lower = 0u64;
+    for (upper, width) in DECADES {
+        if abs_nm < upper {
+            return (first_bin + (abs_nm - lower) / width) as usize;
+        }
+        first_bin += (upper - lower) / width;
+        lower = upper;
+    }
+    BINS - 1
+}
+
+/// Upper edge of a histogram bin in nanometres (u64::MAX for the overflow bin).
+fn bin_upper_nm(bin: usize) -> u64 {
+    let mut first_bin = 0u64;
+    let mut lower = 0u64;
+    for (upper, width) in DECADES {
+        let n = (upper - lower) / width;
+        if (bin as u64) < first_bin + n {
+            return lower + (bin as u64 - first_bin + 1) * width;
+        }
+        first_bin += n;
+        lower = upper;
+    }
+    u64::MAX
+}
 
 /// Removed returns by cause.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -27,7 +65,7 @@ pub struct DropCounts {
 }
 
 /// Removed returns by cause and laser id (index = laser id).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct DropsByLaser {
     /// Removed by occlusion.
     pub occluded: [u64; 32],
@@ -35,16 +73,6 @@ pub struct DropsByLaser {
     pub below_power: [u64; 32],
     /// Under the minimum range.
     pub below_min_range: [u64; 32],
-}
-
-impl Default for DropsByLaser {
-    fn default() -> Self {
-        DropsByLaser {
-            occluded: [0; 32],
-            below_power: [0; 32],
-            below_min_range: [0; 32],
-        }
-    }
 }
 
 /// Statistics of R_n - R_i over kept returns (serialised as count, mean_m, rms_m,
@@ -55,7 +83,8 @@ pub struct RangeChange {
     sum_nm: i128,
     sum_sq_nm2: i128,
     max_abs_nm: u64,
-    abs_hist: BTreeMap<u64, u64>,
+    /// Counts per bin of |change|; empty until the first change is added.
+    abs_hist: Vec<u64>,
 }
 
 impl RangeChange {
@@ -67,7 +96,10 @@ impl RangeChange {
         self.sum_nm += i128::from(nm);
         self.sum_sq_nm2 += i128::from(nm) * i128::from(nm);
         self.max_abs_nm = self.max_abs_nm.max(abs);
-        *self.abs_hist.entry(abs / BIN_NM).or_insert(0) += 1;
+        if self.abs_hist.is_empty() {
+            self.abs_hist = vec![0; BINS];
+        }
+        self.abs_hist[bin_of(abs)] += 1;
     }
 
     /// Adds another set of changes.
@@ -76,8 +108,14 @@ impl RangeChange {
         self.sum_nm += other.sum_nm;
         self.sum_sq_nm2 += other.sum_sq_nm2;
         self.max_abs_nm = self.max_abs_nm.max(other.max_abs_nm);
-        for (&bin, &n) in &other.abs_hist {
-            *self.abs_hist.entry(bin).or_insert(0) += n;
+        if other.abs_hist.is_empty() {
+            return;
+        }
+        if self.abs_hist.is_empty() {
+            self.abs_hist = vec![0; BINS];
+        }
+        for (mine, theirs) in self.abs_hist.iter_mut().zip(&other.abs_hist) {
+            *mine += theirs;
         }
     }
 
@@ -109,10 +147,10 @@ impl RangeChange {
         }
         let need = (self.count * 95).div_ceil(100);
         let mut seen = 0;
-        for (&bin, &n) in &self.abs_hist {
+        for (bin, &n) in self.abs_hist.iter().enumerate() {
             seen += n;
             if seen >= need {
-                return ((bin + 1) * BIN_NM).min(self.max_abs_nm) as f64 * 1e-9;
+                return bin_upper_nm(bin).min(self.max_abs_nm) as f64 * 1e-9;
             }
         }
         self.max_abs_nm as f64 * 1e-9
@@ -196,9 +234,30 @@ impl NoiseSummary {
         for i in 0..32 {
             self.dropped_by_laser.occluded[i] += other.dropped_by_laser.occluded[i];
             self.dropped_by_laser.below_power[i] += other.dropped_by_laser.below_power[i];
-            self.dropped_by_laser.below_min_range[i] +=
-                other.dropped_by_laser.below_min_range[i];
+            self.dropped_by_laser.below_min_range[i] += other.dropped_by_laser.below_min_range[i];
         }
         self.range_change.merge(&other.range_change);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bins_tile_the_axis() {
+        assert_eq!(bin_of(0), 0);
+        assert_eq!(bin_of(99_999), 0);
+        assert_eq!(bin_of(100_000), 1);
+        assert_eq!(bin_of(99_999_999), 999);
+        assert_eq!(bin_of(100_000_000), 1000);
+        assert_eq!(bin_of(1_000_000_000), 1900);
+        assert_eq!(bin_of(99_999_999_999), BINS - 2);
+        assert_eq!(bin_of(u64::MAX), BINS - 1);
+        for b in 0..BINS - 1 {
+            // Every value just under a bin's upper edge falls in that bin.
+            assert_eq!(bin_of(bin_upper_nm(b) - 1), b, "bin {b}");
+            assert_eq!(bin_of(bin_upper_nm(b)), b + 1, "bin {b}");
+        }
     }
 }

@@ -6,6 +6,7 @@
 pub mod calibration;
 pub mod capture;
 pub mod cli;
+pub mod config;
 pub mod cluster;
 pub mod commands;
 pub mod error;

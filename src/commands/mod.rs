@@ -3,6 +3,7 @@
 pub mod convert;
 pub mod info;
 pub mod synth;
+pub mod validate;
 
 use crate::cli::Global;
 use crate::hdl32e::frames::CaptureSummary;

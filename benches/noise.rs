@@ -1,0 +1,65 @@
+//! Speed of the noise chain: occlusion + rain + detection filters on a 50,000-return
+//! synthetic frame (target: under 2 ms on one core).
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use lidar_noise::calibration::Calibration;
+use lidar_noise::config::Config;
+use lidar_noise::frame::{Frame, Return, ReturnKind};
+use lidar_noise::noise::NoiseChain;
+use std::hint::black_box;
+
+/// 50,000 returns: every laser in turn, ranges 1..80 m, varied intensities.
+fn synthetic_frame() -> Frame {
+    let cal = Calibration::builtin();
+    let rings = cal.rings();
+    let returns = (0..50_000u32)
+        .map(|i| {
+            let laser = (i % 32) as u8;
+            let range = 1.0 + (i.wrapping_mul(2_654_435_761) % 7900) as f32 / 100.0;
+            let azimuth = (i / 32) as f32 * 0.2 % 360.0;
+            let el = cal.lasers[laser as usize].elevation_deg as f32;
+            let (se, ce) = el.to_radians().sin_cos();
+            let (sa, ca) = azimuth.to_radians().sin_cos();
+            Return {
+                x: range * ce * ca,
+                y: -range * ce * sa,
+                z: range * se,
+                range,
+                azimuth,
+                elevation: el,
+                time: 0.0,
+                packet: i / 384,
+                raw_distance: (range / 0.002) as u16,
+                intensity: (i % 101) as u8,
+                laser,
+                ring: rings[laser as usize],
+                block: ((i / 32) % 12) as u8,
+                kind: ReturnKind::Strongest,
+            }
+        })
+        .collect();
+    Frame {
+        index: 0,
+        partial: false,
+        returns,
+    }
+}
+
+fn bench_chain(c: &mut Criterion) {
+    let (config, _) = Config::load(None, &[], None).expect("built-in config");
+    let chain = NoiseChain::new(&config);
+    let frame = synthetic_frame();
+    c.bench_function("paper chain + filters, 50k returns", |b| {
+        b.iter(|| black_box(chain.process(black_box(&frame))))
+    });
+    let out = chain.process(&frame);
+    c.bench_function("survivors, 50k returns", |b| {
+        b.iter(|| black_box(black_box(&out).survivors()))
+    });
+    c.bench_function("frame summary, 50k returns", |b| {
+        b.iter(|| black_box(black_box(&out).summary()))
+    });
+}
+
+criterion_group!(benches, bench_chain);
+criterion_main!(benches);

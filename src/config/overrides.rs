@@ -1,0 +1,218 @@
+//! Key positions of a TOML file and `--set key=value` overrides of the parsed document.
+
+use crate::config::reader::Locator;
+use std::collections::HashMap;
+use toml::de::{DeTable, DeValue};
+use toml::{Spanned, Table, Value};
+
+/// Converts a byte offset of `text` to a 1-based (line, column in characters).
+pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let column = before[line_start..].chars().count() + 1;
+    (line, column)
+}
+
+/// Line and column of every key and array element of the document, by dotted path.
+pub fn key_positions(text: &str, root: &Spanned<DeTable<'_>>) -> HashMap<String, (usize, usize)> {
+    let mut spans = HashMap::new();
+    walk_table(text, root.get_ref(), "", &mut spans);
+    spans
+}
+
+fn walk_table(
+    text: &str,
+    table: &DeTable<'_>,
+    prefix: &str,
+    spans: &mut HashMap<String, (usize, usize)>,
+) {
+    for (key, value) in table.iter() {
+        let path = if prefix.is_empty() {
+            key.get_ref().to_string()
+        } else {
+            format!("{prefix}.{}", key.get_ref())
+        };
+        // The key's own position: that is the line a user looks for.
+        spans
+            .entry(path.clone())
+            .or_insert_with(|| line_column(text, key.span().start));
+        walk_value(text, value, &path, spans);
+    }
+}
+
+fn walk_value(
+    text: &str,
+    value: &Spanned<DeValue<'_>>,
+    path: &str,
+    spans: &mut HashMap<String, (usize, usize)>,
+) {
+    match value.get_ref() {
+        DeValue::Table(t) => walk_table(text, t, path, spans),
+        DeValue::Array(items) => {
+            for (i, item) in items.iter().enumerate() {
+                let elem = format!("{path}[{i}]");
+                spans.insert(elem.clone(), line_column(text, item.span().start));
+                walk_value(text, item, &elem, spans);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// One step of a dotted override path.
+#[derive(Debug, PartialEq)]
+enum Segment {
+    Key(String),
+    Index(usize),
+}
+
+/// Splits `noise[1].rate_mm_h` into keys and indices, or explains what is wrong.
+fn parse_path(path: &str) -> Result<Vec<Segment>, String> {
+    let mut out = Vec::new();
+    for part in path.split('.') {
+        let (name, mut rest) = match part.find('[') {
+            Some(i) => (&part[..i], &part[i..]),
+            None => (part, ""),
+        };
+        if name.is_empty()
+            || !name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+        {
+            return Err(format!("\"{part}\" is not a key name"));
+        }
+        out.push(Segment::Key(name.to_string()));
+        while !rest.is_empty() {
+            let close = rest
+                .find(']')
+                .filter(|_| rest.starts_with('['))
+                .ok_or_else(|| format!("malformed index in \"{part}\""))?;
+            let index: usize = rest[1..close]
+                .parse()
+                .map_err(|_| format!("\"{}\" is not an index", &rest[1..close]))?;
+            out.push(Segment::Index(index));
+            rest = &rest[close + 1..];
+        }
+    }
+    Ok(out)
+}
+
+/// The dotted path in canonical form (as used in error messages).
+fn canonical(segments: &[Segment]) -> String {
+    let mut s = String::new();
+    for seg in segments {
+        match seg {
+            Segment::Key(k) => {
+                if !s.is_empty() {
+                    s.push('.');
+                }
+                s.push_str(k);
+            }
+            Segment::Index(i) => s.push_str(&format!("[{i}]")),
+        }
+    }
+    s
+}
+
+/// Parses the value of a `--set` as a TOML value, or takes it as a string.
+fn parse_value(text: &str) -> Value {
+    toml::from_str::<Table>(&format!("v = {text}"))
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .unwrap_or_else(|| Value::String(text.to_string()))
+}
+
+/// Applies one `key=value` override to `root`, recording its path in `locator`.
+///
+/// Intermediate tables are created when missing; an array index may be one past the end
+/// to append a new table (e.g. a new `[[noise]]` stage).
+pub fn apply_set(root: &mut Table, arg: &str, locator: &mut Locator) -> Result<(), String> {
+    let (path, text) = arg
+        .split_once('=')
+        .ok_or_else(|| "expected key=value".to_string())?;
+    let segments = parse_path(path.trim())?;
+    let value = parse_value(text.trim());
+    let mut cur: &mut Value = {
+        let Some(Segment::Key(first)) = segments.first() else {
+            return Err("empty key".into());
+        };
+        if segments.len() == 1 {
+            root.insert(first.clone(), value);
+            locator.sets.push((canonical(&segments), arg.to_string()));
+            return Ok(());
+        }
+        root.entry(first.clone())
+            .or_insert_with(|| empty_for(&segments[1]))
+    };
+    for (i, seg) in segments.iter().enumerate().skip(1) {
+        let last = i + 1 == segments.len();
+        let here = canonical(&segments[..i]);
+        cur = match seg {
+            Segment::Key(k) => {
+                let Value::Table(t) = cur else {
+                    return Err(format!("{here} is not a table"));
+                };
+                if last {
+                    t.insert(k.clone(), value);
+                    break;
+                }
+                t.entry(k.clone())
+                    .or_insert_with(|| empty_for(&segments[i + 1]))
+            }
+            Segment::Index(n) => {
+                let Value::Array(items) = cur else {
+                    return Err(format!("{here} is not an array"));
+                };
+                if *n == items.len() && !last {
+                    items.push(empty_for(&segments[i + 1]));
+                }
+                let len = items.len();
+                let slot = items.get_mut(*n).ok_or_else(|| {
+                    format!("index {n} is out of range: {here} has {len} entries")
+                })?;
+                if last {
+                    *slot = value;
+                    break;
+                }
+                slot
+            }
+        };
+    }
+    locator.sets.push((canonical(&segments), arg.to_string()));
+    Ok(())
+}
+
+/// The empty container a path segment needs to step into.
+fn empty_for(next: &Segment) -> Value {
+    match next {
+        Segment::Key(_) => Value::Table(Table::new()),
+        Segment::Index(_) => Value::Array(Vec::new()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paths_parse() {
+        assert_eq!(
+            parse_path("noise[1].rate_mm_h").unwrap(),
+            vec![
+                Segment::Key("noise".into()),
+                Segment::Index(1),
+                Segment::Key("rate_mm_h".into())
+            ]
+        );
+        assert!(parse_path("noise[x]").is_err());
+        assert!(parse_path("a..b").is_err());
+    }
+
+    #[test]
+    fn line_columns_count_from_one() {
+        assert_eq!(line_column("a\nbc = 1", 3), (2, 2));
+        assert_eq!(line_column("x", 0), (1, 1));
+    }
+}

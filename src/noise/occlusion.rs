@@ -1,0 +1,207 @@
+//! Lens occlusion (factor 12): beams of the selected lasers are blocked or attenuated.
+//!
+//! Options: exactly one of `lasers = [ids]`, `rings = [rings]` (0 = lowest) or
+//! `elevation_deg = [lo, hi]` (inclusive, with 0.005 degree slack so table values such
+//! as -5.33 match although stored as f32); optional `azimuth_deg = [from, to]`, the
+//! sector clockwise from `from` (inclusive) to `to` (exclusive), which may wrap through
+//! 0 (`[300, 60]`); optional `transmission` in [0, 1): 0 (default) blocks the beam —
+//! the return is marked `Occluded`, its power and range untouched — while 0 < t < 1
+//! multiplies the power by t and keeps the return for the later stages and filters.
+
+use crate::config::reader::Section;
+use crate::error::Result;
+use crate::noise::{Fate, NoiseStage, NoisyFrame};
+use rand_chacha::ChaCha8Rng;
+use std::sync::Arc;
+use toml::Value;
+
+/// The `type` name of this stage.
+pub const NAME: &str = "occlusion";
+
+/// Slack on elevation interval bounds, in degrees.
+const ELEVATION_SLACK_DEG: f64 = 0.005;
+
+/// Which beams are occluded.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Selection {
+    /// By laser id (firing order, 0..31).
+    Lasers(Vec<u8>),
+    /// By ring (elevation order, 0 = lowest).
+    Rings(Vec<u8>),
+    /// By elevation interval [lo, hi] in degrees.
+    Elevation([f64; 2]),
+}
+
+/// The occlusion stage.
+#[derive(Clone, Debug)]
+pub struct Occlusion {
+    /// The occluded beams.
+    pub selection: Selection,
+    /// Optional azimuth sector [from, to) in degrees, clockwise, may wrap.
+    pub azimuth_deg: Option<[f64; 2]>,
+    /// Power transmission of the obstruction; 0 blocks.
+    pub transmission: f64,
+    /// Bit i set: laser id (or ring) i selected.
+    mask: u32,
+}
+
+impl Occlusion {
+    /// Builds the stage; `selection` and `azimuth_deg` must already be valid.
+    pub fn new(selection: Selection, azimuth_deg: Option<[f64; 2]>, transmission: f64) -> Self {
+        let mask = match &selection {
+            Selection::Lasers(ids) | Selection::Rings(ids) => {
+                ids.iter().fold(0u32, |m, &i| m | (1u32 << i))
+            }
+            Selection::Elevation(_) => 0,
+        };
+        Occlusion {
+            selection,
+            azimuth_deg,
+            transmission,
+            mask,
+        }
+    }
+
+    /// True if the beam of this return passes through the obstruction.
+    pub fn covers(&self, laser: u8, ring: u8, elevation: f32, azimuth: f32) -> bool {
+        let beam = match &self.selection {
+            Selection::Lasers(_) => laser < 32 && self.mask & (1 << laser) != 0,
+            Selection::Rings(_) => ring < 32 && self.mask & (1 << ring) != 0,
+            Selection::Elevation([lo, hi]) => {
+                let e = f64::from(elevation);
+                e >= lo - ELEVATION_SLACK_DEG && e <= hi + ELEVATION_SLACK_DEG
+            }
+        };
+        beam && self
+            .azimuth_deg
+            .is_none_or(|s| in_sector(f64::from(azimuth), s))
+    }
+}
+
+/// True if `azimuth` lies in the clockwise sector [from, to), wrapping through 0.
+pub fn in_sector(azimuth: f64, [from, to]: [f64; 2]) -> bool {
+    let a = azimuth.rem_euclid(360.0);
+    let (from, to) = (from.rem_euclid(360.0), to.rem_euclid(360.0));
+    if from <= to {
+        a >= from && a < to
+    } else {
+        a >= from || a < to
+    }
+}
+
+impl NoiseStage for Occlusion {
+    fn kind(&self) -> &'static str {
+        NAME
+    }
+
+    fn describe(&self) -> String {
+        let what = match &self.selection {
+            Selection::Lasers(ids) => format!("laser ids {ids:?}"),
+            Selection::Rings(r) => format!("rings {r:?}"),
+            Selection::Elevation([lo, hi]) => format!("elevations {lo}..{hi} deg"),
+        };
+        let sector = match self.azimuth_deg {
+            Some([a, b]) => format!(", azimuth {a}..{b} deg"),
+            None => ", all azimuths".into(),
+        };
+        let effect = if self.transmission == 0.0 {
+            "blocked".to_string()
+        } else {
+            format!("power x {}", self.transmission)
+        };
+        format!("{what}{sector}: {effect}")
+    }
+
+    fn settings(&self) -> Vec<(&'static str, Value)> {
+        let ints = |v: &[u8]| Value::Array(v.iter().map(|&i| Value::Integer(i.into())).collect());
+        let floats = |v: [f64; 2]| Value::Array(v.iter().map(|&x| Value::Float(x)).collect());
+        let mut out = vec![match &self.selection {
+            Selection::Lasers(ids) => ("lasers", ints(ids)),
+            Selection::Rings(r) => ("rings", ints(r)),
+            Selection::Elevation(e) => ("elevation_deg", floats(*e)),
+        }];
+        if let Some(s) = self.azimuth_deg {
+            out.push(("azimuth_deg", floats(s)));
+        }
+        out.push(("transmission", Value::Float(self.transmission)));
+        out
+    }
+
+    fn apply(&self, frame: &mut NoisyFrame, _rng: &mut ChaCha8Rng) {
+        for ((r, fate), power) in frame
+            .clean
+            .iter()
+            .zip(frame.fate.iter_mut())
+            .zip(frame.power.iter_mut())
+        {
+            if *fate != Fate::Kept || !self.covers(r.laser, r.ring, r.elevation, r.azimuth) {
+                continue;
+            }
+            if self.transmission == 0.0 {
+                *fate = Fate::Occluded;
+            } else {
+                *power *= self.transmission;
+            }
+        }
+    }
+}
+
+/// Reads the options of an `occlusion` entry.
+pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
+    let given: Vec<&str> = ["lasers", "rings", "elevation_deg"]
+        .into_iter()
+        .filter(|k| opts.has(k))
+        .collect();
+    if given.len() > 1 {
+        return Err(opts.error(
+            given[1],
+            format!(
+                "give only one of lasers, rings, elevation_deg (found {})",
+                given.join(" and ")
+            ),
+        ));
+    }
+    let selection = if let Some(ids) = opts.id_list("lasers", 31)? {
+        Selection::Lasers(ids)
+    } else if let Some(rings) = opts.id_list("rings", 31)? {
+        Selection::Rings(rings)
+    } else if let Some([lo, hi]) = opts.pair("elevation_deg")? {
+        if lo > hi {
+            return Err(opts.error(
+                "elevation_deg",
+                format!("interval [{lo}, {hi}] is empty: lo must not exceed hi"),
+            ));
+        }
+        Selection::Elevation([lo, hi])
+    } else {
+        return Err(opts.error(
+            "",
+            "occlusion needs one of lasers = [...], rings = [...] or elevation_deg = [lo, hi]",
+        ));
+    };
+    let azimuth = opts.pair("azimuth_deg")?;
+    if let Some([from, to]) = azimuth {
+        for (i, a) in [from, to].into_iter().enumerate() {
+            if !(0.0..=360.0).contains(&a) {
+                return Err(opts.error(
+                    &format!("azimuth_deg[{i}]"),
+                    format!("{a} is outside [0, 360] degrees"),
+                ));
+            }
+        }
+        if from.rem_euclid(360.0) == to.rem_euclid(360.0) {
+            return Err(opts.error(
+                "azimuth_deg",
+                "the sector is empty (from == to); leave azimuth_deg out for the full turn",
+            ));
+        }
+    }
+    let transmission = opts.f64("transmission")?.unwrap_or(0.0);
+    if !(0.0..1.0).contains(&transmission) {
+        return Err(opts.error(
+            "transmission",
+            format!("{transmission} is outside [0, 1): 0 blocks, 0 < t < 1 attenuates"),
+        ));
+    }
+    Ok(Arc::new(Occlusion::new(selection, azimuth, transmission)))
+}

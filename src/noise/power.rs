@@ -1,0 +1,114 @@
+//! Ideal power of a recorded return, as a fraction of emitted power.
+//!
+//! LiDAR equation for a Lambertian target: P_i = kappa * rho / R^2, clamped at 1
+//! (receiver saturation). rho comes from the intensity byte (`/100` for firmware-2
+//! reflectivity, `/255` for raw levels — an assumption: raw level proportional to
+//! reflectance) clamped to `[reflectance_floor, 1]`, so retro-reflectors (reflectivity
+//! over 100) get rho = 1 and an intensity of 0 is still a detectable return.
+//!
+//! kappa is fixed by a reference target: rho_ref at z_ref returns exactly the threshold
+//! p_th = `detection.min_power`, so kappa = p_th * z_ref^2 / rho_ref.
+//!
+//! The MAVS model (P = rho / z^2 against P_min = 0.9 / (pi z_max^2)) is the same formula
+//! rescaled so that its threshold lands on `detection.min_power`: kappa = p_th * pi *
+//! z_max^2 / 0.9 with z_max = `reference_range_m`, i.e. an effective rho_ref = 0.9 / pi.
+//! A return is then kept exactly when rho / z^2 >= P_min, whatever `min_power` is;
+//! `reference_reflectance` is not used.
+
+use crate::config::{DetectionConfig, IntensityMode, PowerConfig, PowerModel, SensorConfig};
+use serde::Serialize;
+
+/// Every constant of the ideal-power model, for reports.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct PowerConstants {
+    /// "lidar-equation" or "mavs".
+    pub model: PowerModel,
+    /// How intensities were read.
+    pub intensity: IntensityMode,
+    /// Intensity giving rho = 1 (100 for reflectivity, 255 for raw).
+    pub intensity_full_scale: f64,
+    /// Lowest reflectance given to a return.
+    pub reflectance_floor: f64,
+    /// Reference reflectance used for kappa (0.9 / pi in the MAVS model).
+    pub reference_reflectance: f64,
+    /// Reference range in metres (z_max in the MAVS model).
+    pub reference_range_m: f64,
+    /// Detection threshold as a fraction of emitted power.
+    pub threshold: f64,
+    /// kappa in P = kappa * rho / R^2, in square metres.
+    pub kappa_m2: f64,
+    /// Powers are clamped at this value (receiver saturation).
+    pub saturation: f64,
+    /// MAVS only: its unscaled threshold 0.9 / (pi * z_max^2) in 1/m^2.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mavs_min_power_per_m2: Option<f64>,
+}
+
+/// The ideal-power model with a per-intensity reflectance table.
+#[derive(Clone, Debug)]
+pub struct IdealPower {
+    constants: PowerConstants,
+    /// rho of each intensity byte.
+    rho: [f64; 256],
+}
+
+impl IdealPower {
+    /// Builds the model from the configuration tables.
+    pub fn new(power: &PowerConfig, sensor: &SensorConfig, detection: &DetectionConfig) -> Self {
+        let full_scale = match sensor.intensity {
+            IntensityMode::Reflectivity => 100.0,
+            IntensityMode::Raw => 255.0,
+        };
+        let (rho_ref, mavs) = match power.model {
+            PowerModel::LidarEquation => (power.reference_reflectance, None),
+            PowerModel::Mavs => (
+                0.9 / std::f64::consts::PI,
+                Some(0.9 / (std::f64::consts::PI * power.reference_range_m.powi(2))),
+            ),
+        };
+        let floor = power.reflectance_floor;
+        let mut rho = [0.0; 256];
+        for (i, r) in rho.iter_mut().enumerate() {
+            *r = (i as f64 / full_scale).clamp(floor, 1.0);
+        }
+        IdealPower {
+            constants: PowerConstants {
+                model: power.model,
+                intensity: sensor.intensity,
+                intensity_full_scale: full_scale,
+                reflectance_floor: floor,
+                reference_reflectance: rho_ref,
+                reference_range_m: power.reference_range_m,
+                threshold: detection.min_power,
+                kappa_m2: detection.min_power * power.reference_range_m.powi(2) / rho_ref,
+                saturation: 1.0,
+                mavs_min_power_per_m2: mavs,
+            },
+            rho,
+        }
+    }
+
+    /// The constants in use.
+    pub fn constants(&self) -> &PowerConstants {
+        &self.constants
+    }
+
+    /// Reflectance given to an intensity byte.
+    pub fn reflectance(&self, intensity: u8) -> f64 {
+        self.rho[intensity as usize]
+    }
+
+    /// Ideal power of a return of `intensity` at `range` metres.
+    pub fn power(&self, intensity: u8, range: f32) -> f64 {
+        let c = &self.constants;
+        let range = f64::from(range);
+        if range <= 0.0 {
+            return c.saturation;
+        }
+        // Written as p_th * (rho / rho_ref) * (z_ref / R)^2 — the same value as
+        // kappa * rho / R^2 — so the reference target lands exactly on the threshold.
+        let q = c.reference_range_m / range;
+        (c.threshold * (self.reflectance(intensity) / c.reference_reflectance) * q * q)
+            .min(c.saturation)
+    }
+}

@@ -141,7 +141,9 @@ pub(crate) fn convex_hull(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
             Box::new(pts.iter().rev())
         };
         for &p in iter {
-            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+            {
                 hull.pop();
             }
             hull.push(p);
@@ -158,7 +160,9 @@ pub(crate) fn min_area_rect(hull: &[[f64; 2]]) -> ([f64; 2], f64, f64, f64) {
         0 => ([0.0; 2], 0.0, 0.0, 0.0),
         1 => (hull[0], 0.0, 0.0, 0.0),
         _ => {
-            let mut best: Option<(f64, [f64; 2], f64, f64, [f64; 2])> = None;
+            // (area, centre, extent along u, extent along v, u)
+            type Candidate = (f64, [f64; 2], f64, f64, [f64; 2]);
+            let mut best: Option<Candidate> = None;
             for i in 0..hull.len() {
                 let a = hull[i];
                 let b = hull[(i + 1) % hull.len()];
@@ -168,7 +172,12 @@ pub(crate) fn min_area_rect(hull: &[[f64; 2]]) -> ([f64; 2], f64, f64, f64) {
                 }
                 let u = [(b[0] - a[0]) / len, (b[1] - a[1]) / len];
                 let v = [-u[1], u[0]];
-                let (mut u0, mut u1, mut v0, mut v1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+                let (mut u0, mut u1, mut v0, mut v1) = (
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                );
                 for p in hull {
                     let pu = p[0] * u[0] + p[1] * u[1];
                     let pv = p[0] * v[0] + p[1] * v[1];
@@ -188,7 +197,11 @@ pub(crate) fn min_area_rect(hull: &[[f64; 2]]) -> ([f64; 2], f64, f64, f64) {
             let Some((_, center, du, dv, u)) = best else {
                 return (hull[0], 0.0, 0.0, 0.0);
             };
-            let (length, width, axis) = if du >= dv { (du, dv, u) } else { (dv, du, [-u[1], u[0]]) };
+            let (length, width, axis) = if du >= dv {
+                (du, dv, u)
+            } else {
+                (dv, du, [-u[1], u[0]])
+            };
             let mut yaw = axis[1].atan2(axis[0]).to_degrees();
             // A box has no front: fold the direction into (-90, 90].
             if yaw > 90.0 {
@@ -231,13 +244,26 @@ mod tests {
         // interior points and z spread.
         let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
         let mut rs = Vec::new();
-        for (k, (lu, lv)) in [(-2.0, -1.0), (2.0, -1.0), (2.0, 1.0), (-2.0, 1.0), (0.5, 0.2), (-1.0, 0.0)]
-            .iter()
-            .enumerate()
+        for (k, (lu, lv)) in [
+            (-2.0, -1.0),
+            (2.0, -1.0),
+            (2.0, 1.0),
+            (-2.0, 1.0),
+            (0.5, 0.2),
+            (-1.0, 0.0),
+        ]
+        .iter()
+        .enumerate()
         {
             let x = 10.0 + lu * c - lv * s;
             let y = 5.0 + lu * s + lv * c;
-            rs.push(ret(x as f32, y as f32, k as f32 * 0.1, 10 * k as u8, [7, 3, 3, 9, 0, 7][k]));
+            rs.push(ret(
+                x as f32,
+                y as f32,
+                k as f32 * 0.1,
+                10 * k as u8,
+                [7, 3, 3, 9, 0, 7][k],
+            ));
         }
         rs.push(ret(100.0, 0.0, 0.0, 0, 1)); // noise, label -1
         let labels = vec![4, 4, 4, 4, 4, 4, -1];
@@ -246,7 +272,10 @@ mod tests {
         let i = &info[0];
         assert_eq!((i.id, i.n_points), (4, 6));
         let b = &i.oriented_box;
-        assert!((b.length - 4.0).abs() < 1e-5 && (b.width - 2.0).abs() < 1e-5, "{b:?}");
+        assert!(
+            (b.length - 4.0).abs() < 1e-5 && (b.width - 2.0).abs() < 1e-5,
+            "{b:?}"
+        );
         assert!((b.yaw_deg - 30.0).abs() < 1e-4, "{b:?}");
         assert!((b.center[0] - 10.0).abs() < 1e-5 && (b.center[1] - 5.0).abs() < 1e-5);
         assert!((b.z_min - 0.0).abs() < 1e-6 && (b.z_max - 0.5).abs() < 1e-6);
@@ -257,7 +286,11 @@ mod tests {
 
     #[test]
     fn degenerate_clusters() {
-        let rs = vec![ret(1.0, 1.0, 0.0, 0, 0), ret(2.0, 3.0, 1.0, 0, 0), ret(5.0, 5.0, 5.0, 0, 0)];
+        let rs = vec![
+            ret(1.0, 1.0, 0.0, 0, 0),
+            ret(2.0, 3.0, 1.0, 0, 0),
+            ret(5.0, 5.0, 5.0, 0, 0),
+        ];
         let info = describe(&rs, &[0, 0, 1]).unwrap();
         let seg = &info[0].oriented_box;
         assert!((seg.length - 5f64.sqrt()).abs() < 1e-9 && seg.width.abs() < 1e-12);

@@ -375,13 +375,37 @@ mod tests {
         assert!((r[3][3] - coef).abs() < 1e-12);
 
         // Threshold above the root's coefficient: everything one cluster.
-        let all = cut_tree(&z, 5, TreeCut::Inconsistent { threshold: 1.2, depth: 2 }).unwrap();
+        let all = cut_tree(
+            &z,
+            5,
+            TreeCut::Inconsistent {
+                threshold: 1.2,
+                depth: 2,
+            },
+        )
+        .unwrap();
         assert_eq!(all, vec![0, 0, 0, 0, 0]);
         // Below it: the root splits, every other link (coefficient 0) holds.
-        let two = cut_tree(&z, 5, TreeCut::Inconsistent { threshold: 1.1, depth: 2 }).unwrap();
+        let two = cut_tree(
+            &z,
+            5,
+            TreeCut::Inconsistent {
+                threshold: 1.1,
+                depth: 2,
+            },
+        )
+        .unwrap();
         assert_eq!(two, vec![0, 0, 0, 1, 1]);
         // Depth 1: every coefficient is 0, so threshold 0 keeps everything merged.
-        let d1 = cut_tree(&z, 5, TreeCut::Inconsistent { threshold: 0.0, depth: 1 }).unwrap();
+        let d1 = cut_tree(
+            &z,
+            5,
+            TreeCut::Inconsistent {
+                threshold: 0.0,
+                depth: 1,
+            },
+        )
+        .unwrap();
         assert_eq!(d1, vec![0, 0, 0, 0, 0]);
     }
 
@@ -390,13 +414,26 @@ mod tests {
         // Points 0, 1, 3, 6 on a line: links (0,1)@1 -> 4, (4,2)@2 -> 5, (5,3)@3 -> 6.
         // Link 5: heights {1, 2}: mean 1.5, std sqrt(0.5), coefficient 0.5/sqrt(0.5) = 0.7071.
         // Link 6: heights {2, 3}: same coefficient 0.7071.
-        let pts: Vec<[f32; 3]> = [0.0, 1.0, 3.0, 6.0].iter().map(|&x| [x, 0.0, 0.0]).collect();
+        let pts: Vec<[f32; 3]> = [0.0, 1.0, 3.0, 6.0]
+            .iter()
+            .map(|&x| [x, 0.0, 0.0])
+            .collect();
         let z = linkage(&pts, f64::INFINITY).unwrap();
         assert_eq!(z[1][..3], [2.0, 4.0, 2.0]);
         let r = inconsistent(&z, 4, 2).unwrap();
         let c = 0.5 / 0.5f64.sqrt();
         assert!((r[1][3] - c).abs() < 1e-12 && (r[2][3] - c).abs() < 1e-12);
-        let at = |t| cut_tree(&z, 4, TreeCut::Inconsistent { threshold: t, depth: 2 }).unwrap();
+        let at = |t| {
+            cut_tree(
+                &z,
+                4,
+                TreeCut::Inconsistent {
+                    threshold: t,
+                    depth: 2,
+                },
+            )
+            .unwrap()
+        };
         assert_eq!(at(0.71), vec![0, 0, 0, 0]);
         // 0.70 < c: links 5 and 6 fail; link 4 (coefficient 0) holds.
         assert_eq!(at(0.70), vec![0, 0, 1, 2]);

@@ -67,9 +67,9 @@ fn brute_force(pts: &[[f32; 3]], linked: impl Fn(usize, usize) -> bool) -> Vec<u
         let mut stack = vec![s];
         while let Some(i) = stack.pop() {
             comp[i] = s;
-            for j in 0..n {
-                if !seen[j] && linked(i, j) {
-                    seen[j] = true;
+            for (j, seen_j) in seen.iter_mut().enumerate() {
+                if !*seen_j && linked(i, j) {
+                    *seen_j = true;
                     stack.push(j);
                 }
             }
@@ -93,18 +93,29 @@ fn distance_cut_matches_brute_force() {
     let mut nontrivial = 0;
     for seed in 0..100u64 {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let n = if seed % 10 == 0 { 3000 } else { rng.random_range(2..1500) };
+        let n = if seed % 10 == 0 {
+            3000
+        } else {
+            rng.random_range(2..1500)
+        };
         let extent = rng.random_range(3.0..30.0);
         let pts = cloud(&mut rng, n, extent);
         let cutoff: f64 = rng.random_range(0.05..1.0);
         let expected = brute_force(&pts, |i, j| dist(&pts[i], &pts[j]) <= cutoff);
         let got = distance_components(&pts, cutoff, 0.0).unwrap();
-        assert_eq!(canonical(&got), expected, "seed {seed}, n {n}, cutoff {cutoff}");
+        assert_eq!(
+            canonical(&got),
+            expected,
+            "seed {seed}, n {n}, cutoff {cutoff}"
+        );
         // Labels are numbered by smallest point index, so they already are canonical up to
         // renumbering: label k first appears before label k+1.
         let mut next = 0;
         for &l in &got {
-            assert!(l <= next, "seed {seed}: labels not in first-appearance order");
+            assert!(
+                l <= next,
+                "seed {seed}: labels not in first-appearance order"
+            );
             if l == next {
                 next += 1;
             }
@@ -118,7 +129,10 @@ fn distance_cut_matches_brute_force() {
             nontrivial += 1;
         }
     }
-    assert!(nontrivial >= 50, "only {nontrivial} clouds had non-trivial clusters");
+    assert!(
+        nontrivial >= 50,
+        "only {nontrivial} clouds had non-trivial clusters"
+    );
 }
 
 #[test]
@@ -175,7 +189,10 @@ fn min_points_and_non_finite_points() {
     assert_eq!(c.labels, expected);
     assert_eq!(c.labels[3], -1);
     assert_eq!(c.n_clusters, ids.len());
-    assert_eq!(c.n_noise_points, expected.iter().filter(|&&l| l < 0).count());
+    assert_eq!(
+        c.n_noise_points,
+        expected.iter().filter(|&&l| l < 0).count()
+    );
     assert!(c.n_clusters > 1 && c.n_noise_points > 0);
 }
 

@@ -50,7 +50,12 @@ fn read_points(path: &Path) -> Result<Vec<[f32; 3]>> {
         let mut p = [0f32; 3];
         for (k, v) in p.iter_mut().enumerate() {
             *v = rec[k].trim().parse().with_context(|| {
-                format!("{}: line {}, column {}: not a number", path.display(), i + 2, k + 1)
+                format!(
+                    "{}: line {}, column {}: not a number",
+                    path.display(),
+                    i + 2,
+                    k + 1
+                )
             })?;
         }
         pts.push(p);
@@ -59,15 +64,23 @@ fn read_points(path: &Path) -> Result<Vec<[f32; 3]>> {
 }
 
 /// Writes through a temporary file in the target folder, renamed into place when complete.
-fn write_atomic(path: &Path, body: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<()> {
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).with_context(|| format!("{}", dir.display()))?;
+fn write_atomic(
+    path: &Path,
+    body: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<()> {
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let mut tmp =
+        tempfile::NamedTempFile::new_in(dir).with_context(|| format!("{}", dir.display()))?;
     {
         let mut w = BufWriter::new(tmp.as_file_mut());
         body(&mut w).with_context(|| format!("{}", path.display()))?;
         w.flush()?;
     }
-    tmp.persist(path).with_context(|| format!("{}", path.display()))?;
+    tmp.persist(path)
+        .with_context(|| format!("{}", path.display()))?;
     Ok(())
 }
 
@@ -79,7 +92,10 @@ fn main() -> Result<()> {
         Cut::Inconsistent => CutRule::Inconsistent { threshold: args.t },
         Cut::Maxclust => {
             if args.t < 1.0 || args.t.fract() != 0.0 {
-                bail!("--t: maxclust needs a whole number of clusters >= 1, got {}", args.t);
+                bail!(
+                    "--t: maxclust needs a whole number of clusters >= 1, got {}",
+                    args.t
+                );
             }
             CutRule::MaxClust { k: args.t as usize }
         }

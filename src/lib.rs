@@ -6,9 +6,9 @@
 pub mod calibration;
 pub mod capture;
 pub mod cli;
-pub mod config;
 pub mod cluster;
 pub mod commands;
+pub mod config;
 pub mod error;
 pub mod frame;
 pub mod ground;

@@ -1,0 +1,302 @@
+//! Per-cluster report: size, position, boxes, ranges, intensity and lasers.
+
+use crate::error::{Error, Result};
+use crate::frame::Return;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// Box of a cluster in the ground plane, rotated about the vertical axis, with its z range.
+///
+/// It is the minimum-area rectangle enclosing the xy convex hull, found by trying every hull
+/// edge as a side (the rotating-calipers result; the optimum has a side flush with an edge).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OrientedBox {
+    /// Centre of the rectangle (x, y) in metres.
+    pub center: [f64; 2],
+    /// Longer side in metres.
+    pub length: f64,
+    /// Shorter side in metres.
+    pub width: f64,
+    /// Direction of the longer side, degrees counter-clockwise from +x, in (-90, 90].
+    pub yaw_deg: f64,
+    /// Lowest z in metres.
+    pub z_min: f64,
+    /// Highest z in metres.
+    pub z_max: f64,
+}
+
+/// Summary of one cluster.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ClusterInfo {
+    /// Cluster label.
+    pub id: i32,
+    /// Number of returns.
+    pub n_points: usize,
+    /// Mean position (x, y, z) in metres.
+    pub centroid: [f64; 3],
+    /// Axis-aligned box corner with the smallest coordinates.
+    pub aabb_min: [f64; 3],
+    /// Axis-aligned box corner with the largest coordinates.
+    pub aabb_max: [f64; 3],
+    /// Axis-aligned box dimensions (x, y, z) in metres.
+    pub extent: [f64; 3],
+    /// Yaw-oriented box in the ground plane.
+    pub oriented_box: OrientedBox,
+    /// Smallest range of the returns in metres.
+    pub min_range: f64,
+    /// Mean range of the returns in metres.
+    pub mean_range: f64,
+    /// Mean intensity byte.
+    pub mean_intensity: f64,
+    /// Laser ids that hit the cluster, ascending.
+    pub lasers: Vec<u8>,
+}
+
+/// Describes every cluster (labels >= 0; negative labels are noise), sorted by id.
+pub fn describe(returns: &[Return], labels: &[i32]) -> Result<Vec<ClusterInfo>> {
+    if returns.len() != labels.len() {
+        return Err(Error::Invalid(format!(
+            "describe clusters: {} returns but {} labels",
+            returns.len(),
+            labels.len()
+        )));
+    }
+    let mut groups: BTreeMap<i32, Vec<&Return>> = BTreeMap::new();
+    for (r, &l) in returns.iter().zip(labels) {
+        if l >= 0 {
+            groups.entry(l).or_default().push(r);
+        }
+    }
+    Ok(groups
+        .into_iter()
+        .map(|(id, members)| summarize(id, &members))
+        .collect())
+}
+
+fn summarize(id: i32, members: &[&Return]) -> ClusterInfo {
+    let n = members.len() as f64;
+    let mut sum = [0.0f64; 3];
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    let mut min_range = f64::INFINITY;
+    let mut range_sum = 0.0;
+    let mut intensity_sum = 0.0;
+    let mut lasers = Vec::new();
+    let mut xy = Vec::with_capacity(members.len());
+    for r in members {
+        let p = [r.x as f64, r.y as f64, r.z as f64];
+        for a in 0..3 {
+            sum[a] += p[a];
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+        min_range = min_range.min(r.range as f64);
+        range_sum += r.range as f64;
+        intensity_sum += r.intensity as f64;
+        lasers.push(r.laser);
+        xy.push([p[0], p[1]]);
+    }
+    lasers.sort_unstable();
+    lasers.dedup();
+    let (center, length, width, yaw_deg) = min_area_rect(&convex_hull(xy));
+    ClusterInfo {
+        id,
+        n_points: members.len(),
+        centroid: sum.map(|s| s / n),
+        aabb_min: lo,
+        aabb_max: hi,
+        extent: [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]],
+        oriented_box: OrientedBox {
+            center,
+            length,
+            width,
+            yaw_deg,
+            z_min: lo[2],
+            z_max: hi[2],
+        },
+        min_range,
+        mean_range: range_sum / n,
+        mean_intensity: intensity_sum / n,
+        lasers,
+    }
+}
+
+fn cross(o: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+}
+
+/// Counter-clockwise convex hull without collinear points (Andrew's monotone chain).
+pub(crate) fn convex_hull(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
+    pts.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    pts.dedup();
+    if pts.len() < 3 {
+        return pts;
+    }
+    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * pts.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
+            Box::new(pts.iter())
+        } else {
+            Box::new(pts.iter().rev())
+        };
+        for &p in iter {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        // The last point of each chain starts the other one.
+        hull.pop();
+    }
+    hull
+}
+
+/// Minimum-area enclosing rectangle of a convex polygon: (centre, length, width, yaw deg).
+pub(crate) fn min_area_rect(hull: &[[f64; 2]]) -> ([f64; 2], f64, f64, f64) {
+    match hull.len() {
+        0 => ([0.0; 2], 0.0, 0.0, 0.0),
+        1 => (hull[0], 0.0, 0.0, 0.0),
+        _ => {
+            // (area, centre, extent along u, extent along v, u)
+            type Candidate = (f64, [f64; 2], f64, f64, [f64; 2]);
+            let mut best: Option<Candidate> = None;
+            for i in 0..hull.len() {
+                let a = hull[i];
+                let b = hull[(i + 1) % hull.len()];
+                let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+                if len == 0.0 {
+                    continue;
+                }
+                let u = [(b[0] - a[0]) / len, (b[1] - a[1]) / len];
+                let v = [-u[1], u[0]];
+                let (mut u0, mut u1, mut v0, mut v1) = (
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                );
+                for p in hull {
+                    let pu = p[0] * u[0] + p[1] * u[1];
+                    let pv = p[0] * v[0] + p[1] * v[1];
+                    u0 = u0.min(pu);
+                    u1 = u1.max(pu);
+                    v0 = v0.min(pv);
+                    v1 = v1.max(pv);
+                }
+                let area = (u1 - u0) * (v1 - v0);
+                if best.as_ref().is_none_or(|b| area < b.0) {
+                    let cu = 0.5 * (u0 + u1);
+                    let cv = 0.5 * (v0 + v1);
+                    let center = [cu * u[0] + cv * v[0], cu * u[1] + cv * v[1]];
+                    best = Some((area, center, u1 - u0, v1 - v0, u));
+                }
+            }
+            let Some((_, center, du, dv, u)) = best else {
+                return (hull[0], 0.0, 0.0, 0.0);
+            };
+            let (length, width, axis) = if du >= dv {
+                (du, dv, u)
+            } else {
+                (dv, du, [-u[1], u[0]])
+            };
+            let mut yaw = axis[1].atan2(axis[0]).to_degrees();
+            // A box has no front: fold the direction into (-90, 90].
+            if yaw > 90.0 {
+                yaw -= 180.0;
+            } else if yaw <= -90.0 {
+                yaw += 180.0;
+            }
+            (center, length, width, yaw)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::ReturnKind;
+
+    fn ret(x: f32, y: f32, z: f32, intensity: u8, laser: u8) -> Return {
+        Return {
+            x,
+            y,
+            z,
+            range: (x * x + y * y + z * z).sqrt(),
+            azimuth: 0.0,
+            elevation: 0.0,
+            time: 0.0,
+            packet: 0,
+            raw_distance: 0,
+            intensity,
+            laser,
+            ring: 0,
+            block: 0,
+            kind: ReturnKind::Strongest,
+        }
+    }
+
+    #[test]
+    fn rotated_rectangle_is_recovered() {
+        // Corners of a 4 x 2 rectangle centred at (10, 5), long side at 30 degrees, plus
+        // interior points and z spread.
+        let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+        let mut rs = Vec::new();
+        for (k, (lu, lv)) in [
+            (-2.0, -1.0),
+            (2.0, -1.0),
+            (2.0, 1.0),
+            (-2.0, 1.0),
+            (0.5, 0.2),
+            (-1.0, 0.0),
+        ]
+        .iter()
+        .enumerate()
+        {
+            let x = 10.0 + lu * c - lv * s;
+            let y = 5.0 + lu * s + lv * c;
+            rs.push(ret(
+                x as f32,
+                y as f32,
+                k as f32 * 0.1,
+                10 * k as u8,
+                [7, 3, 3, 9, 0, 7][k],
+            ));
+        }
+        rs.push(ret(100.0, 0.0, 0.0, 0, 1)); // noise, label -1
+        let labels = vec![4, 4, 4, 4, 4, 4, -1];
+        let info = describe(&rs, &labels).unwrap();
+        assert_eq!(info.len(), 1);
+        let i = &info[0];
+        assert_eq!((i.id, i.n_points), (4, 6));
+        let b = &i.oriented_box;
+        assert!(
+            (b.length - 4.0).abs() < 1e-5 && (b.width - 2.0).abs() < 1e-5,
+            "{b:?}"
+        );
+        assert!((b.yaw_deg - 30.0).abs() < 1e-4, "{b:?}");
+        assert!((b.center[0] - 10.0).abs() < 1e-5 && (b.center[1] - 5.0).abs() < 1e-5);
+        assert!((b.z_min - 0.0).abs() < 1e-6 && (b.z_max - 0.5).abs() < 1e-6);
+        assert_eq!(i.lasers, vec![0, 3, 7, 9]);
+        assert!((i.mean_intensity - 25.0).abs() < 1e-12);
+        assert!((i.extent[2] - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn degenerate_clusters() {
+        let rs = vec![
+            ret(1.0, 1.0, 0.0, 0, 0),
+            ret(2.0, 3.0, 1.0, 0, 0),
+            ret(5.0, 5.0, 5.0, 0, 0),
+        ];
+        let info = describe(&rs, &[0, 0, 1]).unwrap();
+        let seg = &info[0].oriented_box;
+        assert!((seg.length - 5f64.sqrt()).abs() < 1e-9 && seg.width.abs() < 1e-12);
+        assert!((seg.yaw_deg - 2f64.atan2(1.0).to_degrees()).abs() < 1e-9);
+        let one = &info[1].oriented_box;
+        assert_eq!((one.center, one.length, one.width), ([5.0, 5.0], 0.0, 0.0));
+        assert!(describe(&rs, &[0]).is_err());
+    }
+}

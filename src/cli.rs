@@ -29,6 +29,10 @@ pub enum Command {
     Info(commands::info::Args),
     /// Decode a capture to one PLY point cloud per frame.
     Convert(commands::convert::Args),
+    /// Check an experiment configuration without running it.
+    Validate(commands::validate::Args),
+    /// Ray-cast a scene into a synthetic HDL-32E capture with ground-truth labels.
+    Synth(commands::synth::SynthArgs),
 }
 
 /// Settings every command receives.
@@ -61,6 +65,8 @@ pub fn main() -> i32 {
     let result = match cli.command {
         Command::Info(args) => commands::info::run(args, global),
         Command::Convert(args) => commands::convert::run(args, global),
+        Command::Validate(args) => commands::validate::run(args),
+        Command::Synth(args) => commands::synth::run(args),
     };
     match result {
         Ok(()) => EXIT_OK,

@@ -1,6 +1,7 @@
 //! `lidar-noise synth`: writes a synthetic HDL-32E capture with ground-truth labels.
 
 use crate::synth::{labels, objects_json, write_capture, Scene, SynthOptions};
+use crate::writers::atomic::temp_file_for;
 use anyhow::{bail, Context};
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -70,10 +71,8 @@ pub fn run(args: SynthArgs) -> anyhow::Result<()> {
         }
     }
 
-    let pcap_tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("{}: cannot create a temporary file", dir.display()))?;
-    let labels_tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("{}: cannot create a temporary file", dir.display()))?;
+    let pcap_tmp = temp_file_for(&pcap_path)?;
+    let labels_tmp = temp_file_for(&labels_path)?;
     let (summary, pcap_w, labels_w) = write_capture(
         &scene,
         &options,
@@ -89,8 +88,7 @@ pub fn run(args: SynthArgs) -> anyhow::Result<()> {
         .into_inner()
         .map_err(|e| e.into_error())
         .with_context(|| format!("{}: cannot write", labels_path.display()))?;
-    let mut objects_tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("{}: cannot create a temporary file", dir.display()))?;
+    let mut objects_tmp = temp_file_for(&objects_path)?;
     objects_tmp
         .write_all(objects_json(&scene).as_bytes())
         .and_then(|_| objects_tmp.write_all(b"\n"))

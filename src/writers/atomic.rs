@@ -23,6 +23,19 @@ where
     F: FnOnce(&mut dyn Write) -> std::io::Result<()>,
 {
     refuse_inputs(path, protected_inputs)?;
+    let mut tmp = temp_file_for(path)?;
+    {
+        let mut out = BufWriter::with_capacity(BUFFER_BYTES, tmp.as_file_mut());
+        write(&mut out).map_err(|e| Error::io(path, e))?;
+        out.flush().map_err(|e| Error::io(path, e))?;
+    }
+    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
+    Ok(())
+}
+
+/// Creates the temporary file that will become `path`: in the same folder, hidden, mode
+/// 0644 on Unix. Persist it with `NamedTempFile::persist(path)` once complete.
+pub fn temp_file_for(path: &Path) -> Result<tempfile::NamedTempFile> {
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
@@ -38,14 +51,7 @@ where
         use std::os::unix::fs::PermissionsExt;
         builder.permissions(fs::Permissions::from_mode(0o644));
     }
-    let mut tmp = builder.tempfile_in(&dir).map_err(|e| Error::io(path, e))?;
-    {
-        let mut out = BufWriter::with_capacity(BUFFER_BYTES, tmp.as_file_mut());
-        write(&mut out).map_err(|e| Error::io(path, e))?;
-        out.flush().map_err(|e| Error::io(path, e))?;
-    }
-    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
-    Ok(())
+    builder.tempfile_in(&dir).map_err(|e| Error::io(path, e))
 }
 
 /// Errors when `target` names the same file as one of `inputs`.

@@ -25,6 +25,8 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Run the whole pipeline: noise, detection filters, ground, clusters, reports.
+    Run(commands::run::Args),
     /// Describe a capture: format, packets, sensor, frames, returns.
     Info(commands::info::Args),
     /// Decode a capture to one PLY point cloud per frame.
@@ -63,6 +65,7 @@ pub fn main() -> i32 {
     };
     let global = Global { quiet: cli.quiet };
     let result = match cli.command {
+        Command::Run(args) => commands::run::run(args, global),
         Command::Info(args) => commands::info::run(args, global),
         Command::Convert(args) => commands::convert::run(args, global),
         Command::Validate(args) => commands::validate::run(args),

@@ -15,5 +15,6 @@ pub mod ground;
 pub mod hdl32e;
 pub mod noise;
 pub mod options;
+pub mod pipeline;
 pub mod synth;
 pub mod writers;

@@ -145,9 +145,7 @@ fn vlp16_patched_to_say_hdl32e_is_refused_by_its_structure() {
         }
     }
     assert!(patched > 10, "expected VLP-16 data packets to patch");
-    let err = decode(classic(&recs, false, false), &keep_all())
-        .err()
-        .expect("must refuse");
+    let err = decode(classic(&recs, false, false), &keep_all()).expect_err("must refuse");
     let msg = err.to_string();
     assert!(msg.contains("VLP-16") && msg.contains("0x21"), "{msg}");
 }
@@ -255,7 +253,7 @@ fn not_a_capture_is_an_error_naming_the_file() {
         b"hello world, not a capture".to_vec(),
         vec![0xd4, 0xc3],
     ] {
-        let err = decode(bytes, &keep_all()).err().expect("must fail");
+        let err = decode(bytes, &keep_all()).expect_err("must fail");
         assert!(err.to_string().contains("test.pcap"), "{err}");
     }
 }

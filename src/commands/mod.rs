@@ -2,6 +2,7 @@
 
 pub mod convert;
 pub mod info;
+pub mod run;
 pub mod synth;
 pub mod validate;
 

@@ -3,19 +3,22 @@
 //! Reading goes: text -> `toml` document (plus the position of every key) -> `--set`
 //! overrides -> typed [`Config`]. Every error names the dotted key (`noise[1].rate_mm_h`)
 //! and where it came from: a line and column of the file, or the `--set` argument.
-//! Unknown keys are errors everywhere except inside `[ground]` and `[cluster]`, which are
-//! kept as opaque tables until their typed readers land.
+//! Unknown keys are errors everywhere.
 //!
 //! Defaults when a key is absent (the reference study's settings): `seed = 42`,
 //! `sensor.intensity = "reflectivity"`, `power.model = "lidar-equation"`,
 //! `power.reference_reflectance = 0.10`, `power.reference_range_m = 100`,
 //! `power.reflectance_floor = 0.005`, no noise stages, `detection.min_power = 0.001`,
-//! `detection.min_range_m = 0.9`.
+//! `detection.min_range_m = 0.9`, `ground.method = "range-image"` with
+//! `max_angle_delta_deg = 5`, `initial_angle_deg = 30`, `cluster.cut = "distance"` with
+//! `cutoff_m = 0.5`, `cutoff_per_m = 0`, `min_points = 10`, `max_edge_m = 2`.
 
 pub mod overrides;
 pub mod reader;
 
+use crate::cluster::{ClusterOptions, CutRule};
 use crate::error::{Error, Result};
+use crate::ground::{GroundMethod, GroundOptions};
 use crate::noise::{self, NoiseStage};
 use reader::{Locator, ReadContext, Section};
 use serde::ser::SerializeMap;
@@ -123,10 +126,10 @@ pub struct Config {
     pub noise: Vec<Arc<dyn NoiseStage>>,
     /// `[detection]`.
     pub detection: DetectionConfig,
-    /// `[ground]`, not validated here yet (opaque).
-    pub ground: Option<toml::Table>,
-    /// `[cluster]`, not validated here yet (opaque).
-    pub cluster: Option<toml::Table>,
+    /// `[ground]`.
+    pub ground: GroundOptions,
+    /// `[cluster]`.
+    pub cluster: ClusterOptions,
     /// Where the configuration came from (file path or the built-in label).
     pub source: PathBuf,
 }
@@ -230,8 +233,8 @@ impl Config {
                 })
                 .collect(),
             detection: &self.detection,
-            ground: self.ground.as_ref(),
-            cluster: self.cluster.as_ref(),
+            ground: &self.ground,
+            cluster: ClusterSettings::of(&self.cluster),
         }
     }
 }
@@ -244,10 +247,150 @@ pub struct EffectiveConfig<'a> {
     power: &'a PowerConfig,
     noise: Vec<StageSettings>,
     detection: &'a DetectionConfig,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    ground: Option<&'a toml::Table>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    cluster: Option<&'a toml::Table>,
+    ground: &'a GroundOptions,
+    cluster: ClusterSettings,
+}
+
+/// `[cluster]` as written in the file: the cut rule's parameter sits in `cutoff_m`.
+#[derive(Serialize)]
+struct ClusterSettings {
+    cut: &'static str,
+    cutoff_m: f64,
+    cutoff_per_m: f64,
+    min_points: usize,
+    max_edge_m: f64,
+}
+
+impl ClusterSettings {
+    fn of(o: &ClusterOptions) -> Self {
+        let (cut, cutoff_m) = match o.cut {
+            CutRule::Distance => ("distance", o.cutoff_m),
+            CutRule::Inconsistent { threshold } => ("inconsistent", threshold),
+            CutRule::MaxClust { k } => ("maxclust", k as f64),
+        };
+        ClusterSettings {
+            cut,
+            cutoff_m,
+            cutoff_per_m: o.cutoff_per_m,
+            min_points: o.min_points,
+            max_edge_m: o.max_edge_m,
+        }
+    }
+}
+
+/// Reads `[ground]`; every key is optional.
+fn read_ground(root: &Section<'_>) -> Result<GroundOptions> {
+    let mut g = GroundOptions::default();
+    let Some(t) = root.table("ground")? else {
+        return Ok(g);
+    };
+    if let Some(m) = t.choice("method", &["range-image", "ransac", "none"])? {
+        g.method = match m {
+            "ransac" => GroundMethod::Ransac,
+            "none" => GroundMethod::None,
+            _ => GroundMethod::RangeImage,
+        };
+    }
+    let angle = |key: &str, into: &mut f64| -> Result<()> {
+        if let Some(v) = t.f64(key)? {
+            if !(0.0..=90.0).contains(&v) {
+                return Err(t.error(key, format!("{v} is not an angle in [0, 90] degrees")));
+            }
+            *into = v;
+        }
+        Ok(())
+    };
+    angle("max_angle_delta_deg", &mut g.max_angle_delta_deg)?;
+    angle("initial_angle_deg", &mut g.initial_angle_deg)?;
+    angle("ransac_max_tilt_deg", &mut g.ransac_max_tilt_deg)?;
+    if let Some(v) = t.f64("ransac_threshold_m")? {
+        if !(v > 0.0 && v.is_finite()) {
+            return Err(t.error(
+                "ransac_threshold_m",
+                format!("{v} must be a positive distance"),
+            ));
+        }
+        g.ransac_threshold_m = v;
+    }
+    if let Some(v) = t.i64("ransac_iterations")? {
+        if !(1..=1_000_000).contains(&v) {
+            return Err(t.error("ransac_iterations", format!("{v} is outside 1..=1000000")));
+        }
+        g.ransac_iterations = v as u32;
+    }
+    t.finish()?;
+    Ok(g)
+}
+
+/// Reads `[cluster]`; every key is optional.
+fn read_cluster(root: &Section<'_>) -> Result<ClusterOptions> {
+    let mut c = ClusterOptions {
+        min_points: 10,
+        ..ClusterOptions::default()
+    };
+    let Some(t) = root.table("cluster")? else {
+        return Ok(c);
+    };
+    let cut = t
+        .choice("cut", &["distance", "inconsistent", "maxclust"])?
+        .unwrap_or("distance");
+    let value = t.f64("cutoff_m")?;
+    c.cut = match cut {
+        "inconsistent" => {
+            let v = value.unwrap_or(1.0);
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(t.error(
+                    "cutoff_m",
+                    format!("{v}: the inconsistency threshold must be 0 or more"),
+                ));
+            }
+            CutRule::Inconsistent { threshold: v }
+        }
+        "maxclust" => {
+            let Some(v) = value else {
+                return Err(t.missing("cutoff_m"));
+            };
+            if !(v >= 1.0 && v.fract() == 0.0 && v <= 1e9) {
+                return Err(t.error("cutoff_m", format!("{v}: with cut = \"maxclust\" give the largest number of clusters, a whole number of at least 1")));
+            }
+            CutRule::MaxClust { k: v as usize }
+        }
+        _ => {
+            if let Some(v) = value {
+                if !(v > 0.0 && v.is_finite()) {
+                    return Err(t.error(
+                        "cutoff_m",
+                        format!("{v} must be a positive distance in metres"),
+                    ));
+                }
+                c.cutoff_m = v;
+            }
+            CutRule::Distance
+        }
+    };
+    if let Some(v) = t.f64("cutoff_per_m")? {
+        if !(v >= 0.0 && v.is_finite()) {
+            return Err(t.error("cutoff_per_m", format!("{v} must be 0 or more")));
+        }
+        c.cutoff_per_m = v;
+    }
+    if let Some(v) = t.i64("min_points")? {
+        if v < 1 {
+            return Err(t.error("min_points", format!("{v} must be at least 1")));
+        }
+        c.min_points = v as usize;
+    }
+    if let Some(v) = t.f64("max_edge_m")? {
+        if !(v > 0.0) {
+            return Err(t.error(
+                "max_edge_m",
+                format!("{v} must be a positive distance (inf allowed)"),
+            ));
+        }
+        c.max_edge_m = v;
+    }
+    t.finish()?;
+    Ok(c)
 }
 
 /// A stage's `type` followed by its options in their documented order.
@@ -336,8 +479,8 @@ fn read_config(root: &Section<'_>, file: &Path) -> Result<Config> {
         d.finish()?;
     }
 
-    let ground = root.raw_table("ground")?;
-    let cluster = root.raw_table("cluster")?;
+    let ground = read_ground(root)?;
+    let cluster = read_cluster(root)?;
     root.finish()?;
 
     Ok(Config {

@@ -14,10 +14,10 @@ pub mod ransac;
 
 use crate::frame::Return;
 use rand_chacha::ChaCha8Rng;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 /// Which ground segmentation runs.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum GroundMethod {
     /// Angle image over the organised ring x azimuth grid (MATLAB / Bogoslavskyi).
@@ -30,7 +30,7 @@ pub enum GroundMethod {
 }
 
 /// Settings of the ground stage; the `[ground]` table of the configuration file.
-#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GroundOptions {
     /// Segmentation method ("range-image", "ransac" or "none").

@@ -5,6 +5,8 @@
 //! temporary file, never overwriting an input of the run.
 
 pub mod atomic;
+pub mod csv;
+pub mod json;
 pub mod ply;
 
 use crate::error::Result;

@@ -1,0 +1,142 @@
+//! The whole per-frame pipeline: noise chain and detection filters, ground removal,
+//! clustering and the cluster report. One frame in, one [`FrameResult`] out; frames are
+//! independent, so any number of threads gives the same results.
+
+use crate::cluster::{self, ClusterInfo, ClusterOptions};
+use crate::config::Config;
+use crate::error::Result;
+use crate::frame::Frame;
+use crate::frame::Return;
+use crate::ground::{self, GroundOptions};
+use crate::noise::{stage_rng, stage_tags, NoiseChain, NoiseSummary, NoisyFrame};
+use serde::Serialize;
+
+pub mod report;
+
+/// The configured pipeline, shareable between threads.
+#[derive(Clone, Debug)]
+pub struct Pipeline {
+    chain: NoiseChain,
+    ground: GroundOptions,
+    cluster: ClusterOptions,
+    seed: u64,
+    ground_tag: u32,
+}
+
+/// Counts of one frame (or, merged, of a capture) after every stage.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct StageCounts {
+    /// Returns kept by the noise chain and the detection filters.
+    pub kept: u64,
+    /// Kept returns labelled ground.
+    pub ground: u64,
+    /// Kept returns not labelled ground (the clustering's input).
+    pub non_ground: u64,
+    /// Clusters with at least `min_points` returns (objects).
+    pub clusters: u64,
+    /// Non-ground returns in clusters smaller than `min_points`.
+    pub noise_points: u64,
+    /// Non-ground returns in clusters (objects).
+    pub cluster_points: u64,
+}
+
+impl StageCounts {
+    /// Adds another frame's counts.
+    pub fn merge(&mut self, o: &StageCounts) {
+        self.kept += o.kept;
+        self.ground += o.ground;
+        self.non_ground += o.non_ground;
+        self.clusters += o.clusters;
+        self.noise_points += o.noise_points;
+        self.cluster_points += o.cluster_points;
+    }
+
+    /// Share of kept returns labelled ground (0 when nothing was kept).
+    pub fn ground_fraction(&self) -> f64 {
+        if self.kept == 0 {
+            0.0
+        } else {
+            self.ground as f64 / self.kept as f64
+        }
+    }
+}
+
+/// Everything the pipeline found in one frame.
+#[derive(Clone, Debug)]
+pub struct FrameResult {
+    /// Every return of the frame with its fate, noisy range and power.
+    pub noisy: NoisyFrame,
+    /// The kept returns with noisy range and coordinates, in capture order.
+    pub survivors: Vec<Return>,
+    /// Index in `noisy.clean` of each survivor.
+    pub kept: Vec<u32>,
+    /// Ground label of each survivor.
+    pub ground: Vec<bool>,
+    /// Cluster id of each survivor: -1 for ground and for noise.
+    pub labels: Vec<i32>,
+    /// The clusters (objects), sorted by id.
+    pub clusters: Vec<ClusterInfo>,
+    /// Counts after each stage.
+    pub counts: StageCounts,
+    /// What the noise chain and the filters did.
+    pub noise: NoiseSummary,
+}
+
+impl Pipeline {
+    /// Builds the pipeline of a validated configuration.
+    pub fn new(config: &Config) -> Self {
+        Pipeline {
+            chain: NoiseChain::new(config),
+            ground: config.ground.clone(),
+            cluster: config.cluster,
+            seed: config.seed,
+            // Ground has its own stream, keyed like a stage named "ground".
+            ground_tag: stage_tags(&["ground"])[0],
+        }
+    }
+
+    /// The noise chain.
+    pub fn chain(&self) -> &NoiseChain {
+        &self.chain
+    }
+
+    /// Runs every stage on one frame.
+    pub fn process(&self, frame: Frame) -> Result<FrameResult> {
+        let noisy = self.chain.process_owned(frame);
+        let survivors = noisy.survivors();
+        let kept = noisy.kept_indices();
+        let mut rng = stage_rng(self.seed, noisy.index, self.ground_tag);
+        let ground = ground::segment(&survivors, &self.ground, &mut rng);
+        let non_ground: Vec<usize> = (0..survivors.len()).filter(|&i| !ground[i]).collect();
+        let points: Vec<[f32; 3]> = non_ground
+            .iter()
+            .map(|&i| [survivors[i].x, survivors[i].y, survivors[i].z])
+            .collect();
+        let clustering = cluster::cluster(&points, &self.cluster)?;
+        let mut labels = vec![-1i32; survivors.len()];
+        for (&i, &label) in non_ground.iter().zip(&clustering.labels) {
+            labels[i] = label;
+        }
+        let object_returns: Vec<Return> = non_ground.iter().map(|&i| survivors[i]).collect();
+        let clusters = cluster::describe(&object_returns, &clustering.labels)?;
+        let counts = StageCounts {
+            kept: survivors.len() as u64,
+            ground: (survivors.len() - non_ground.len()) as u64,
+            non_ground: non_ground.len() as u64,
+            clusters: clustering.n_clusters as u64,
+            noise_points: clustering.n_noise_points as u64,
+            cluster_points: (non_ground.len() - clustering.n_noise_points) as u64,
+        };
+        let noise = noisy.summary();
+        Ok(FrameResult {
+            noisy,
+            survivors,
+            kept,
+            ground,
+            labels,
+            clusters,
+            counts,
+            noise,
+        })
+    }
+}

@@ -381,7 +381,7 @@ fn read_cluster(root: &Section<'_>) -> Result<ClusterOptions> {
         c.min_points = v as usize;
     }
     if let Some(v) = t.f64("max_edge_m")? {
-        if !(v > 0.0) {
+        if v.is_nan() || v <= 0.0 {
             return Err(t.error(
                 "max_edge_m",
                 format!("{v} must be a positive distance (inf allowed)"),

@@ -194,12 +194,19 @@ fn set_overrides_keys_before_validation() {
         &[
             "noise[2].type=occlusion",
             "noise[2].rings=[0]",
-            "ground.max_angle=5",
+            "ground.max_angle_delta_deg=7",
+            "cluster.cutoff_m=0.3",
         ],
     )
     .unwrap();
     assert_eq!(c.noise.len(), 3);
-    assert_eq!(c.ground.unwrap()["max_angle"].as_integer(), Some(5));
+    assert_eq!(c.ground.max_angle_delta_deg, 7.0);
+    assert_eq!(c.cluster.cutoff_m, 0.3);
+    // [ground] and [cluster] know their keys too.
+    let e = load(GOOD, &["ground.max_angle=5"]).unwrap_err();
+    assert!(e.contains("ground.max_angle"), "{e}");
+    let e = load(GOOD, &["cluster.cut=\"fuzzy\""]).unwrap_err();
+    assert!(e.contains("cluster.cut"), "{e}");
 }
 
 #[test]

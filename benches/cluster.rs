@@ -1,7 +1,9 @@
-//! Clustering speed on a synthetic LiDAR frame's non-ground points (about 23,000).
+//! Clustering speed on a synthetic LiDAR frame's non-ground points (about 26,000), and on a
+//! real HDL-32E frame's crude non-ground set when the shared capture is present.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use lidar_noise::cluster::{cluster, linkage, ClusterOptions, CutRule};
+use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::hint::black_box;
@@ -87,6 +89,32 @@ fn frame() -> Vec<[f32; 3]> {
     pts
 }
 
+/// Returns above z = -1.5 m (a crude ground removal) of the largest of the first frames of
+/// the shared Monterey capture; `None` (with a message) when the file is absent.
+fn real_frame() -> Option<Vec<[f32; 3]>> {
+    let path = std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/data/hdl32e/monterey.pcap"
+    ));
+    if !path.exists() {
+        eprintln!("skipping the real-frame case: {} is absent", path.display());
+        return None;
+    }
+    let reader = FrameReader::open(path, &DecoderOptions::default()).expect("readable capture");
+    let frame = reader
+        .take(3)
+        .map(|f| f.expect("decodable frame"))
+        .max_by_key(|f| f.returns.len())?;
+    Some(
+        frame
+            .returns
+            .iter()
+            .filter(|r| r.z > -1.5)
+            .map(|r| [r.x, r.y, r.z])
+            .collect(),
+    )
+}
+
 fn bench(c: &mut Criterion) {
     let pts = frame();
     let opts = ClusterOptions {
@@ -112,6 +140,16 @@ fn bench(c: &mut Criterion) {
     c.bench_function("distance_cut_adaptive", |b| {
         b.iter(|| cluster(black_box(&pts), &adaptive).expect("valid options"))
     });
+    if let Some(real) = real_frame() {
+        let n = cluster(&real, &opts).expect("valid options").n_clusters;
+        eprintln!(
+            "monterey frame: {} points with z > -1.5 m, {n} clusters",
+            real.len()
+        );
+        c.bench_function("distance_cut_0.5m_monterey", |b| {
+            b.iter(|| cluster(black_box(&real), &opts).expect("valid options"))
+        });
+    }
     c.bench_function("linkage_bound_0.5m", |b| {
         b.iter(|| linkage(black_box(&pts), 0.5).expect("valid bound"))
     });

@@ -1,4 +1,4 @@
-//! The k-d tree distance cut against an O(n^2) brute-force reference.
+//! The distance cut (voxel grid and k-d tree paths) against an O(n^2) brute-force reference.
 
 use lidar_noise::cluster::{cluster, distance_components, ClusterOptions, CutRule};
 use rand::{Rng, SeedableRng};
@@ -133,6 +133,32 @@ fn distance_cut_matches_brute_force() {
         nontrivial >= 50,
         "only {nontrivial} clouds had non-trivial clusters"
     );
+}
+
+/// A point a billion metres out is beyond the voxel grid's coordinate limit (1e9 voxels of
+/// side at most cutoff/sqrt(3)), which forces the k-d tree path for a fixed cutoff; the result
+/// must match the brute force and, apart from the isolated outlier, the grid path's result.
+#[test]
+fn fixed_cutoff_tree_fallback_matches_brute_force_and_grid() {
+    for seed in 0..30u64 {
+        let mut rng = ChaCha8Rng::seed_from_u64(500 + seed);
+        let n = rng.random_range(2..1500);
+        let extent = rng.random_range(3.0..30.0);
+        let mut pts = cloud(&mut rng, n, extent);
+        let cutoff: f64 = rng.random_range(0.05..1.0);
+        let grid = distance_components(&pts, cutoff, 0.0).unwrap();
+        pts.push([1e9, 0.0, 0.0]);
+        let expected = brute_force(&pts, |i, j| dist(&pts[i], &pts[j]) <= cutoff);
+        let tree = distance_components(&pts, cutoff, 0.0).unwrap();
+        assert_eq!(canonical(&tree), expected, "seed {seed}, n {n}");
+        assert_eq!(
+            tree[..n],
+            grid[..],
+            "seed {seed}: grid and tree labels differ"
+        );
+        let outlier = tree[n];
+        assert!(tree[..n].iter().all(|&l| l != outlier));
+    }
 }
 
 #[test]

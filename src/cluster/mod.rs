@@ -5,7 +5,7 @@
 //!   distance is `<= cutoff` and takes connected components: a k-d tree radius search plus
 //!   union-find, O(n log n), no distance matrix. With a fixed cutoff a voxel grid of side
 //!   cutoff/sqrt(3) replaces the k-d tree (same exact result, expected O(n), see
-//!   `grid_components`); the range-adaptive cutoff uses the tree. This equals SciPy's
+//!   the `grid` module); the range-adaptive cutoff uses the tree. This equals SciPy's
 //!   `fcluster(linkage(X, 'single'), t, 'distance')` (cophenetic distance `<= t`), PCL
 //!   Euclidean cluster extraction, MATLAB `pcsegdist` and DBSCAN with `min_samples = 1`.
 //! - the merge tree ([`linkage`]) is the Euclidean minimum spanning tree restricted to edges up
@@ -24,6 +24,7 @@
 //! Points with a non-finite coordinate are never linked: each is its own cluster.
 
 mod describe;
+mod grid;
 mod tree;
 
 pub use describe::{describe, ClusterInfo, OrientedBox};
@@ -230,13 +231,16 @@ pub fn distance_components(
     check_non_negative("cutoff_m", cutoff_m)?;
     check_non_negative("cutoff_per_m", cutoff_per_m)?;
     let fp = FinitePoints::new(points)?;
+    if cutoff_per_m == 0.0 {
+        if let Some(labels) = grid::components(&fp, points.len(), cutoff_m) {
+            return Ok(labels);
+        }
+    }
     let mut uf = UnionFind::new(points.len());
     if fp.points.len() > 1 {
         let tree = fp.tree();
         let pts = &fp.points;
-        if cutoff_per_m == 0.0 && grid_components(&fp, cutoff_m, &mut uf) {
-            // Done on the voxel grid.
-        } else if cutoff_per_m == 0.0 {
+        if cutoff_per_m == 0.0 {
             // Each pair is examined once, from its lower index.
             let r2 = search_radius_sq(cutoff_m);
             for (i, p) in pts.iter().enumerate() {
@@ -283,113 +287,6 @@ pub fn distance_components(
         }
     }
     Ok(uf.component_labels().0)
-}
-
-/// Multiplicative hasher for voxel keys: SipHash dominated the grid's run time, and the keys
-/// are not attacker-chosen.
-#[derive(Default)]
-struct VoxelHasher(u64);
-
-impl std::hash::Hasher for VoxelHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(b as u64);
-        }
-    }
-    fn write_u64(&mut self, v: u64) {
-        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-    }
-    fn write_i64(&mut self, v: i64) {
-        self.write_u64(v as u64);
-    }
-    fn write_usize(&mut self, v: usize) {
-        self.write_u64(v as u64);
-    }
-}
-
-type VoxelHash = std::hash::BuildHasherDefault<VoxelHasher>;
-
-/// Distance cut on a voxel grid of side `cutoff / sqrt(3)` (slightly less): two points in one
-/// voxel are always closer than the cutoff, so a voxel is joined without distance checks, and
-/// only voxels up to two steps apart can hold linked points. A pair of voxels whose points
-/// are already in one component is skipped; otherwise point pairs are tested exactly until the
-/// first link. Expected O(n) on LiDAR-like data. Returns false (nothing done) when the grid
-/// does not apply: zero or infinite cutoff, or coordinates too far out for integer voxels.
-fn grid_components(fp: &FinitePoints, cutoff: f64, uf: &mut UnionFind) -> bool {
-    // The 1e-6 shrink keeps same-voxel pairs below the cutoff despite rounding in the
-    // voxel assignment and in the distance itself (both ~1e-16 relative).
-    let side = cutoff / 3f64.sqrt() * (1.0 - 1e-6);
-    if !(side > 0.0 && side.is_finite()) {
-        return false;
-    }
-    let limit = 1e9;
-    let mut keyed: Vec<([i64; 3], u32)> = Vec::with_capacity(fp.points.len());
-    for (i, p) in fp.points.iter().enumerate() {
-        let mut key = [0i64; 3];
-        for a in 0..3 {
-            let c = (p[a] as f64 / side).floor();
-            if c.abs() > limit {
-                return false;
-            }
-            key[a] = c as i64;
-        }
-        keyed.push((key, i as u32));
-    }
-    keyed.sort_unstable();
-    // Voxels as runs of the sorted list.
-    let mut starts: Vec<usize> = Vec::new();
-    let mut cells: std::collections::HashMap<[i64; 3], usize, VoxelHash> =
-        std::collections::HashMap::with_capacity_and_hasher(keyed.len(), VoxelHash::default());
-    for (k, (key, _)) in keyed.iter().enumerate() {
-        if k == 0 || keyed[k - 1].0 != *key {
-            cells.insert(*key, starts.len());
-            starts.push(k);
-        }
-    }
-    starts.push(keyed.len());
-    let gid = |k: usize| fp.index[keyed[k].1 as usize];
-    for c in 0..starts.len() - 1 {
-        let first = gid(starts[c]);
-        for k in starts[c] + 1..starts[c + 1] {
-            uf.union(first, gid(k));
-        }
-    }
-    // Half of the 124 neighbour offsets in [-2, 2]^3: each voxel pair is visited once.
-    let mut offsets = Vec::with_capacity(62);
-    for dx in -2i64..=2 {
-        for dy in -2i64..=2 {
-            for dz in -2i64..=2 {
-                if [dx, dy, dz] > [0, 0, 0] {
-                    offsets.push([dx, dy, dz]);
-                }
-            }
-        }
-    }
-    for c in 0..starts.len() - 1 {
-        let key = keyed[starts[c]].0;
-        let a_rep = gid(starts[c]);
-        for o in &offsets {
-            let nk = [key[0] + o[0], key[1] + o[1], key[2] + o[2]];
-            let Some(&nc) = cells.get(&nk) else { continue };
-            let b_rep = gid(starts[nc]);
-            if uf.find(a_rep) == uf.find(b_rep) {
-                continue;
-            }
-            'pairs: for ka in starts[c]..starts[c + 1] {
-                let pa = &fp.points[keyed[ka].1 as usize];
-                for (_, b) in &keyed[starts[nc]..starts[nc + 1]] {
-                    if point_distance(pa, &fp.points[*b as usize]) <= cutoff {
-                        uf.union(a_rep, b_rep);
-                        break 'pairs;
-                    }
-                }
-            }
-        }
-    }
-    true
 }
 
 /// Turns a partition (component number per point) into labels, dropping small clusters.

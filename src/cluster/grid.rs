@@ -1,0 +1,328 @@
+//! Exact fixed-cutoff distance cut on a uniform voxel grid.
+//!
+//! The voxel side is `cutoff / sqrt(3)` (shrunk by 1e-6), so any two points of one voxel are
+//! closer than the cutoff and every voxel starts as one set: the union-find runs over voxels,
+//! not points. Linked points can only sit in voxels at most two steps apart per axis. Voxels
+//! are identified by a packed `u64` key (x, y, z fields, z lowest), sorted by an LSD radix
+//! sort; the voxels of one (x, y) column within two steps in z then form one contiguous key
+//! range, so the 12 "forward" neighbour columns (plus the voxel's own column above it) are
+//! found by 13 monotone pointers walking the sorted keys, each voxel pair visited once, with
+//! no hashing. A voxel pair already in one set is skipped; otherwise point pairs are tested
+//! exactly (same `f64` formula as [`super::point_distance`]) until the first link, with
+//! bounding-box lower bounds discarding pairs and points that cannot link.
+
+use super::FinitePoints;
+
+/// Bits per radix-sort digit (a 2048-entry histogram stays in L1).
+const RADIX_BITS: u32 = 11;
+
+/// Largest voxel coordinate magnitude handled (cells beyond it fall back to the k-d tree).
+const CELL_LIMIT: f64 = 1e9;
+
+/// Largest `s` with `sqrt(s) <= cutoff` in `f64`, so `s <= t` decides `sqrt(s) <= cutoff`
+/// exactly: the rounded square root is monotone, hence the linked squared distances form a
+/// down-set. Saves a square root per tested pair.
+fn squared_threshold(cutoff: f64) -> f64 {
+    // Neighbouring non-negative doubles by their bit patterns (`f64::next_up` needs Rust
+    // 1.86, above the crate's MSRV).
+    let up = |t: f64| f64::from_bits(t.to_bits() + 1);
+    let down = |t: f64| f64::from_bits(t.to_bits() - 1);
+    let mut t = cutoff * cutoff;
+    while t > 0.0 && t.sqrt() > cutoff {
+        t = down(t);
+    }
+    while t < f64::INFINITY && up(t).sqrt() <= cutoff {
+        t = up(t);
+    }
+    t
+}
+
+/// Squared distance in the order `point_distance` sums it: `(dx*dx + dy*dy) + dz*dz`.
+#[inline(always)]
+fn sq3(dx: f64, dy: f64, dz: f64) -> f64 {
+    dx * dx + dy * dy + dz * dz
+}
+
+/// Gap between a coordinate interval and a value (0 inside): a lower bound of `|v - b|` for
+/// every `b` in `[lo, hi]`, and since `f64` rounding is monotone the rounded gap is also a
+/// lower bound of every rounded difference, so box tests never reject a linked pair.
+#[inline(always)]
+fn gap(lo: f64, hi: f64, v: f64) -> f64 {
+    (lo - v).max(v - hi).max(0.0)
+}
+
+/// Voxel coordinate `floor(v / side)`, or `None` beyond [`CELL_LIMIT`] or for NaN. Written
+/// out because `f64::floor` is a libm call on baseline x86-64.
+#[inline(always)]
+fn cell_of_coord(v: f32, side: f64) -> Option<i64> {
+    let f = v as f64 / side;
+    if f.is_nan() || f.abs() > CELL_LIMIT {
+        return None;
+    }
+    let t = f as i64;
+    Some(if (t as f64) > f { t - 1 } else { t })
+}
+
+/// Disjoint-set forest over voxels with union by size and path halving.
+struct CellSets {
+    parent: Vec<u32>,
+    size: Vec<u32>,
+}
+
+impl CellSets {
+    #[inline(always)]
+    fn find(&mut self, mut x: u32) -> u32 {
+        while self.parent[x as usize] != x {
+            let grand = self.parent[self.parent[x as usize] as usize];
+            self.parent[x as usize] = grand;
+            x = grand;
+        }
+        x
+    }
+
+    /// Joins two distinct roots.
+    #[inline(always)]
+    fn join_roots(&mut self, mut ra: u32, mut rb: u32) {
+        if self.size[ra as usize] < self.size[rb as usize] {
+            std::mem::swap(&mut ra, &mut rb);
+        }
+        self.parent[rb as usize] = ra;
+        self.size[ra as usize] += self.size[rb as usize];
+    }
+}
+
+/// Stable LSD radix sort of `keys` (only the low `bits` bits set) carrying `vals` along.
+fn radix_sort(keys: &mut Vec<u64>, vals: &mut Vec<u32>, bits: u32) {
+    let n = keys.len();
+    let mut k2 = vec![0u64; n];
+    let mut v2 = vec![0u32; n];
+    let buckets = 1usize << RADIX_BITS;
+    let mask = (buckets - 1) as u64;
+    let mut hist = vec![0usize; buckets];
+    let mut shift = 0;
+    while shift < bits {
+        hist.iter_mut().for_each(|h| *h = 0);
+        for &k in keys.iter() {
+            hist[((k >> shift) & mask) as usize] += 1;
+        }
+        // A digit shared by every key leaves the order unchanged.
+        if !hist.contains(&n) {
+            let mut sum = 0;
+            for h in hist.iter_mut() {
+                let c = *h;
+                *h = sum;
+                sum += c;
+            }
+            for (&k, &v) in keys.iter().zip(vals.iter()) {
+                let d = ((k >> shift) & mask) as usize;
+                k2[hist[d]] = k;
+                v2[hist[d]] = v;
+                hist[d] += 1;
+            }
+            std::mem::swap(keys, &mut k2);
+            std::mem::swap(vals, &mut v2);
+        }
+        shift += RADIX_BITS;
+    }
+}
+
+/// Component number per input point (`n` inputs, finite ones in `fp`), numbered 0.. in order
+/// of each component's smallest input index; non-finite points are singletons. `None` when
+/// the grid does not apply (zero or infinite cutoff, coordinates too far out for the packed
+/// keys); the caller then uses the k-d tree.
+pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec<u32>> {
+    // The 1e-6 shrink keeps same-voxel pairs below the cutoff despite rounding in the voxel
+    // assignment and in the distance itself (both ~1e-16 relative).
+    let side = cutoff / 3f64.sqrt() * (1.0 - 1e-6);
+    if !(side > 0.0 && side.is_finite()) {
+        return None;
+    }
+    let m = fp.points.len();
+    if m == 0 {
+        return Some((0..n as u32).collect());
+    }
+    // Two cheap passes (bounds, then keys) instead of storing every voxel triple.
+    let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
+    for p in &fp.points {
+        for a in 0..3 {
+            let c = cell_of_coord(p[a], side)?;
+            lo[a] = lo[a].min(c);
+            hi[a] = hi[a].max(c);
+        }
+    }
+    // Fields hold cell - lo + 2 in [2, span + 2], so a step of up to two either way stays
+    // inside its field and key arithmetic never carries between fields.
+    let width = |a: usize| 64 - ((hi[a] - lo[a] + 4) as u64).leading_zeros();
+    let (wy, wz) = (width(1), width(2));
+    let total = width(0) + wy + wz;
+    if total > 62 {
+        return None;
+    }
+    let (sx, sy) = (wy + wz, wz);
+    let field = |p: &[f32; 3], a: usize| {
+        (cell_of_coord(p[a], side).expect("checked in the first pass") - lo[a] + 2) as u64
+    };
+    let mut keys: Vec<u64> = fp
+        .points
+        .iter()
+        .map(|p| field(p, 0) << sx | field(p, 1) << sy | field(p, 2))
+        .collect();
+    let mut order: Vec<u32> = (0..m as u32).collect();
+    radix_sort(&mut keys, &mut order, total);
+
+    // Voxels as runs of the sorted keys; points copied in voxel order for locality.
+    let mut cell_key: Vec<u64> = Vec::new();
+    let mut cell_start: Vec<u32> = Vec::new();
+    let mut cell_box: Vec<[f64; 6]> = Vec::new();
+    let mut sp: Vec<[f32; 3]> = Vec::with_capacity(m);
+    let mut cell_of: Vec<u32> = vec![0; m];
+    for (k, (&key, &i)) in keys.iter().zip(order.iter()).enumerate() {
+        let pf = fp.points[i as usize];
+        let p = pf.map(|c| c as f64);
+        if k == 0 || keys[k - 1] != key {
+            cell_key.push(key);
+            cell_start.push(k as u32);
+            cell_box.push([p[0], p[1], p[2], p[0], p[1], p[2]]);
+        }
+        let b = cell_box.last_mut().expect("pushed above");
+        for a in 0..3 {
+            b[a] = b[a].min(p[a]);
+            b[a + 3] = b[a + 3].max(p[a]);
+        }
+        cell_of[i as usize] = (cell_key.len() - 1) as u32;
+        sp.push(pf);
+    }
+    drop(keys);
+    drop(order);
+    let n_cells = cell_key.len();
+    cell_start.push(m as u32);
+    // Sentinel above every neighbour key (keys use at most 62 bits): walks need no bounds test.
+    cell_key.push(u64::MAX);
+    let mut sets = CellSets {
+        parent: (0..n_cells as u32).collect(),
+        size: vec![1; n_cells],
+    };
+    let t = squared_threshold(cutoff);
+
+    // Forward neighbour columns (dx > 0, or dx == 0 and dy > 0), each as the key range of
+    // dz in [-2, 2]; the voxel's own column above it (dz = 1, 2) is handled apart.
+    let pack = |dx: i64, dy: i64, dz: i64| -> u64 { ((dx << sx) + (dy << sy) + dz) as u64 };
+    let mut columns: Vec<(u64, u64)> = Vec::with_capacity(12);
+    for dx in 0i64..=2 {
+        for dy in -2i64..=2 {
+            if dx > 0 || dy > 0 {
+                columns.push((pack(dx, dy, -2), pack(dx, dy, 2)));
+            }
+        }
+    }
+    let mut ptr = vec![0usize; columns.len()];
+
+    // Tests one voxel pair and joins it when some point pair links.
+    let try_link = |sets: &mut CellSets, a: usize, b: usize| {
+        let (ra, rb) = (sets.find(a as u32), sets.find(b as u32));
+        if ra == rb {
+            return;
+        }
+        let (ba, bb) = (&cell_box[a], &cell_box[b]);
+        let g = sq3(
+            (bb[0] - ba[3]).max(ba[0] - bb[3]).max(0.0),
+            (bb[1] - ba[4]).max(ba[1] - bb[4]).max(0.0),
+            (bb[2] - ba[5]).max(ba[2] - bb[5]).max(0.0),
+        );
+        if g > t {
+            return;
+        }
+        let pb = &sp[cell_start[b] as usize..cell_start[b + 1] as usize];
+        for p in &sp[cell_start[a] as usize..cell_start[a + 1] as usize] {
+            let p = p.map(|c| c as f64);
+            let g = sq3(
+                gap(bb[0], bb[3], p[0]),
+                gap(bb[1], bb[4], p[1]),
+                gap(bb[2], bb[5], p[2]),
+            );
+            if g > t {
+                continue;
+            }
+            if pb
+                .iter()
+                .any(|q| sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64) <= t)
+            {
+                sets.join_roots(ra, rb);
+                return;
+            }
+        }
+    };
+
+    for c in 0..n_cells {
+        let key = cell_key[c];
+        let mut q = c + 1;
+        while cell_key[q] <= key + 2 {
+            try_link(&mut sets, c, q);
+            q += 1;
+        }
+        for (j, &(lo_off, hi_off)) in columns.iter().enumerate() {
+            let (klo, khi) = (key.wrapping_add(lo_off), key.wrapping_add(hi_off));
+            let mut p = ptr[j];
+            while cell_key[p] < klo {
+                p += 1;
+            }
+            ptr[j] = p;
+            while cell_key[p] <= khi {
+                try_link(&mut sets, c, p);
+                p += 1;
+            }
+        }
+    }
+
+    // Labels in input order, numbered by each component's smallest input index.
+    let mut cell_of_input = vec![u32::MAX; n];
+    for (f, &i) in fp.index.iter().enumerate() {
+        cell_of_input[i as usize] = cell_of[f];
+    }
+    let mut root_label = vec![u32::MAX; n_cells];
+    let mut next = 0u32;
+    let labels = cell_of_input
+        .iter()
+        .map(|&c| {
+            if c == u32::MAX {
+                next += 1;
+                return next - 1;
+            }
+            let r = sets.find(c) as usize;
+            if root_label[r] == u32::MAX {
+                root_label[r] = next;
+                next += 1;
+            }
+            root_label[r]
+        })
+        .collect();
+    Some(labels)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn squared_threshold_decides_like_sqrt() {
+        for &c in &[0.5, 0.1, 1.0, 0.3, 1e-3, 7.77, 0.05] {
+            let t = squared_threshold(c);
+            assert!(t.sqrt() <= c, "{c}");
+            assert!(f64::from_bits(t.to_bits() + 1).sqrt() > c, "{c}");
+        }
+    }
+
+    #[test]
+    fn radix_sort_sorts_and_carries_values() {
+        let mut keys: Vec<u64> = (0..5000u64)
+            .map(|i| (i * 2_654_435_761) % (1 << 40))
+            .collect();
+        let mut vals: Vec<u32> = (0..5000).collect();
+        let orig = keys.clone();
+        radix_sort(&mut keys, &mut vals, 40);
+        assert!(keys.windows(2).all(|w| w[0] <= w[1]));
+        for (k, v) in keys.iter().zip(&vals) {
+            assert_eq!(orig[*v as usize], *k);
+        }
+    }
+}

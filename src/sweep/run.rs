@@ -138,6 +138,15 @@ pub fn run(
             let config = s.base.cell_config(&s.varies, &cell)?;
             let mut baseline = config.clone();
             baseline.noise.clear();
+            // Without noise stages only RANSAC ground draws random numbers: otherwise the
+            // baseline is the same for every seed and is computed once.
+            let baseline_key = if baseline.ground.method == crate::ground::GroundMethod::Ransac {
+                baseline.effective_toml()
+            } else {
+                let mut unseeded = baseline.clone();
+                unseeded.seed = 0;
+                unseeded.effective_toml()
+            };
             let settings = cell_settings(s, capture, bytes, &cell, &config, &baseline);
             let path = dir.join(cell.file_name(&s.varies));
             if read_cell(&path).is_some_and(|f| f.settings == settings) {
@@ -148,7 +157,7 @@ pub fn run(
                 path,
                 settings,
                 pipeline: Pipeline::new(&config),
-                baseline_key: baseline.effective_toml(),
+                baseline_key,
                 baseline,
                 min_points: config.cluster.min_points,
             });

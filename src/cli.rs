@@ -35,6 +35,8 @@ pub enum Command {
     Validate(commands::validate::Args),
     /// Ray-cast a scene into a synthetic HDL-32E capture with ground-truth labels.
     Synth(commands::synth::SynthArgs),
+    /// Run every combination of varied settings and seeds; tables, plots and a web page.
+    Sweep(commands::sweep::Args),
 }
 
 /// Settings every command receives.
@@ -70,6 +72,7 @@ pub fn main() -> i32 {
         Command::Convert(args) => commands::convert::run(args, global),
         Command::Validate(args) => commands::validate::run(args),
         Command::Synth(args) => commands::synth::run(args),
+        Command::Sweep(args) => commands::sweep::run(args, global),
     };
     match result {
         Ok(()) => EXIT_OK,

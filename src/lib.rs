@@ -16,5 +16,6 @@ pub mod hdl32e;
 pub mod noise;
 pub mod options;
 pub mod pipeline;
+pub mod sweep;
 pub mod synth;
 pub mod writers;

@@ -3,6 +3,7 @@
 pub mod convert;
 pub mod info;
 pub mod run;
+pub mod sweep;
 pub mod synth;
 pub mod validate;
 

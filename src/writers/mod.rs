@@ -6,8 +6,10 @@
 
 pub mod atomic;
 pub mod csv;
+pub mod html;
 pub mod json;
 pub mod ply;
+pub mod png;
 
 use crate::error::Result;
 use std::io::Write;

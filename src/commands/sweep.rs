@@ -1,0 +1,241 @@
+//! `lidar-noise sweep`: every combination of varied settings and seeds over captures.
+
+use crate::cli::Global;
+use crate::options::{parse_range, DecoderArgs};
+use crate::sweep::outputs::{write_outputs, BirdsEye};
+use crate::sweep::plan::{parse_seeds, BaseConfig, Vary};
+use crate::sweep::run::{
+    birdseye_panels, read_frame, run as run_sweep, CaptureInput, Observer, SweepSettings,
+};
+use anyhow::{Context, Result};
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `sweep`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Capture files (pcap or pcapng).
+    #[arg(value_name = "CAPTURE", required = true)]
+    pub captures: Vec<PathBuf>,
+    /// Base experiment configuration (default: the built-in configs/paper.toml).
+    #[arg(short, long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Override a base configuration key, e.g. --set detection.min_power=0.002 (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// Vary a key over values: rain.rate_mm_h=0,1,3 (first stage of that type),
+    /// noise[1].rate_mm_h=..., any --set path, or occlusion=on,off (repeatable).
+    #[arg(long = "vary", value_name = "KEY=V1,V2,...")]
+    pub varies: Vec<String>,
+    /// Seeds: N, A..B (both included) or a,b,c (default: the configuration's seed).
+    #[arg(long, value_name = "SEEDS")]
+    pub seeds: Option<String>,
+    /// Ground-truth labels (one per capture, in order); by default CAPTURE with .pcap
+    /// replaced by .labels.csv.gz is used when it exists.
+    #[arg(long = "labels", value_name = "FILE")]
+    pub labels: Vec<PathBuf>,
+    /// Output folder.
+    #[arg(short, long, value_name = "DIR", default_value = "lidar-noise-sweep")]
+    pub output: PathBuf,
+    /// Frames to process, by sweep index: N, A..B (both included), A.. or ..B.
+    #[arg(long, value_name = "RANGE")]
+    pub frames: Option<String>,
+    /// Frame of the first capture shown in the bird's-eye figure (default: the first).
+    #[arg(long, value_name = "N")]
+    pub figure_frame: Option<u32>,
+    /// Half-width of the bird's-eye view in metres.
+    #[arg(long, value_name = "M", default_value_t = 40.0)]
+    pub figure_extent: f64,
+    #[command(flatten)]
+    pub decoder: DecoderArgs,
+}
+
+/// Progress bars on stderr: cells and frames, with elapsed and remaining time.
+struct Bars {
+    cells: ProgressBar,
+    frames: ProgressBar,
+    _multi: MultiProgress,
+}
+
+impl Bars {
+    fn new(global: Global, total_cells: u64) -> Bars {
+        use std::io::IsTerminal;
+        let visible = !global.quiet && std::io::stderr().is_terminal();
+        let multi = MultiProgress::with_draw_target(if visible {
+            ProgressDrawTarget::stderr()
+        } else {
+            ProgressDrawTarget::hidden()
+        });
+        let style = |unit: &str| {
+            ProgressStyle::with_template(&format!(
+                "{{bar:30}} {{pos}}/{{len}} {unit} {{elapsed}} elapsed, {{eta}} left {{msg}}"
+            ))
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+        };
+        let cells = multi.add(ProgressBar::new(total_cells).with_style(style("cells")));
+        let frames = multi.add(ProgressBar::new(0).with_style(style("frames")));
+        Bars {
+            cells,
+            frames,
+            _multi: multi,
+        }
+    }
+}
+
+impl Observer for Bars {
+    fn capture(&self, name: &str, _cells: u64) {
+        self.cells.set_message(name.to_string());
+        self.frames.set_position(0);
+        self.frames.set_length(0);
+    }
+    fn frames_total(&self, n: u64) {
+        // Known after the first chunk: n frames per cell, pending cells of this capture.
+        let cells_left = self.cells.length().unwrap_or(0) - self.cells.position();
+        self.frames
+            .set_length(self.frames.position() + n * cells_left);
+    }
+    fn frame_done(&self) {
+        self.frames.inc(1);
+    }
+    fn cell_done(&self) {
+        self.cells.inc(1);
+    }
+}
+
+/// Runs the sweep and writes every output.
+pub fn run(args: Args, global: Global) -> Result<()> {
+    let (base, warnings) = BaseConfig::load(args.config.as_deref(), &args.sets)?;
+    for w in &warnings {
+        global.warn(w);
+    }
+    let varies: Vec<Vary> = args
+        .varies
+        .iter()
+        .map(|v| Vary::parse(v))
+        .collect::<crate::error::Result<_>>()?;
+    let mut seen = HashSet::new();
+    if let Some(v) = varies.iter().find(|v| !seen.insert(v.key.clone())) {
+        anyhow::bail!("--vary {}: the key is varied twice", v.key);
+    }
+    let seeds = match &args.seeds {
+        Some(s) => parse_seeds(s)?,
+        None => vec![base.seed()],
+    };
+    if !args.labels.is_empty() && args.labels.len() != args.captures.len() {
+        anyhow::bail!(
+            "--labels: give one labels file per capture ({} captures, {} labels files)",
+            args.captures.len(),
+            args.labels.len()
+        );
+    }
+    if !(args.figure_extent.is_finite() && args.figure_extent > 0.0) {
+        anyhow::bail!(
+            "--figure-extent {}: give a positive distance in metres",
+            args.figure_extent
+        );
+    }
+    let mut used = HashSet::new();
+    let mut captures = Vec::new();
+    for (i, path) in args.captures.iter().enumerate() {
+        let stem = path.file_stem().map_or_else(
+            || "capture".to_string(),
+            |s| s.to_string_lossy().into_owned(),
+        );
+        let mut name = stem.clone();
+        let mut n = 2;
+        while !used.insert(name.clone()) {
+            name = format!("{stem}-{n}");
+            n += 1;
+        }
+        let labels = match args.labels.get(i) {
+            Some(l) => Some(l.clone()),
+            None => {
+                let guess = path.with_file_name(format!("{stem}.labels.csv.gz"));
+                guess.is_file().then_some(guess)
+            }
+        };
+        captures.push(CaptureInput {
+            name,
+            path: path.clone(),
+            labels,
+        });
+    }
+    let settings = SweepSettings {
+        base,
+        varies,
+        seeds,
+        decoder: args.decoder.to_options()?,
+        frames: match &args.frames {
+            Some(text) => parse_range("--frames", text)?,
+            None => 0..=u32::MAX,
+        },
+        output: args.output.clone(),
+    };
+    // Every cell configuration is built (and so checked) before any work starts.
+    for cell in crate::sweep::plan::cells(&settings.varies, &settings.seeds) {
+        settings.base.cell_config(&settings.varies, &cell)?;
+    }
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("cannot create the output folder {}", args.output.display()))?;
+    let n_cells = crate::sweep::plan::cells(&settings.varies, &settings.seeds).len();
+    let bars = Bars::new(global, (n_cells * captures.len()) as u64);
+    let outcome = run_sweep(&settings, &captures, &bars)?;
+    bars.frames.finish_and_clear();
+    bars.cells.finish_and_clear();
+
+    let first = &captures[0];
+    let seed = settings.seeds[0];
+    let figure = match read_frame(
+        &first.path,
+        &settings.decoder,
+        &settings.frames,
+        args.figure_frame,
+    )? {
+        Some(frame) => Some(BirdsEye {
+            capture: first.name.clone(),
+            frame: frame.index,
+            seed,
+            panels: birdseye_panels(&settings.base, seed, &frame)?,
+            extent_m: args.figure_extent,
+        }),
+        None => {
+            global.warn(&format!(
+                "{}: no frame {} for the bird's-eye figure",
+                first.path.display(),
+                args.figure_frame
+                    .map_or("in range".into(), |f| f.to_string())
+            ));
+            None
+        }
+    };
+    let mut protected: Vec<&Path> = Vec::new();
+    for c in &captures {
+        protected.push(&c.path);
+        if let Some(l) = &c.labels {
+            protected.push(l);
+        }
+    }
+    if let Some(c) = &args.config {
+        protected.push(c);
+    }
+    let names: Vec<String> = captures.iter().map(|c| c.name.clone()).collect();
+    write_outputs(
+        &args.output,
+        &settings.varies,
+        &names,
+        &outcome.rows,
+        figure.as_ref(),
+        &protected,
+    )?;
+    if !global.quiet {
+        eprintln!(
+            "sweep: {} cells computed, {} loaded from earlier runs, {} rows; open {}",
+            outcome.computed,
+            outcome.loaded,
+            outcome.rows.len(),
+            args.output.join("index.html").display()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,402 @@
+//! The cells of a sweep: every combination of the `--vary` values and `--seeds`, and the
+//! configuration of each cell built from the base configuration.
+
+use crate::config::overrides::apply_set;
+use crate::config::reader::Locator;
+use crate::config::{Config, DEFAULT_LABEL, DEFAULT_TOML};
+use crate::error::{Error, Result};
+use crate::noise::REGISTRY;
+use std::path::{Path, PathBuf};
+use toml::{Table, Value};
+
+/// What a `--vary` key changes.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum VaryKind {
+    /// `<stage type>=on,off`: off removes every stage of that type.
+    Toggle {
+        /// The stage type.
+        stage: String,
+    },
+    /// `<stage type>.<option>`: the option of the first stage of that type (one is
+    /// appended when the base configuration has none).
+    StageOption {
+        /// The stage type.
+        stage: String,
+        /// The option name.
+        option: String,
+    },
+    /// Any other dotted path accepted by `--set`, e.g. `noise[1].rate_mm_h`.
+    Path,
+}
+
+/// One `--vary KEY=v1,v2,...`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Vary {
+    /// The key as given.
+    pub key: String,
+    /// The values as given, in order.
+    pub values: Vec<String>,
+    /// What the key changes.
+    pub kind: VaryKind,
+}
+
+impl Vary {
+    /// Parses `KEY=v1,v2,...`.
+    pub fn parse(arg: &str) -> Result<Vary> {
+        let bad = |m: &str| Error::Invalid(format!("--vary {arg}: {m}"));
+        let (key, values) = arg
+            .split_once('=')
+            .ok_or_else(|| bad("expected KEY=v1,v2,..."))?;
+        let key = key.trim().to_string();
+        let values: Vec<String> = values.split(',').map(|v| v.trim().to_string()).collect();
+        if key.is_empty() || values.iter().any(String::is_empty) {
+            return Err(bad("empty key or value"));
+        }
+        let mut seen = std::collections::HashSet::new();
+        if let Some(dup) = values.iter().find(|v| !seen.insert(v.as_str())) {
+            return Err(bad(&format!("value {dup} is given twice")));
+        }
+        let is_stage = |s: &str| REGISTRY.iter().any(|k| k.name == s);
+        let kind = if is_stage(&key) {
+            if let Some(v) = values.iter().find(|v| *v != "on" && *v != "off") {
+                return Err(bad(&format!("a stage type takes on or off, not {v}")));
+            }
+            VaryKind::Toggle { stage: key.clone() }
+        } else {
+            match key.split_once('.') {
+                Some((stage, option)) if is_stage(stage) && !option.contains(['.', '[']) => {
+                    VaryKind::StageOption {
+                        stage: stage.to_string(),
+                        option: option.to_string(),
+                    }
+                }
+                _ => VaryKind::Path,
+            }
+        };
+        Ok(Vary { key, values, kind })
+    }
+
+    /// True when every value reads as a number (the key can be a plot axis).
+    pub fn is_numeric(&self) -> bool {
+        self.values.iter().all(|v| v.parse::<f64>().is_ok())
+    }
+}
+
+/// Parses `--seeds`: `N`, `A..B` (both included) or `a,b,c`.
+pub fn parse_seeds(text: &str) -> Result<Vec<u64>> {
+    let bad = || {
+        Error::Invalid(format!(
+            "--seeds {text}: expected N, A..B (both included) or a,b,c with whole numbers"
+        ))
+    };
+    let num = |s: &str| s.trim().parse::<u64>().map_err(|_| bad());
+    let seeds: Vec<u64> = match text.split_once("..") {
+        Some((a, b)) => {
+            let (a, b) = (num(a)?, num(b.trim_start_matches('='))?);
+            if b < a || b - a >= 100_000 {
+                return Err(bad());
+            }
+            (a..=b).collect()
+        }
+        None => text.split(',').map(num).collect::<Result<_>>()?,
+    };
+    let mut seen = std::collections::HashSet::new();
+    if seeds
+        .iter()
+        .any(|s| !seen.insert(*s) || i64::try_from(*s).is_err())
+    {
+        return Err(bad());
+    }
+    Ok(seeds)
+}
+
+/// One combination of varied values and a seed.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct Cell {
+    /// One value per `--vary`, in the order of the `--vary` options.
+    pub values: Vec<String>,
+    /// Seed of every random stream.
+    pub seed: u64,
+}
+
+impl Cell {
+    /// Human-readable key, e.g. `rain.rate_mm_h=0.5 occlusion=on seed=1`.
+    pub fn key(&self, varies: &[Vary]) -> String {
+        let mut parts: Vec<String> = varies
+            .iter()
+            .zip(&self.values)
+            .map(|(v, x)| format!("{}={x}", v.key))
+            .collect();
+        parts.push(format!("seed={}", self.seed));
+        parts.join(" ")
+    }
+
+    /// File name of the cell's result: the key made file-safe, plus a hash of the exact
+    /// key so that two keys never share a file.
+    pub fn file_name(&self, varies: &[Vary]) -> String {
+        let key = self.key(varies);
+        let safe: String = key
+            .chars()
+            .map(|c| match c {
+                'a'..='z' | 'A'..='Z' | '0'..='9' | '.' | '=' | '-' | '_' => c,
+                _ => '_',
+            })
+            .collect();
+        format!("{safe}-{:08x}.json", fnv1a64(&key) as u32)
+    }
+}
+
+/// 64-bit FNV-1a hash (stable across runs and platforms).
+pub fn fnv1a64(text: &str) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in text.bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
+/// Every combination: seeds outermost, then the `--vary` values, first key slowest.
+pub fn cells(varies: &[Vary], seeds: &[u64]) -> Vec<Cell> {
+    let mut combos: Vec<Vec<String>> = vec![Vec::new()];
+    for v in varies {
+        combos = combos
+            .into_iter()
+            .flat_map(|c| {
+                v.values.iter().map(move |x| {
+                    let mut c = c.clone();
+                    c.push(x.clone());
+                    c
+                })
+            })
+            .collect();
+    }
+    seeds
+        .iter()
+        .flat_map(|&seed| {
+            combos.iter().map(move |values| Cell {
+                values: values.clone(),
+                seed,
+            })
+        })
+        .collect()
+}
+
+/// The base configuration as a TOML document, from which each cell's is derived.
+#[derive(Clone, Debug)]
+pub struct BaseConfig {
+    /// The document after the user's `--set` overrides.
+    pub table: Table,
+    /// Where it came from (for errors).
+    pub source: PathBuf,
+    /// The validated base configuration.
+    pub config: Config,
+}
+
+impl BaseConfig {
+    /// Loads `path` (or the built-in configuration) and applies `sets`; returns the base
+    /// and the configuration's warnings.
+    pub fn load(path: Option<&Path>, sets: &[String]) -> Result<(BaseConfig, Vec<String>)> {
+        let (text, source) = match path {
+            Some(p) => (
+                std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?,
+                p.to_path_buf(),
+            ),
+            None => (DEFAULT_TOML.to_string(), PathBuf::from(DEFAULT_LABEL)),
+        };
+        // Validating the text as given first gives errors with file lines.
+        let (config, warnings) = Config::from_toml_str(&text, &source, sets, None)?;
+        let mut table: Table = toml::from_str(&text).map_err(|e| Error::Config {
+            path: source.clone(),
+            message: e.to_string(),
+        })?;
+        let mut locator = Locator::default();
+        for s in sets {
+            apply_set(&mut table, s, &mut locator).map_err(|m| Error::Config {
+                path: source.clone(),
+                message: format!("--set {s}: {m}"),
+            })?;
+        }
+        Ok((
+            BaseConfig {
+                table,
+                source,
+                config,
+            },
+            warnings,
+        ))
+    }
+
+    /// Seed of the base configuration.
+    pub fn seed(&self) -> u64 {
+        self.config.seed
+    }
+
+    /// The configuration of one cell.
+    pub fn cell_config(&self, varies: &[Vary], cell: &Cell) -> Result<Config> {
+        let mut table = self.table.clone();
+        let label = self.source.with_file_name(format!(
+            "{} [sweep cell {}]",
+            self.source
+                .file_name()
+                .map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
+            cell.key(varies)
+        ));
+        let fail = |m: String| Error::Config {
+            path: label.clone(),
+            message: m,
+        };
+        let mut locator = Locator::default();
+        // Values first, on the stage list as written, so that `noise[i]` paths keep
+        // meaning what they mean in the file; removals come last.
+        for (v, value) in varies.iter().zip(&cell.values) {
+            let set = match &v.kind {
+                VaryKind::Toggle { .. } => continue,
+                VaryKind::StageOption { stage, option } => {
+                    let i = match stage_index(&table, stage) {
+                        Some(i) => i,
+                        None => push_stage(&mut table, stage),
+                    };
+                    format!("noise[{i}].{option}={value}")
+                }
+                VaryKind::Path => format!("{}={value}", v.key),
+            };
+            apply_set(&mut table, &set, &mut locator)
+                .map_err(|m| fail(format!("--vary {}: {m}", v.key)))?;
+        }
+        for (v, value) in varies.iter().zip(&cell.values) {
+            if let VaryKind::Toggle { stage } = &v.kind {
+                if stage_index(&table, stage).is_none() {
+                    return Err(fail(format!(
+                        "--vary {}: the configuration has no {stage} stage to switch",
+                        v.key
+                    )));
+                }
+                if value == "off" {
+                    retain_stages(&mut table, |t| t != stage);
+                }
+            }
+        }
+        config_of(&table, &label, cell.seed)
+    }
+
+    /// The clean baseline of a cell configuration: the same without any noise stage.
+    pub fn baseline_config(&self, varies: &[Vary], cell: &Cell) -> Result<Config> {
+        let mut config = self.cell_config(varies, cell)?;
+        config.noise.clear();
+        Ok(config)
+    }
+
+    /// The base configuration keeping only the stages whose type is in `types`.
+    pub fn only_stages(&self, types: &[&str], seed: u64) -> Result<Config> {
+        let mut config = self.config.clone();
+        config.noise.retain(|s| types.contains(&s.kind()));
+        config.seed = seed;
+        Ok(config)
+    }
+}
+
+fn config_of(table: &Table, label: &Path, seed: u64) -> Result<Config> {
+    let text = toml::to_string(table).map_err(|e| Error::Config {
+        path: label.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    Ok(Config::from_toml_str(&text, label, &[], Some(seed))?.0)
+}
+
+fn stage_type(v: &Value) -> Option<&str> {
+    v.as_table()?.get("type")?.as_str()
+}
+
+fn stage_index(table: &Table, stage: &str) -> Option<usize> {
+    table
+        .get("noise")?
+        .as_array()?
+        .iter()
+        .position(|v| stage_type(v) == Some(stage))
+}
+
+fn push_stage(table: &mut Table, stage: &str) -> usize {
+    let entry = table
+        .entry("noise")
+        .or_insert_with(|| Value::Array(Vec::new()));
+    if !entry.is_array() {
+        *entry = Value::Array(Vec::new());
+    }
+    let Value::Array(list) = entry else {
+        return 0;
+    };
+    let mut t = Table::new();
+    t.insert("type".into(), Value::String(stage.into()));
+    list.push(Value::Table(t));
+    list.len() - 1
+}
+
+fn retain_stages(table: &mut Table, keep: impl Fn(&str) -> bool) {
+    if let Some(Value::Array(list)) = table.get_mut("noise") {
+        list.retain(|v| stage_type(v).is_none_or(&keep));
+        if list.is_empty() {
+            table.remove("noise");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn seeds_and_cells() {
+        assert_eq!(parse_seeds("1..10").unwrap(), (1..=10).collect::<Vec<_>>());
+        assert_eq!(parse_seeds("3,1").unwrap(), vec![3, 1]);
+        assert!(parse_seeds("5..1").is_err());
+        let v = [
+            Vary::parse("rain.rate_mm_h=0,1").unwrap(),
+            Vary::parse("occlusion=on,off").unwrap(),
+        ];
+        assert_eq!(
+            v[0].kind,
+            VaryKind::StageOption {
+                stage: "rain".into(),
+                option: "rate_mm_h".into()
+            }
+        );
+        let c = cells(&v, &[1, 2]);
+        assert_eq!(c.len(), 8);
+        assert_eq!(c[1].values, vec!["0", "off"]);
+        assert_eq!(c[4].seed, 2);
+        assert!(Vary::parse("occlusion=maybe").is_err());
+    }
+
+    #[test]
+    fn cell_configs_switch_and_set_stages() {
+        let (base, _) = BaseConfig::load(None, &[]).unwrap();
+        let v = [
+            Vary::parse("rain.rate_mm_h=0,3").unwrap(),
+            Vary::parse("occlusion=on,off").unwrap(),
+        ];
+        let c = base
+            .cell_config(
+                &v,
+                &Cell {
+                    values: vec!["3".into(), "off".into()],
+                    seed: 5,
+                },
+            )
+            .unwrap();
+        assert_eq!(c.seed, 5);
+        assert_eq!(c.noise.len(), 1);
+        assert_eq!(c.noise[0].kind(), "rain");
+        assert!(c.noise[0].describe().contains('3'));
+        let b = base
+            .baseline_config(
+                &v,
+                &Cell {
+                    values: vec!["3".into(), "on".into()],
+                    seed: 5,
+                },
+            )
+            .unwrap();
+        assert!(b.noise.is_empty());
+    }
+}

@@ -1,0 +1,568 @@
+//! Execution of a sweep: cells x frames in parallel, one result file per cell, resumable.
+//!
+//! Each capture is decoded in batches of frames; a batch is shared by every cell being
+//! computed, and the clean baseline of each frame is computed once per distinct baseline
+//! configuration (the cell configuration without noise stages, seed included, since
+//! ground RANSAC draws from the seed) and reused by every cell. Each cell's per-frame
+//! metrics go to `DIR/cells/<capture>/<cell>.json`, written atomically with the settings
+//! that produced them; a later run loads a cell whose file records the same settings
+//! instead of computing it again. The tables are always rebuilt from the cell files.
+
+use super::metrics::{self, FrameMetrics, MatchRule};
+use super::plan::{BaseConfig, Cell, Vary};
+use crate::config::Config;
+use crate::error::{Error, Result};
+use crate::frame::Frame;
+use crate::hdl32e::frames::{DecoderOptions, FrameReader};
+use crate::pipeline::{FrameResult, Pipeline};
+use crate::synth::labels::{read_labels_file, LabelRow};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, HashMap};
+use std::ops::RangeInclusive;
+use std::path::{Path, PathBuf};
+
+/// Version of the metric definitions; a change makes old cell files stale.
+pub const METRICS_VERSION: u32 = 1;
+
+/// One capture of a sweep.
+#[derive(Clone, Debug)]
+pub struct CaptureInput {
+    /// Name in outputs (unique within the sweep; the file stem by default).
+    pub name: String,
+    /// The pcap or pcapng file.
+    pub path: PathBuf,
+    /// Ground-truth labels of a synthesized capture, if any.
+    pub labels: Option<PathBuf>,
+}
+
+/// Everything a sweep needs.
+#[derive(Clone, Debug)]
+pub struct SweepSettings {
+    /// The base configuration.
+    pub base: BaseConfig,
+    /// The varied keys.
+    pub varies: Vec<Vary>,
+    /// The seeds.
+    pub seeds: Vec<u64>,
+    /// Decoder settings.
+    pub decoder: DecoderOptions,
+    /// Frames to process, by index.
+    pub frames: RangeInclusive<u32>,
+    /// Output folder.
+    pub output: PathBuf,
+}
+
+/// Receives progress events (from several threads).
+pub trait Observer: Sync {
+    /// A capture starts with `cells` cells to compute.
+    fn capture(&self, _name: &str, _cells: u64) {}
+    /// The number of frame pipelines still to run in this capture is now known.
+    fn frames_total(&self, _n: u64) {}
+    /// One frame of one cell is done.
+    fn frame_done(&self) {}
+    /// One cell is done (computed or loaded).
+    fn cell_done(&self) {}
+}
+
+/// An observer that ignores everything.
+pub struct Silent;
+impl Observer for Silent {}
+
+/// One row of the tidy table: a frame of a cell of a capture.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// Capture name.
+    pub capture: String,
+    /// Varied values, in `--vary` order.
+    pub values: Vec<String>,
+    /// Seed.
+    pub seed: u64,
+    /// The metrics.
+    pub metrics: FrameMetrics,
+}
+
+/// What a sweep did.
+#[derive(Clone, Debug, Default)]
+pub struct Outcome {
+    /// Cells computed in this run.
+    pub computed: usize,
+    /// Cells loaded from earlier runs.
+    pub loaded: usize,
+    /// Every row, read back from the cell files, in canonical order.
+    pub rows: Vec<Row>,
+}
+
+/// A cell result file.
+#[derive(Serialize, Deserialize)]
+struct CellFile {
+    tool: String,
+    settings: serde_json::Value,
+    frames: Vec<FrameMetrics>,
+}
+
+/// The baseline of one frame, reduced to what the metrics need.
+struct Reference {
+    labels: Vec<i32>,
+    kept: u64,
+    clusters: u64,
+    distance: BTreeMap<i32, f64>,
+}
+
+/// Ground truth of one frame, per clean return.
+struct Truth {
+    ground: Vec<bool>,
+    objects: Vec<i32>,
+}
+
+/// Runs (or resumes) the sweep and returns every row; `protected` are input paths.
+pub fn run(
+    s: &SweepSettings,
+    captures: &[CaptureInput],
+    observer: &dyn Observer,
+) -> Result<Outcome> {
+    let mut outcome = Outcome::default();
+    let canonical = canonical_cells(s);
+    for capture in captures {
+        let dir = s.output.join("cells").join(&capture.name);
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        let protected = protected_paths(capture);
+        let protected: Vec<&Path> = protected.iter().map(PathBuf::as_path).collect();
+        let bytes = std::fs::metadata(&capture.path)
+            .map_err(|e| Error::io(&capture.path, e))?
+            .len();
+        // Execution order: seeds outermost so cells sharing a baseline run together.
+        let mut pending = Vec::new();
+        let mut loaded = 0usize;
+        for cell in super::plan::cells(&s.varies, &s.seeds) {
+            let config = s.base.cell_config(&s.varies, &cell)?;
+            let mut baseline = config.clone();
+            baseline.noise.clear();
+            // Without noise stages only RANSAC ground draws random numbers: otherwise the
+            // baseline is the same for every seed and is computed once.
+            let baseline_key = if baseline.ground.method == crate::ground::GroundMethod::Ransac {
+                baseline.effective_toml()
+            } else {
+                let mut unseeded = baseline.clone();
+                unseeded.seed = 0;
+                unseeded.effective_toml()
+            };
+            let settings = cell_settings(s, capture, bytes, &cell, &config, &baseline);
+            let path = dir.join(cell.file_name(&s.varies));
+            if read_cell(&path).is_some_and(|f| f.settings == settings) {
+                loaded += 1;
+                continue;
+            }
+            pending.push(Pending {
+                path,
+                settings,
+                pipeline: Pipeline::new(&config),
+                baseline_key,
+                baseline,
+                min_points: config.cluster.min_points,
+            });
+        }
+        observer.capture(&capture.name, pending.len() as u64);
+        for _ in 0..loaded {
+            observer.cell_done();
+        }
+        outcome.loaded += loaded;
+        if !pending.is_empty() {
+            let truth = match &capture.labels {
+                Some(p) => Some(group_labels(read_labels_file(p)?)),
+                None => None,
+            };
+            let chunk = (4 * rayon::current_num_threads()).max(8);
+            let mut first = true;
+            for cells in pending.chunks(chunk) {
+                compute_chunk(
+                    s,
+                    capture,
+                    cells,
+                    truth.as_ref(),
+                    &protected,
+                    observer,
+                    &mut first,
+                )?;
+            }
+        }
+        outcome.computed += pending.len();
+        for cell in &canonical {
+            let path = dir.join(cell.file_name(&s.varies));
+            let file = read_cell(&path).ok_or_else(|| {
+                Error::Invalid(format!(
+                    "{}: cell result missing or unreadable",
+                    path.display()
+                ))
+            })?;
+            outcome.rows.extend(file.frames.into_iter().map(|m| Row {
+                capture: capture.name.clone(),
+                values: cell.values.clone(),
+                seed: cell.seed,
+                metrics: m,
+            }));
+        }
+    }
+    Ok(outcome)
+}
+
+/// Cells in table order: `--vary` values (first key slowest), then seed.
+pub fn canonical_cells(s: &SweepSettings) -> Vec<Cell> {
+    let mut cells = super::plan::cells(&s.varies, &s.seeds);
+    let rank = |c: &Cell| -> Vec<usize> {
+        s.varies
+            .iter()
+            .zip(&c.values)
+            .map(|(v, x)| v.values.iter().position(|y| y == x).unwrap_or(0))
+            .chain(s.seeds.iter().position(|&x| x == c.seed))
+            .collect()
+    };
+    cells.sort_by_key(rank);
+    cells
+}
+
+struct Pending {
+    path: PathBuf,
+    settings: serde_json::Value,
+    pipeline: Pipeline,
+    baseline: Config,
+    baseline_key: String,
+    min_points: usize,
+}
+
+fn protected_paths(capture: &CaptureInput) -> Vec<PathBuf> {
+    let mut p = vec![capture.path.clone()];
+    p.extend(capture.labels.clone());
+    p
+}
+
+fn cell_settings(
+    s: &SweepSettings,
+    capture: &CaptureInput,
+    bytes: u64,
+    cell: &Cell,
+    config: &Config,
+    baseline: &Config,
+) -> serde_json::Value {
+    let values: Vec<serde_json::Value> = s
+        .varies
+        .iter()
+        .zip(&cell.values)
+        .map(|(v, x)| serde_json::json!({ "key": v.key, "value": x }))
+        .collect();
+    serde_json::json!({
+        "metrics_version": METRICS_VERSION,
+        "capture": capture.name,
+        "capture_bytes": bytes,
+        "labels": capture.labels.as_ref().and_then(|p| p.file_name()).map(|n| n.to_string_lossy()),
+        "frames": [s.frames.start(), s.frames.end()],
+        "decoder": {
+            "calibration": s.decoder.calibration.source,
+            "interpolate_azimuth": s.decoder.interpolate_azimuth,
+            "dual": format!("{:?}", s.decoder.dual),
+            "cut_angle_deg": s.decoder.cut_angle_deg,
+            "keep_partial": s.decoder.keep_partial,
+        },
+        "cell": values,
+        "seed": cell.seed,
+        "config": config.to_json(),
+        "baseline": baseline.to_json(),
+    })
+}
+
+fn read_cell(path: &Path) -> Option<CellFile> {
+    let text = std::fs::read(path).ok()?;
+    serde_json::from_slice(&text).ok()
+}
+
+fn group_labels(rows: Vec<LabelRow>) -> HashMap<u32, Vec<LabelRow>> {
+    let mut out: HashMap<u32, Vec<LabelRow>> = HashMap::new();
+    for r in rows {
+        out.entry(r.frame).or_default().push(r);
+    }
+    out
+}
+
+fn truth_of(frame: &Frame, labels: &HashMap<u32, Vec<LabelRow>>, origin: &Path) -> Result<Truth> {
+    let rows = labels.get(&frame.index).map_or(&[][..], Vec::as_slice);
+    let lines_up = rows.len() == frame.returns.len()
+        && rows
+            .iter()
+            .zip(&frame.returns)
+            .all(|(l, r)| (l.packet, l.block, l.laser) == (r.packet, r.block, r.laser));
+    if !lines_up {
+        return Err(Error::Invalid(format!(
+            "{}: the labels of frame {} ({} rows) do not line up with its {} decoded returns",
+            origin.display(),
+            frame.index,
+            rows.len(),
+            frame.returns.len()
+        )));
+    }
+    Ok(Truth {
+        ground: rows.iter().map(|l| l.label == 0).collect(),
+        objects: rows
+            .iter()
+            .map(|l| if l.label == 0 { -1 } else { i32::from(l.label) })
+            .collect(),
+    })
+}
+
+/// Cluster id of every clean return (-1 when dropped, ground or noise).
+fn labels_per_clean(r: &FrameResult) -> Vec<i32> {
+    let mut out = vec![-1; r.noisy.len()];
+    for (&k, &l) in r.kept.iter().zip(&r.labels) {
+        out[k as usize] = l;
+    }
+    out
+}
+
+fn reference_of(r: &FrameResult) -> Reference {
+    Reference {
+        labels: labels_per_clean(r),
+        kept: r.counts.kept,
+        clusters: r.clusters.len() as u64,
+        distance: r
+            .clusters
+            .iter()
+            .map(|c| (c.id, c.centroid[0].hypot(c.centroid[1])))
+            .collect(),
+    }
+}
+
+fn frame_metrics(
+    r: &FrameResult,
+    reference: &Reference,
+    truth: Option<&Truth>,
+    min_points: usize,
+) -> FrameMetrics {
+    use crate::noise::Fate;
+    let count = |f: Fate| r.noisy.fate.iter().filter(|&&x| x == f).count() as u64;
+    let change = metrics::range_change(
+        r.kept
+            .iter()
+            .map(|&k| (r.noisy.clean[k as usize].range, r.noisy.range[k as usize])),
+    );
+    let noisy = labels_per_clean(r);
+    let rule = MatchRule::default();
+    let m = metrics::match_objects(&reference.labels, &noisy, rule);
+    let farthest = |ids: &mut dyn Iterator<Item = i32>| {
+        ids.filter_map(|id| reference.distance.get(&id).copied())
+            .max_by(f64::total_cmp)
+    };
+    let mut out = FrameMetrics {
+        frame: r.noisy.index,
+        returns: r.noisy.len() as u64,
+        kept: r.counts.kept,
+        baseline_kept: reference.kept,
+        occluded: count(Fate::Occluded),
+        below_power: count(Fate::BelowPower),
+        below_min_range: count(Fate::BelowMinRange),
+        range_change_mean_m: change.mean,
+        range_change_rms_m: change.rms,
+        range_change_p95_m: change.p95_abs,
+        clusters: r.clusters.len() as u64,
+        baseline_clusters: reference.clusters,
+        matched: m.matched() as u64,
+        object_survival: m.survival(),
+        split: m.split as u64,
+        merged: m.merged as u64,
+        lost: m.lost as u64,
+        false_clusters: m.false_clusters as u64,
+        farthest_matched_m: farthest(&mut m.pairs.iter().map(|p| p.0)),
+        baseline_farthest_m: farthest(&mut reference.distance.keys().copied()),
+        ..FrameMetrics::default()
+    };
+    if let Some(t) = truth {
+        let mut predicted = vec![false; r.noisy.len()];
+        for (&k, &g) in r.kept.iter().zip(&r.ground) {
+            predicted[k as usize] = g;
+        }
+        (out.ground_precision, out.ground_recall) =
+            metrics::precision_recall(&t.ground, &predicted);
+        (out.object_precision, out.object_recall) =
+            metrics::detection_scores(&t.objects, &noisy, min_points, rule);
+    }
+    out
+}
+
+#[allow(clippy::too_many_arguments)]
+fn compute_chunk(
+    s: &SweepSettings,
+    capture: &CaptureInput,
+    cells: &[Pending],
+    labels: Option<&HashMap<u32, Vec<LabelRow>>>,
+    protected: &[&Path],
+    observer: &dyn Observer,
+    first: &mut bool,
+) -> Result<()> {
+    let mut keys: Vec<&str> = Vec::new();
+    let mut baselines: Vec<Pipeline> = Vec::new();
+    let mut which = Vec::with_capacity(cells.len());
+    for c in cells {
+        let i = match keys.iter().position(|k| *k == c.baseline_key) {
+            Some(i) => i,
+            None => {
+                keys.push(&c.baseline_key);
+                baselines.push(Pipeline::new(&c.baseline));
+                keys.len() - 1
+            }
+        };
+        which.push(i);
+    }
+    let mut reader = FrameReader::open(&capture.path, &s.decoder)?;
+    let batch_size = (2 * rayon::current_num_threads()).max(4);
+    let mut results: Vec<Vec<FrameMetrics>> = vec![Vec::new(); cells.len()];
+    let mut done = false;
+    let mut n_frames = 0u64;
+    while !done {
+        let mut batch = Vec::with_capacity(batch_size);
+        while batch.len() < batch_size {
+            match reader.next() {
+                None => {
+                    done = true;
+                    break;
+                }
+                Some(frame) => {
+                    let frame = frame?;
+                    if frame.index > *s.frames.end() {
+                        done = true;
+                        break;
+                    }
+                    if s.frames.contains(&frame.index) {
+                        batch.push(frame);
+                    }
+                }
+            }
+        }
+        if batch.is_empty() {
+            break;
+        }
+        n_frames += batch.len() as u64;
+        let truths: Vec<Option<Truth>> = match labels {
+            Some(l) => batch
+                .iter()
+                .map(|f| {
+                    truth_of(f, l, capture.labels.as_deref().unwrap_or(Path::new(""))).map(Some)
+                })
+                .collect::<Result<_>>()?,
+            None => batch.iter().map(|_| None).collect(),
+        };
+        let refs: Vec<Reference> = (0..baselines.len() * batch.len())
+            .into_par_iter()
+            .map(|i| {
+                let (b, f) = (i / batch.len(), i % batch.len());
+                baselines[b]
+                    .process(batch[f].clone())
+                    .map(|r| reference_of(&r))
+            })
+            .collect::<Result<_>>()?;
+        let rows: Vec<FrameMetrics> = (0..cells.len() * batch.len())
+            .into_par_iter()
+            .map(|i| {
+                let (c, f) = (i / batch.len(), i % batch.len());
+                let r = cells[c].pipeline.process(batch[f].clone())?;
+                let reference = &refs[which[c] * batch.len() + f];
+                let m = frame_metrics(&r, reference, truths[f].as_ref(), cells[c].min_points);
+                observer.frame_done();
+                Ok(m)
+            })
+            .collect::<Result<_>>()?;
+        for (i, m) in rows.into_iter().enumerate() {
+            results[i / batch.len()].push(m);
+        }
+    }
+    if n_frames == 0 {
+        return Err(Error::Invalid(format!(
+            "{}: no frame to process in the range {}..{} (partial sweeps need --keep-partial)",
+            capture.path.display(),
+            s.frames.start(),
+            s.frames.end()
+        )));
+    }
+    if *first {
+        observer.frames_total(n_frames);
+        *first = false;
+    }
+    for (cell, frames) in cells.iter().zip(results) {
+        let file = CellFile {
+            tool: format!("lidar-noise {}", env!("CARGO_PKG_VERSION")),
+            settings: cell.settings.clone(),
+            frames,
+        };
+        crate::writers::atomic::write_atomically(&cell.path, protected, |out| {
+            serde_json::to_writer_pretty(&mut *out, &file).map_err(std::io::Error::other)?;
+            out.write_all(b"\n")
+        })?;
+        observer.cell_done();
+    }
+    Ok(())
+}
+
+/// One panel of the bird's-eye figure: a configuration's result on one frame.
+#[derive(Clone, Debug)]
+pub struct Panel {
+    /// Title, e.g. "rain only".
+    pub title: String,
+    /// Survivor x, y (metres) and class: -2 ground, -1 noise, k cluster id.
+    pub points: Vec<(f32, f32, i32)>,
+    /// Clusters found.
+    pub clusters: usize,
+}
+
+/// Runs one frame through the clean configuration, each stage type of the base alone, and
+/// all of them (the reference study's figure 3 for occlusion and rain).
+pub fn birdseye_panels(base: &BaseConfig, seed: u64, frame: &Frame) -> Result<Vec<Panel>> {
+    let mut types: Vec<&'static str> = Vec::new();
+    for s in &base.config.noise {
+        if !types.contains(&s.kind()) {
+            types.push(s.kind());
+        }
+    }
+    let mut variants: Vec<(String, Vec<&str>)> = vec![("clean".into(), Vec::new())];
+    for t in &types {
+        variants.push((format!("{t} only"), vec![t]));
+    }
+    if types.len() >= 2 {
+        variants.push((types.join(" + "), types.clone()));
+    }
+    variants
+        .par_iter()
+        .map(|(title, kinds)| {
+            let config = base.only_stages(kinds, seed)?;
+            let r = Pipeline::new(&config).process(frame.clone())?;
+            let points = r
+                .survivors
+                .iter()
+                .zip(&r.ground)
+                .zip(&r.labels)
+                .map(|((p, &g), &l)| (p.x, p.y, if g { -2 } else { l }))
+                .collect();
+            Ok(Panel {
+                title: title.clone(),
+                points,
+                clusters: r.clusters.len(),
+            })
+        })
+        .collect()
+}
+
+/// Decodes the frame with index `index` of a capture (the first in `frames` when `None`).
+pub fn read_frame(
+    path: &Path,
+    decoder: &DecoderOptions,
+    frames: &RangeInclusive<u32>,
+    index: Option<u32>,
+) -> Result<Option<Frame>> {
+    for frame in FrameReader::open(path, decoder)? {
+        let frame = frame?;
+        let wanted = match index {
+            Some(i) => frame.index == i,
+            None => frames.contains(&frame.index),
+        };
+        if wanted {
+            return Ok(Some(frame));
+        }
+    }
+    Ok(None)
+}

@@ -1,0 +1,116 @@
+//! A sweep interrupted and restarted writes the same files as an uninterrupted one.
+
+use assert_cmd::Command;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures")
+        .join(name)
+}
+
+fn sweep(out: &Path) -> String {
+    let o = Command::cargo_bin("lidar-noise")
+        .unwrap()
+        .arg("sweep")
+        .arg(fixture("crossroad.pcap"))
+        .args([
+            "--vary",
+            "rain.rate_mm_h=0,3",
+            "--vary",
+            "occlusion=on,off",
+            "--seeds",
+            "1..2",
+            "--frames",
+            "0",
+            "-o",
+        ])
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Every file under `dir` by relative path, with its bytes.
+fn files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.insert(
+                    p.strip_prefix(dir).unwrap().to_path_buf(),
+                    std::fs::read(&p).unwrap(),
+                );
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn interrupted_and_restarted_equals_uninterrupted() {
+    let tmp = tempfile::tempdir().unwrap();
+    let a = tmp.path().join("a");
+    let b = tmp.path().join("b");
+    let msg = sweep(&a);
+    assert!(msg.contains("8 cells computed, 0 loaded"), "{msg}");
+    sweep(&b);
+    // Simulate an interruption: half the cells and every final output are missing.
+    let cells = b.join("cells").join("crossroad");
+    let mut names: Vec<PathBuf> = std::fs::read_dir(&cells)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    names.sort();
+    assert_eq!(names.len(), 8);
+    for p in names.iter().step_by(2) {
+        std::fs::remove_file(p).unwrap();
+    }
+    for f in ["sweep.csv", "sweep.json", "aggregate.csv", "index.html"] {
+        std::fs::remove_file(b.join(f)).unwrap();
+    }
+    std::fs::remove_dir_all(b.join("plots")).unwrap();
+    let msg = sweep(&b);
+    assert!(msg.contains("4 cells computed, 4 loaded"), "{msg}");
+    let fa = files(&a);
+    let fb = files(&b);
+    assert_eq!(fa.keys().collect::<Vec<_>>(), fb.keys().collect::<Vec<_>>());
+    assert!(fa.len() > 8 + 4 + 10, "{} files", fa.len());
+    for (k, v) in &fa {
+        assert!(v == &fb[k], "{} differs", k.display());
+    }
+    // A third run computes nothing.
+    let msg = sweep(&b);
+    assert!(msg.contains("0 cells computed, 8 loaded"), "{msg}");
+    assert!(files(&b) == fa);
+}
+
+#[test]
+fn a_cell_with_other_settings_is_recomputed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("o");
+    sweep(&out);
+    // Tamper with the recorded settings of one cell: it must be computed again.
+    let cells = out.join("cells").join("crossroad");
+    let p = std::fs::read_dir(&cells)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let text = std::fs::read_to_string(&p).unwrap();
+    std::fs::write(
+        &p,
+        text.replace("\"metrics_version\": 1", "\"metrics_version\": 0"),
+    )
+    .unwrap();
+    let msg = sweep(&out);
+    assert!(msg.contains("1 cells computed, 7 loaded"), "{msg}");
+    assert_eq!(std::fs::read_to_string(&p).unwrap(), text);
+}

@@ -34,8 +34,13 @@ fn run_with(threads: &str, seed: &str, out: &Path, extra: &[&str]) {
         .env("RAYON_NUM_THREADS", threads)
         .args(["--quiet", "run"])
         .arg(&fixture)
-        .args(["--seed", seed, "--keep-dropped", "-o"])
+        .args(["--seed", seed, "-o"])
         .arg(out)
+        .args(if extra.contains(&"--no-ply") {
+            &[][..]
+        } else {
+            &["--keep-dropped"][..]
+        })
         .args(extra)
         .assert()
         .success();
@@ -221,4 +226,40 @@ fn shared_capture_clear_drops_under_1_percent_and_paper_drops_more_than_each_noi
     assert!(paper > dropped["rain"].0 && paper > dropped["occlusion"].0);
     let split = &dropped["paper"].2;
     assert!(split["occluded"].as_u64().unwrap() > 0 && split["below_power"].as_u64().unwrap() > 0);
+}
+
+#[test]
+fn linkage_out_writes_a_scipy_layout_merge_tree_per_frame() {
+    let tmp = tempfile::tempdir().unwrap();
+    run_with(
+        "2",
+        "3",
+        tmp.path(),
+        &["--frames", "1", "--linkage-out", "--no-ply"],
+    );
+    let text = std::fs::read_to_string(tmp.path().join("crossroad/linkage_00001.csv")).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("cluster_a,cluster_b,distance,count"));
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
+        .collect();
+    assert!(rows.len() > 1000, "{} merges", rows.len());
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("crossroad/summary.json")).unwrap())
+            .unwrap();
+    let n = summary["frames"][0]["stages"]["non_ground"]
+        .as_u64()
+        .unwrap() as f64;
+    for (k, row) in rows.iter().enumerate() {
+        assert_eq!(row.len(), 4);
+        assert!(
+            row[0] < n + k as f64 && row[1] < n + k as f64,
+            "ids refer to points or earlier merges"
+        );
+        assert!(row[2] <= 2.0, "no merge above max_edge_m");
+        if k > 0 {
+            assert!(row[2] >= rows[k - 1][2], "heights are sorted");
+        }
+    }
+    assert!(!tmp.path().join("crossroad/frame_00001.ply").exists());
 }

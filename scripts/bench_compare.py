@@ -30,7 +30,7 @@ def main():
     capture, ply_path = sys.argv[1], sys.argv[2]
     import velodyne_decoder as vd
 
-    config = vd.Config(model="HDL-32E")
+    config = vd.Config(model=vd.Model.HDL32E, min_range=0.0)
 
     def decode():
         n = 0

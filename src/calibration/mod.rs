@@ -240,7 +240,7 @@ fn assemble(path: &Path, raw: Vec<RawLaser>, distance_resolution_m: f64) -> Resu
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -280,7 +280,7 @@ mod tests {
             .join(name)
     }
 
-    fn assert_matches_builtin(cal: &Calibration) {
+    pub(crate) fn assert_matches_builtin(cal: &Calibration) {
         let builtin = Calibration::builtin();
         for id in 0..LASERS {
             let (a, b) = (cal.lasers[id], builtin.lasers[id]);

@@ -120,7 +120,7 @@ fn number(node: Node, line_of: &dyn Fn(Node) -> u32) -> std::result::Result<f64,
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calibration::{BUILTIN_ELEVATION_DEG, LASERS};
+    use crate::calibration::BUILTIN_ELEVATION_DEG;
     use std::path::PathBuf;
 
     fn fake_path() -> PathBuf {
@@ -162,19 +162,9 @@ mod tests {
     fn builtin_angles_round_trip() {
         let text = veloview_xml(&ids(), &BUILTIN_ELEVATION_DEG, 0.0, 0.0);
         let cal = parse_str(&text, &fake_path()).unwrap();
-        let builtin = Calibration::builtin();
-        for id in 0..LASERS {
-            let (a, b) = (cal.lasers[id], builtin.lasers[id]);
-            assert!(
-                (a.elevation_deg - b.elevation_deg).abs() < 1e-9,
-                "laser {id}"
-            );
-            assert!((a.azimuth_offset_deg - b.azimuth_offset_deg).abs() < 1e-9);
-            assert!((a.distance_offset_m - b.distance_offset_m).abs() < 1e-9);
-        }
-        // distLSB_ 0.2 cm = 2 mm.
-        assert!((cal.distance_resolution_m - 0.002).abs() < 1e-15);
-        assert_eq!(cal.rings(), builtin.rings());
+        // Angles, offsets and the 2 mm distance unit (distLSB_ 0.2 cm in XML).
+        crate::calibration::tests::assert_matches_builtin(&cal);
+        assert_eq!(cal.rings(), Calibration::builtin().rings());
     }
 
     #[test]

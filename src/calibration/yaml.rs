@@ -187,18 +187,9 @@ mod tests {
     fn builtin_angles_round_trip() {
         let text = ros_yaml(&ids(), &builtin_rad(), 0.0);
         let cal = parse_str(&text, &fake_path()).unwrap();
-        let builtin = Calibration::builtin();
-        for id in 0..LASERS {
-            let (a, b) = (cal.lasers[id], builtin.lasers[id]);
-            assert!(
-                (a.elevation_deg - b.elevation_deg).abs() < 1e-9,
-                "laser {id}"
-            );
-            assert!((a.azimuth_offset_deg - b.azimuth_offset_deg).abs() < 1e-9);
-            assert!((a.distance_offset_m - b.distance_offset_m).abs() < 1e-9);
-        }
-        assert_eq!(cal.distance_resolution_m, 0.002);
-        assert_eq!(cal.rings(), builtin.rings());
+        // Angles, offsets and the 2 mm distance unit (distLSB_ 0.2 cm in XML).
+        crate::calibration::tests::assert_matches_builtin(&cal);
+        assert_eq!(cal.rings(), Calibration::builtin().rings());
         assert_eq!(cal.source, "/calib/test.yaml");
     }
 

@@ -37,3 +37,25 @@ pub fn progress(global: Global, unit: &'static str) -> indicatif::ProgressBar {
     bar.enable_steady_tick(std::time::Duration::from_millis(200));
     bar
 }
+
+/// Output names of captures: each file's stem, with `-2`, `-3`, ... added where two
+/// captures share a stem, so every capture gets its own folder.
+pub fn output_names(paths: &[std::path::PathBuf]) -> Vec<String> {
+    let mut used = std::collections::HashSet::new();
+    paths
+        .iter()
+        .map(|path| {
+            let stem = path.file_stem().map_or_else(
+                || "capture".to_string(),
+                |s| s.to_string_lossy().into_owned(),
+            );
+            let mut name = stem.clone();
+            let mut n = 2;
+            while !used.insert(name.clone()) {
+                name = format!("{stem}-{n}");
+                n += 1;
+            }
+            name
+        })
+        .collect()
+}

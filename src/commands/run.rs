@@ -12,7 +12,6 @@ use crate::writers::write_file;
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
-use std::collections::HashSet;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -133,7 +132,6 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     if let Some(c) = &args.config {
         inputs.push(c);
     }
-    let mut used = HashSet::new();
     if args.captures.is_empty() {
         let dir = args.output.join("crossroad");
         let reader = FrameReader::from_bytes(
@@ -143,17 +141,11 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         )?;
         run_capture(&plan, reader, DEFAULT_CAPTURE_NAME, &dir, &inputs, global)?;
     }
-    for path in &args.captures {
-        let stem = path.file_stem().map_or_else(
-            || "capture".to_string(),
-            |s| s.to_string_lossy().into_owned(),
-        );
-        let mut name = stem.clone();
-        let mut n = 2;
-        while !used.insert(name.clone()) {
-            name = format!("{stem}-{n}");
-            n += 1;
-        }
+    for (path, name) in args
+        .captures
+        .iter()
+        .zip(super::output_names(&args.captures))
+    {
         let reader = FrameReader::open(path, &plan.decoder)?;
         let dir = args.output.join(&name);
         run_capture(
@@ -185,26 +177,10 @@ fn run_capture(
     let batch_size = 2 * rayon::current_num_threads().max(1);
     let mut frame_reports = Vec::new();
     let mut frame_clusters = Vec::new();
-    let mut done = false;
-    while !done {
-        let mut batch = Vec::with_capacity(batch_size);
-        while batch.len() < batch_size {
-            match reader.next() {
-                None => {
-                    done = true;
-                    break;
-                }
-                Some(frame) => {
-                    let frame = frame?;
-                    if frame.index > *plan.frames.end() {
-                        done = true;
-                        break;
-                    }
-                    if plan.frames.contains(&frame.index) {
-                        batch.push(frame);
-                    }
-                }
-            }
+    loop {
+        let batch = reader.next_batch(batch_size, &plan.frames)?;
+        if batch.is_empty() {
+            break;
         }
         let results: Vec<crate::error::Result<FrameResult>> = batch
             .into_par_iter()

@@ -135,22 +135,13 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             args.figure_extent
         );
     }
-    let mut used = HashSet::new();
     let mut captures = Vec::new();
-    for (i, path) in args.captures.iter().enumerate() {
-        let stem = path.file_stem().map_or_else(
-            || "capture".to_string(),
-            |s| s.to_string_lossy().into_owned(),
-        );
-        let mut name = stem.clone();
-        let mut n = 2;
-        while !used.insert(name.clone()) {
-            name = format!("{stem}-{n}");
-            n += 1;
-        }
+    let names = super::output_names(&args.captures);
+    for (i, (path, name)) in args.captures.iter().zip(names).enumerate() {
         let labels = match args.labels.get(i) {
             Some(l) => Some(l.clone()),
             None => {
+                let stem = path.file_stem().unwrap_or_default().to_string_lossy();
                 let guess = path.with_file_name(format!("{stem}.labels.csv.gz"));
                 guess.is_file().then_some(guess)
             }

@@ -14,6 +14,7 @@ use crate::error::{Error, Result};
 use crate::frame::Frame;
 use serde::Serialize;
 use std::collections::VecDeque;
+use std::ops::RangeInclusive;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -122,6 +123,8 @@ pub struct FrameReader {
     packet: Vec<u8>,
     /// Buffers of frames handed back through [`FrameReader::recycle`].
     spare: Vec<Vec<crate::frame::Return>>,
+    /// Set by [`FrameReader::next_batch`] once a frame beyond its range was seen.
+    past_range: bool,
 }
 
 /// Reads up to [`identify::SAMPLE_PACKETS`] data packets and identifies the sensor.
@@ -227,7 +230,28 @@ impl FrameReader {
             done: false,
             packet: Vec::with_capacity(packet::DATA_PACKET_BYTES),
             spare: Vec::new(),
+            past_range: false,
         })
+    }
+
+    /// Up to `max` next frames whose index lies in `frames`; empty once the capture (or
+    /// the range) is exhausted. Lets callers process frames in bounded parallel batches.
+    pub fn next_batch(&mut self, max: usize, frames: &RangeInclusive<u32>) -> Result<Vec<Frame>> {
+        let mut batch = Vec::with_capacity(max);
+        while batch.len() < max && !self.past_range {
+            match self.next() {
+                None => break,
+                Some(frame) => {
+                    let frame = frame?;
+                    if frame.index > *frames.end() {
+                        self.past_range = true;
+                    } else if frames.contains(&frame.index) {
+                        batch.push(frame);
+                    }
+                }
+            }
+        }
+        Ok(batch)
     }
 
     /// Hands a finished frame's buffer back for reuse, sparing an allocation per frame.

@@ -413,28 +413,9 @@ fn compute_chunk(
     let mut reader = FrameReader::open(&capture.path, &s.decoder)?;
     let batch_size = (2 * rayon::current_num_threads()).max(4);
     let mut results: Vec<Vec<FrameMetrics>> = vec![Vec::new(); cells.len()];
-    let mut done = false;
     let mut n_frames = 0u64;
-    while !done {
-        let mut batch = Vec::with_capacity(batch_size);
-        while batch.len() < batch_size {
-            match reader.next() {
-                None => {
-                    done = true;
-                    break;
-                }
-                Some(frame) => {
-                    let frame = frame?;
-                    if frame.index > *s.frames.end() {
-                        done = true;
-                        break;
-                    }
-                    if s.frames.contains(&frame.index) {
-                        batch.push(frame);
-                    }
-                }
-            }
-        }
+    loop {
+        let batch = reader.next_batch(batch_size, &s.frames)?;
         if batch.is_empty() {
             break;
         }

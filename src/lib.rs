@@ -3,6 +3,8 @@
 //! Data flows one way: capture -> decoder -> frame -> noise stages -> detection
 //! filters -> ground -> clusters -> writers.
 
+#![warn(missing_docs)]
+
 pub mod calibration;
 pub mod capture;
 pub mod cli;

@@ -23,6 +23,7 @@ pub struct Args {
     /// Write ASCII PLY instead of binary little-endian.
     #[arg(long)]
     pub ascii: bool,
+    /// Decoder settings shared by the commands that read captures.
     #[command(flatten)]
     pub decoder: DecoderArgs,
 }

@@ -16,6 +16,7 @@ pub struct Args {
     /// Print JSON (one object per capture, one per line) instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Decoder settings shared by the commands that read captures.
     #[command(flatten)]
     pub decoder: DecoderArgs,
 }

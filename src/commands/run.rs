@@ -56,6 +56,7 @@ pub struct Args {
     /// Also write each frame's single-linkage merge tree (SciPy linkage layout, CSV).
     #[arg(long)]
     pub linkage_out: bool,
+    /// Decoder settings shared by the commands that read captures.
     #[command(flatten)]
     pub decoder: DecoderArgs,
 }

@@ -47,6 +47,7 @@ pub struct Args {
     /// Half-width of the bird's-eye view in metres.
     #[arg(long, value_name = "M", default_value_t = 40.0)]
     pub figure_extent: f64,
+    /// Decoder settings shared by the commands that read captures.
     #[command(flatten)]
     pub decoder: DecoderArgs,
 }

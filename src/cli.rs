@@ -70,8 +70,8 @@ pub fn main() -> i32 {
         Command::Run(args) => commands::run::run(args, global),
         Command::Info(args) => commands::info::run(args, global),
         Command::Convert(args) => commands::convert::run(args, global),
-        Command::Validate(args) => commands::validate::run(args),
-        Command::Synth(args) => commands::synth::run(args),
+        Command::Validate(args) => commands::validate::run(args, global),
+        Command::Synth(args) => commands::synth::run(args, global),
         Command::Sweep(args) => commands::sweep::run(args, global),
     };
     match result {

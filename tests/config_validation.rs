@@ -283,6 +283,7 @@ fn shipped_configs_validate() {
 #[test]
 fn validate_command_accepts_good_and_rejects_bad() {
     use lidar_noise::commands::validate::{run, Args};
+    const QUIET: lidar_noise::cli::Global = lidar_noise::cli::Global { quiet: true };
     let dir = tempfile::tempdir().unwrap();
     let good = dir.path().join("good.toml");
     std::fs::write(&good, GOOD).unwrap();
@@ -291,15 +292,15 @@ fn validate_command_accepts_good_and_rejects_bad() {
         set: set.iter().map(|s| s.to_string()).collect(),
         seed: None,
     };
-    run(args(&good, &[])).unwrap();
-    let e = run(args(&good, &["noise[0].lasers=[99]"]))
+    run(args(&good, &[]), QUIET).unwrap();
+    let e = run(args(&good, &["noise[0].lasers=[99]"]), QUIET)
         .unwrap_err()
         .to_string();
     assert!(e.contains("--set noise[0].lasers=[99]"), "{e}");
     let bad = dir.path().join("bad.toml");
     std::fs::write(&bad, GOOD.replace("rate_mm_h = 7.0", "rate_mm_h = -7")).unwrap();
-    let e = run(args(&bad, &[])).unwrap_err().to_string();
+    let e = run(args(&bad, &[]), QUIET).unwrap_err().to_string();
     assert!(e.contains("bad.toml") && e.contains("line 14"), "{e}");
     let missing = dir.path().join("nope.toml");
-    assert!(run(args(&missing, &[])).is_err());
+    assert!(run(args(&missing, &[]), QUIET).is_err());
 }

@@ -1,6 +1,8 @@
 //! `lidar-noise synth` command: writes the three files, refuses to overwrite its input.
 
 use lidar_noise::commands::synth::{run, SynthArgs};
+
+const QUIET: lidar_noise::cli::Global = lidar_noise::cli::Global { quiet: true };
 use lidar_noise::synth::labels::read_labels_file;
 
 fn args(dir: &std::path::Path) -> SynthArgs {
@@ -17,7 +19,7 @@ fn args(dir: &std::path::Path) -> SynthArgs {
 #[test]
 fn writes_capture_labels_and_objects() {
     let dir = tempfile::tempdir().unwrap();
-    run(args(dir.path())).unwrap();
+    run(args(dir.path()), QUIET).unwrap();
     let pcap = std::fs::read(dir.path().join("crossroad.pcap")).unwrap();
     assert_eq!(&pcap[..4], &[0xd4, 0xc3, 0xb2, 0xa1]);
     let rows = read_labels_file(&dir.path().join("crossroad.labels.csv.gz")).unwrap();
@@ -40,7 +42,7 @@ fn refuses_to_overwrite_its_input() {
     let mut a = args(dir.path());
     a.preset = None;
     a.scene = Some(scene.clone());
-    let e = run(a).unwrap_err().to_string();
+    let e = run(a, QUIET).unwrap_err().to_string();
     assert!(e.contains("overwrite"), "{e}");
     assert!(std::fs::read_to_string(&scene)
         .unwrap()

@@ -36,7 +36,7 @@ pub struct SynthArgs {
 
 /// Runs `lidar-noise synth`: writes DIR/<name>.pcap, DIR/<name>.labels.csv.gz and
 /// DIR/<name>.objects.json, each through a temporary file renamed into place.
-pub fn run(args: SynthArgs) -> anyhow::Result<()> {
+pub fn run(args: SynthArgs, global: crate::cli::Global) -> anyhow::Result<()> {
     let mut scene = match (&args.scene, &args.preset) {
         (Some(path), None) => Scene::from_file(path)?,
         (None, Some(name)) => Scene::preset(name)?,
@@ -103,6 +103,9 @@ pub fn run(args: SynthArgs) -> anyhow::Result<()> {
             .with_context(|| format!("{}: cannot write", path.display()))?;
         tmp.persist(path)
             .with_context(|| format!("{}: cannot rename into place", path.display()))?;
+    }
+    if global.quiet {
+        return Ok(());
     }
     eprintln!(
         "{}: {} rotations at {} Hz, {} records ({} data, {} position), {} returns",

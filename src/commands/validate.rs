@@ -19,10 +19,10 @@ pub struct Args {
 
 /// Validates the configuration: prints "CONFIG: ok" and the stage list to stdout and the
 /// warnings to stderr, or returns the error naming key and line.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(args: Args, global: crate::cli::Global) -> anyhow::Result<()> {
     let (config, warnings) = Config::load(args.config.as_deref(), &args.set, args.seed)?;
     for w in &warnings {
-        eprintln!("warning: {w}");
+        global.warn(w);
     }
     println!("{}: ok", config.source.display());
     println!("seed {}", config.seed);

@@ -310,30 +310,26 @@ impl FrameReader {
                 self.finish_frame(b, false);
             }
         }
-        match &mut self.building {
-            Some(b) => {
-                b.last_rel = rel;
-                b.last_step = step;
+        let (next_index, spare) = (&mut self.next_index, &mut self.spare);
+        let b = self.building.get_or_insert_with(|| {
+            let index = *next_index;
+            *next_index += 1;
+            Building {
+                frame: Frame {
+                    index,
+                    partial: false,
+                    returns: spare
+                        .pop()
+                        .unwrap_or_else(|| Vec::with_capacity(FRAME_CAPACITY)),
+                },
+                first_rel: rel,
+                first_step: step,
+                last_rel: rel,
+                last_step: step,
             }
-            None => {
-                let index = self.next_index;
-                self.next_index += 1;
-                self.building = Some(Building {
-                    frame: Frame {
-                        index,
-                        partial: false,
-                        returns: self
-                            .spare
-                            .pop()
-                            .unwrap_or_else(|| Vec::with_capacity(FRAME_CAPACITY)),
-                    },
-                    first_rel: rel,
-                    first_step: step,
-                    last_rel: rel,
-                    last_step: step,
-                });
-            }
-        }
+        });
+        b.last_rel = rel;
+        b.last_step = step;
     }
 
     /// Decodes datagrams until a frame is ready or the capture ends.
@@ -390,6 +386,7 @@ impl FrameReader {
         for firing in &firings[..n] {
             self.on_firing(firing.azimuth, firing.step);
             let (blocks, count) = self.decoder.blocks_of(mode, firing.index);
+            // on_firing always leaves a frame open.
             let Some(b) = self.building.as_mut() else {
                 continue;
             };

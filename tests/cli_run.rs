@@ -10,24 +10,6 @@ fn bin() -> Command {
     Command::cargo_bin("lidar-noise").unwrap()
 }
 
-/// Every file below `dir`, by relative path.
-fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                let rel = p.strip_prefix(dir).unwrap().display().to_string();
-                out.insert(rel, std::fs::read(&p).unwrap());
-            }
-        }
-    }
-    out
-}
-
 fn run_with(threads: &str, seed: &str, out: &Path, extra: &[&str]) {
     let fixture = common::fixtures().join("crossroad.pcap");
     bin()
@@ -57,13 +39,17 @@ fn outputs_are_byte_identical_for_any_thread_count_and_change_with_the_seed() {
     run_with("1", "7", &a, &[]);
     run_with("2", "7", &b, &[]);
     run_with("2", "8", &c, &[]);
-    let (fa, fb, fc) = (files(&a), files(&b), files(&c));
+    let (fa, fb, fc) = (common::files(&a), common::files(&b), common::files(&c));
     assert!(fa.len() >= 5, "{:?}", fa.keys());
     assert_eq!(fa.keys().collect::<Vec<_>>(), fb.keys().collect::<Vec<_>>());
     for (name, bytes) in &fa {
-        assert!(bytes == &fb[name], "{name} differs between 1 and 2 threads");
+        assert!(
+            bytes == &fb[name],
+            "{} differs between 1 and 2 threads",
+            name.display()
+        );
     }
-    let ply = "crossroad/frame_00000.ply";
+    let ply = Path::new("crossroad/frame_00000.ply");
     assert!(fa[ply] != fc[ply], "another seed must give other noise");
 }
 

@@ -1,7 +1,8 @@
 //! A sweep interrupted and restarted writes the same files as an uninterrupted one.
 
+mod common;
+
 use assert_cmd::Command;
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 fn fixture(name: &str) -> PathBuf {
@@ -33,26 +34,6 @@ fn sweep(out: &Path) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
-/// Every file under `dir` by relative path, with its bytes.
-fn files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                out.insert(
-                    p.strip_prefix(dir).unwrap().to_path_buf(),
-                    std::fs::read(&p).unwrap(),
-                );
-            }
-        }
-    }
-    out
-}
-
 #[test]
 fn interrupted_and_restarted_equals_uninterrupted() {
     let tmp = tempfile::tempdir().unwrap();
@@ -78,8 +59,8 @@ fn interrupted_and_restarted_equals_uninterrupted() {
     std::fs::remove_dir_all(b.join("plots")).unwrap();
     let msg = sweep(&b);
     assert!(msg.contains("4 cells computed, 4 loaded"), "{msg}");
-    let fa = files(&a);
-    let fb = files(&b);
+    let fa = common::files(&a);
+    let fb = common::files(&b);
     assert_eq!(fa.keys().collect::<Vec<_>>(), fb.keys().collect::<Vec<_>>());
     assert!(fa.len() > 8 + 4 + 10, "{} files", fa.len());
     for (k, v) in &fa {
@@ -88,7 +69,7 @@ fn interrupted_and_restarted_equals_uninterrupted() {
     // A third run computes nothing.
     let msg = sweep(&b);
     assert!(msg.contains("0 cells computed, 8 loaded"), "{msg}");
-    assert!(files(&b) == fa);
+    assert!(common::files(&b) == fa);
 }
 
 #[test]

@@ -231,6 +231,29 @@ pub fn detection_scores(
     (precision, m.survival())
 }
 
+/// Object outcomes of one distance band in one frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct BandMetrics {
+    /// Lower edge of the band, metres (inclusive).
+    pub lo_m: f64,
+    /// Upper edge of the band, metres (exclusive); `None` for the open last band.
+    pub hi_m: Option<f64>,
+    /// Objects (labelled objects, or clean-baseline object clusters without labels) in the band.
+    pub objects: u64,
+    /// Of those, detected.
+    pub detected: u64,
+    /// Of those, retained (held against all their clean returns, dropped ones included).
+    pub retained: u64,
+    /// Of those, split over two or more noisy clusters.
+    pub split: u64,
+    /// Of those, merged into a cluster another object dominates or shares.
+    pub merged: u64,
+    /// Of those, mostly called ground by the method.
+    pub merged_into_ground: u64,
+    /// Of those, lost (not detected, not split, not merged, not merged into ground).
+    pub lost: u64,
+}
+
 /// Per-frame metrics of one sweep cell (one row of the tidy table).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct FrameMetrics {
@@ -282,6 +305,15 @@ pub struct FrameMetrics {
     pub object_precision: Option<f64>,
     /// Object detection recall against the capture's labels.
     pub object_recall: Option<f64>,
+    /// Objects of the frame (labelled objects, or clean-baseline object clusters).
+    #[serde(default)]
+    pub objects: u64,
+    /// Of those, detected.
+    #[serde(default)]
+    pub detected: u64,
+    /// Object outcomes per distance band, in band order (the same in every row).
+    #[serde(default)]
+    pub bands: Vec<BandMetrics>,
 }
 
 #[cfg(test)]

@@ -25,6 +25,53 @@ pub struct OrientedBox {
     pub z_max: f64,
 }
 
+/// Which clusters are *objects*: road users and obstacles a perception stack must not
+/// hit, as opposed to ground remnants, wall and building fragments and vegetation.
+///
+/// A cluster is an object when it has at least `min_points` returns (the clustering's
+/// rule), its height `z_max - z_min` lies in `[min_height_m, max_height_m]` and its
+/// footprint length (the longer side of its oriented box) lies in
+/// `[min_extent_m, max_extent_m]`. Defaults: 0.4-6 m tall (a traffic cone is 0.5-0.7 m,
+/// a pedestrian 1-2 m, a truck or bus up to about 4.3 m; flat ground remnants and kerbs
+/// are lower), footprint up to 18 m (an articulated truck is 16.5-18.75 m; longer
+/// clusters are walls, facades, hedges). Cones, barrels, bollards and poles up to 6 m are
+/// objects: they must not be hit. The rule is geometric and measured on the returns, so
+/// it sees only what the sensor sees: a car far enough away to be hit by a single laser
+/// ring looks flat and fails the height test.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectRule {
+    /// Lowest object height (metres).
+    pub min_height_m: f64,
+    /// Highest object height (metres).
+    pub max_height_m: f64,
+    /// Shortest footprint length (metres).
+    pub min_extent_m: f64,
+    /// Longest footprint length (metres).
+    pub max_extent_m: f64,
+}
+
+impl Default for ObjectRule {
+    fn default() -> Self {
+        ObjectRule {
+            min_height_m: 0.4,
+            max_height_m: 6.0,
+            min_extent_m: 0.0,
+            max_extent_m: 18.0,
+        }
+    }
+}
+
+impl ObjectRule {
+    /// True when a cluster of at least `min_points` returns passes the size tests.
+    pub fn is_object(&self, c: &ClusterInfo, min_points: usize) -> bool {
+        let height = c.extent[2];
+        let length = c.oriented_box.length;
+        c.n_points >= min_points
+            && (self.min_height_m..=self.max_height_m).contains(&height)
+            && (self.min_extent_m..=self.max_extent_m).contains(&length)
+    }
+}
+
 /// Summary of one cluster.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ClusterInfo {
@@ -50,6 +97,9 @@ pub struct ClusterInfo {
     pub mean_intensity: f64,
     /// Laser ids that hit the cluster, ascending.
     pub lasers: Vec<u8>,
+    /// True when the cluster passes the [`ObjectRule`] (set by the pipeline; false here).
+    #[serde(default)]
+    pub object: bool,
 }
 
 /// Describes every cluster (labels >= 0; negative labels are noise), sorted by id.
@@ -118,6 +168,7 @@ fn summarize(id: i32, members: &[&Return]) -> ClusterInfo {
         mean_range: range_sum / n,
         mean_intensity: intensity_sum / n,
         lasers,
+        object: false,
     }
 }
 

@@ -44,6 +44,10 @@ pub struct Args {
     /// Frame of the first capture shown in the bird's-eye figure (default: the first).
     #[arg(long, value_name = "N")]
     pub figure_frame: Option<u32>,
+    /// Distance band edges in metres, ascending: bands [e0, e1), ..., [ek, inf) on the
+    /// horizontal distance of each object's clean centroid.
+    #[arg(long, value_name = "M,M,...", default_value = "0,5,10,20,40")]
+    pub bands: String,
     /// Half-width of the bird's-eye view in metres.
     #[arg(long, value_name = "M", default_value_t = 40.0)]
     pub figure_extent: f64,
@@ -163,6 +167,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             None => 0..=u32::MAX,
         },
         output: args.output.clone(),
+        bands: crate::sweep::plan::parse_bands(&args.bands)?,
     };
     // Every cell configuration is built (and so checked) before any work starts.
     for cell in crate::sweep::plan::cells(&settings.varies, &settings.seeds) {

@@ -16,7 +16,7 @@
 pub mod overrides;
 pub mod reader;
 
-use crate::cluster::{ClusterOptions, CutRule};
+use crate::cluster::{ClusterOptions, CutRule, ObjectRule};
 use crate::error::{Error, Result};
 use crate::ground::{GroundMethod, GroundOptions};
 use crate::noise::{self, NoiseStage};
@@ -130,6 +130,8 @@ pub struct Config {
     pub ground: GroundOptions,
     /// `[cluster]`.
     pub cluster: ClusterOptions,
+    /// `[cluster]` `object_*` keys: which clusters are objects.
+    pub objects: ObjectRule,
     /// Where the configuration came from (file path or the built-in label).
     pub source: PathBuf,
 }
@@ -234,7 +236,7 @@ impl Config {
                 .collect(),
             detection: &self.detection,
             ground: &self.ground,
-            cluster: ClusterSettings::of(&self.cluster),
+            cluster: ClusterSettings::of(&self.cluster, &self.objects),
         }
     }
 }
@@ -259,10 +261,14 @@ struct ClusterSettings {
     cutoff_per_m: f64,
     min_points: usize,
     max_edge_m: f64,
+    object_min_height_m: f64,
+    object_max_height_m: f64,
+    object_min_extent_m: f64,
+    object_max_extent_m: f64,
 }
 
 impl ClusterSettings {
-    fn of(o: &ClusterOptions) -> Self {
+    fn of(o: &ClusterOptions, objects: &ObjectRule) -> Self {
         let (cut, cutoff_m) = match o.cut {
             CutRule::Distance => ("distance", o.cutoff_m),
             CutRule::Inconsistent { threshold } => ("inconsistent", threshold),
@@ -274,6 +280,10 @@ impl ClusterSettings {
             cutoff_per_m: o.cutoff_per_m,
             min_points: o.min_points,
             max_edge_m: o.max_edge_m,
+            object_min_height_m: objects.min_height_m,
+            object_max_height_m: objects.max_height_m,
+            object_min_extent_m: objects.min_extent_m,
+            object_max_extent_m: objects.max_extent_m,
         }
     }
 }
@@ -323,13 +333,14 @@ fn read_ground(root: &Section<'_>) -> Result<GroundOptions> {
 }
 
 /// Reads `[cluster]`; every key is optional.
-fn read_cluster(root: &Section<'_>) -> Result<ClusterOptions> {
+fn read_cluster(root: &Section<'_>) -> Result<(ClusterOptions, ObjectRule)> {
     let mut c = ClusterOptions {
         min_points: 10,
         ..ClusterOptions::default()
     };
+    let mut o = ObjectRule::default();
     let Some(t) = root.table("cluster")? else {
-        return Ok(c);
+        return Ok((c, o));
     };
     let cut = t
         .choice("cut", &["distance", "inconsistent", "maxclust"])?
@@ -389,8 +400,39 @@ fn read_cluster(root: &Section<'_>) -> Result<ClusterOptions> {
         }
         c.max_edge_m = v;
     }
+    for (key, into) in [
+        ("object_min_height_m", &mut o.min_height_m),
+        ("object_max_height_m", &mut o.max_height_m),
+        ("object_min_extent_m", &mut o.min_extent_m),
+        ("object_max_extent_m", &mut o.max_extent_m),
+    ] {
+        if let Some(v) = t.f64(key)? {
+            if v.is_nan() || v < 0.0 {
+                return Err(t.error(key, format!("{v} must be 0 or more metres (inf allowed)")));
+            }
+            *into = v;
+        }
+    }
+    if o.min_height_m > o.max_height_m {
+        return Err(t.error(
+            "object_max_height_m",
+            format!(
+                "{} is below object_min_height_m = {}",
+                o.max_height_m, o.min_height_m
+            ),
+        ));
+    }
+    if o.min_extent_m > o.max_extent_m {
+        return Err(t.error(
+            "object_max_extent_m",
+            format!(
+                "{} is below object_min_extent_m = {}",
+                o.max_extent_m, o.min_extent_m
+            ),
+        ));
+    }
     t.finish()?;
-    Ok(c)
+    Ok((c, o))
 }
 
 /// A stage's `type` followed by its options in their documented order.
@@ -480,7 +522,7 @@ fn read_config(root: &Section<'_>, file: &Path) -> Result<Config> {
     }
 
     let ground = read_ground(root)?;
-    let cluster = read_cluster(root)?;
+    let (cluster, objects) = read_cluster(root)?;
     root.finish()?;
 
     Ok(Config {
@@ -491,6 +533,7 @@ fn read_config(root: &Section<'_>, file: &Path) -> Result<Config> {
         detection,
         ground,
         cluster,
+        objects,
         source: file.to_path_buf(),
     })
 }

@@ -2,7 +2,7 @@
 //! clustering and the cluster report. One frame in, one [`FrameResult`] out; frames are
 //! independent, so any number of threads gives the same results.
 
-use crate::cluster::{self, ClusterInfo, ClusterOptions};
+use crate::cluster::{self, ClusterInfo, ClusterOptions, ObjectRule};
 use crate::config::Config;
 use crate::error::Result;
 use crate::frame::Frame;
@@ -19,6 +19,7 @@ pub struct Pipeline {
     chain: NoiseChain,
     ground: GroundOptions,
     cluster: ClusterOptions,
+    objects: ObjectRule,
     seed: u64,
     ground_tag: u32,
 }
@@ -32,8 +33,10 @@ pub struct StageCounts {
     pub ground: u64,
     /// Kept returns not labelled ground (the clustering's input).
     pub non_ground: u64,
-    /// Clusters with at least `min_points` returns (objects).
+    /// Clusters with at least `min_points` returns.
     pub clusters: u64,
+    /// Of those, objects (clusters passing the `[cluster]` object rule).
+    pub objects: u64,
     /// Non-ground returns in clusters smaller than `min_points`.
     pub noise_points: u64,
     /// Non-ground returns in clusters (objects).
@@ -47,6 +50,7 @@ impl StageCounts {
         self.ground += o.ground;
         self.non_ground += o.non_ground;
         self.clusters += o.clusters;
+        self.objects += o.objects;
         self.noise_points += o.noise_points;
         self.cluster_points += o.cluster_points;
     }
@@ -74,7 +78,7 @@ pub struct FrameResult {
     pub ground: Vec<bool>,
     /// Cluster id of each survivor: -1 for ground and for noise.
     pub labels: Vec<i32>,
-    /// The clusters (objects), sorted by id.
+    /// The clusters, sorted by id, each flagged object or not.
     pub clusters: Vec<ClusterInfo>,
     /// Counts after each stage.
     pub counts: StageCounts,
@@ -89,6 +93,7 @@ impl Pipeline {
             chain: NoiseChain::new(config),
             ground: config.ground.clone(),
             cluster: config.cluster,
+            objects: config.objects,
             seed: config.seed,
             // Ground has its own stream, keyed like a stage named "ground".
             ground_tag: stage_tags(&["ground"])[0],
@@ -118,12 +123,16 @@ impl Pipeline {
             labels[i] = label;
         }
         let object_returns: Vec<Return> = non_ground.iter().map(|&i| survivors[i]).collect();
-        let clusters = cluster::describe(&object_returns, &clustering.labels)?;
+        let mut clusters = cluster::describe(&object_returns, &clustering.labels)?;
+        for c in &mut clusters {
+            c.object = self.objects.is_object(c, self.cluster.min_points);
+        }
         let counts = StageCounts {
             kept: survivors.len() as u64,
             ground: (survivors.len() - non_ground.len()) as u64,
             non_ground: non_ground.len() as u64,
             clusters: clustering.n_clusters as u64,
+            objects: clusters.iter().filter(|c| c.object).count() as u64,
             noise_points: clustering.n_noise_points as u64,
             cluster_points: (non_ground.len() - clustering.n_noise_points) as u64,
         };

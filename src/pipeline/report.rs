@@ -68,9 +68,10 @@ pub struct FrameClusters {
 }
 
 /// Columns of the cluster CSV.
-pub const CLUSTER_COLUMNS: [&str; 26] = [
+pub const CLUSTER_COLUMNS: [&str; 27] = [
     "frame",
     "cluster",
+    "object",
     "points",
     "centroid_x",
     "centroid_y",
@@ -108,6 +109,7 @@ pub fn cluster_table(frames: &[FrameClusters]) -> CsvTable {
             t.rows.push(vec![
                 frame.index.to_string(),
                 c.id.to_string(),
+                u8::from(c.object).to_string(),
                 c.n_points.to_string(),
                 f(c.centroid[0]),
                 f(c.centroid[1]),

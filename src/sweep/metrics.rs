@@ -3,7 +3,43 @@
 //! Every function takes plain arrays indexed by the frame's clean returns, so the
 //! metrics can be checked on hand-made cases.
 //!
-//! # Object matching rule
+//! # Object outcomes ([`object_outcomes`])
+//! The *objects* of a frame are, with ground-truth labels, the labelled objects with at
+//! least `min_points` returns in the clean frame; without labels, the clean baseline's
+//! *object clusters* (clusters passing the `[cluster]` object rule, see
+//! [`crate::cluster::ObjectRule`]). For an object `o`:
+//! - `C(o)`: its clean returns (every return of the frame that belongs to it);
+//! - `R(o)`: its *reaching* returns, those of `C(o)` kept by the noise stages and the
+//!   detection filters, i.e. the returns that reach ground removal and clustering;
+//! - `G(o)`: the returns of `R(o)` the method labels ground;
+//! - for a noisy cluster `n` (any cluster of the noisy frame with at least `min_points`
+//!   returns): `|n|` its returns, `O(o, n)` the returns of `o` in `n`, and the purity
+//!   `O(o, n) / |n|`.
+//!
+//! Each object gets exactly one *outcome*, the first that applies, in this order:
+//! 1. **detected**: some noisy cluster `n` has `O(o, n) >= 0.5 |R(o)|` and purity
+//!    `>= 0.5` (needs `|R(o)| > 0`);
+//! 2. **merged into ground**: `|G(o)| > 0.5 |R(o)|`;
+//! 3. **merged**: some noisy cluster has `O(o, n) >= 0.5 |R(o)|` but purity `< 0.5`: the
+//!    object is the minority of a cluster made mostly of other returns (another object,
+//!    ground remnants or clutter);
+//! 4. **split**: two or more noisy clusters each hold `O(o, n) >= 0.2 |R(o)|`;
+//! 5. **lost**: anything else, including objects none of whose returns reach clustering.
+//!
+//! So detected + merged into ground + merged + split + lost = objects. Separately,
+//! **retained** (a subset of detected) applies the detection test to the clean returns:
+//! some noisy cluster has `O(o, n) >= 0.5 |C(o)|` and purity `>= 0.5`, so returns dropped
+//! by noise or filters count as lost. Detected measures the method on what reached it;
+//! retained measures what the whole chain keeps of the object.
+//!
+//! # Distance bands ([`band_index`])
+//! An object's distance is the horizontal `(x, y)` distance from the sensor to the
+//! centroid of its clean returns in the frame. Band edges `e0 < e1 < ... < ek` make the
+//! bands `[e0, e1), [e1, e2), ..., [ek, inf)`: lower edge inclusive, upper edge
+//! exclusive, the last band open. An object at exactly 5.0 m with edges 0, 5, 10 is in
+//! `[5, 10)`; an object closer than `e0` is in no band.
+//!
+//! # IoU matching rule ([`match_objects`]; object survival)
 //! A *partition* gives each clean return a cluster id (`>= 0`) or `-1` (ground, noise, or
 //! for the noisy side, dropped). For a reference cluster `c` and a noisy cluster `n`, the
 //! overlap `O(c, n)` counts returns in both; sizes `|c|`, `|n|` count all returns with
@@ -201,8 +237,8 @@ pub fn range_change(pairs: impl IntoIterator<Item = (f32, f32)>) -> RangeChange 
 
 /// Precision and recall of a binary labelling; `None` where the denominator is zero.
 ///
-/// `predicted[i]` is true when return `i` was kept and called positive; `truth[i]` is the
-/// ground truth of every clean return, so dropped positives count as missed.
+/// The slices hold the returns to score: the sweep passes only the returns that reach
+/// ground removal, so returns dropped before it are neither hits nor misses.
 pub fn precision_recall(truth: &[bool], predicted: &[bool]) -> (Option<f64>, Option<f64>) {
     let (mut tp, mut p, mut t) = (0usize, 0usize, 0usize);
     for (&tr, &pr) in truth.iter().zip(predicted) {
@@ -212,23 +248,6 @@ pub fn precision_recall(truth: &[bool], predicted: &[bool]) -> (Option<f64>, Opt
     }
     let ratio = |a: usize, b: usize| (b > 0).then(|| a as f64 / b as f64);
     (ratio(tp, p), ratio(tp, t))
-}
-
-/// Object detection precision and recall against ground-truth objects.
-///
-/// `truth` holds the object id per clean return (-1 for ground); objects with fewer than
-/// `min_points` returns in the frame are ignored. Recall = truth objects matched / truth
-/// objects; precision = noisy clusters matched / noisy clusters.
-pub fn detection_scores(
-    truth: &[i32],
-    noisy: &[i32],
-    min_points: usize,
-    rule: MatchRule,
-) -> (Option<f64>, Option<f64>) {
-    let truth = drop_small(truth, min_points);
-    let m = match_objects(&truth, noisy, rule);
-    let precision = (m.noisy > 0).then(|| m.matched() as f64 / m.noisy as f64);
-    (precision, m.survival())
 }
 
 /// Object outcomes of one distance band in one frame.
@@ -254,6 +273,229 @@ pub struct BandMetrics {
     pub lost: u64,
 }
 
+/// Outcome of one object in one frame (exclusive; see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    /// One pure noisy cluster holds at least half of its reaching returns.
+    Detected,
+    /// More than half of its reaching returns are labelled ground.
+    MergedIntoGround,
+    /// One noisy cluster holds at least half of its reaching returns but is impure.
+    Merged,
+    /// Two or more noisy clusters each hold at least 20 % of its reaching returns.
+    Split,
+    /// None of the above.
+    Lost,
+}
+
+/// What became of one object in one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ObjectResult {
+    /// Object id (label or baseline cluster id).
+    pub id: i32,
+    /// The exclusive outcome.
+    pub outcome: Outcome,
+    /// Detected against its clean returns (dropped returns count as lost).
+    pub retained: bool,
+    /// Clean returns `|C(o)|`.
+    pub clean: usize,
+    /// Reaching returns `|R(o)|`.
+    pub reached: usize,
+    /// Horizontal distance of the centroid of its clean returns from the sensor, metres.
+    pub distance_m: f64,
+}
+
+/// Share of an object's returns a cluster must hold to detect (or merge) it.
+pub const HOLD_SHARE: f64 = 0.5;
+/// Smallest purity of a detecting cluster.
+pub const MIN_PURITY: f64 = 0.5;
+/// Share of an object's reaching returns each part of a split holds.
+pub const SPLIT_SHARE: f64 = 0.2;
+
+/// Per clean return of one frame: what the metrics need to know.
+#[derive(Clone, Copy, Debug)]
+pub struct ReturnState {
+    /// Object id (`>= 0`) or -1 (ground, clutter).
+    pub object: i32,
+    /// Kept by the noise stages and filters.
+    pub reached: bool,
+    /// Labelled ground by the method (only meaningful when reached).
+    pub ground: bool,
+    /// Noisy cluster id (`>= 0`, at least `min_points` returns) or -1.
+    pub cluster: i32,
+    /// Clean horizontal position (x, y), metres.
+    pub xy: [f32; 2],
+}
+
+/// The outcome of every object with at least `min_points` clean returns, by id.
+pub fn object_outcomes(returns: &[ReturnState], min_points: usize) -> Vec<ObjectResult> {
+    #[derive(Default)]
+    struct Acc {
+        clean: usize,
+        reached: usize,
+        ground: usize,
+        sx: f64,
+        sy: f64,
+        parts: Vec<(i32, usize)>,
+    }
+    let mut objects: BTreeMap<i32, Acc> = BTreeMap::new();
+    let mut cluster_size: Vec<usize> = Vec::new();
+    for r in returns {
+        if r.cluster >= 0 {
+            let c = r.cluster as usize;
+            if c >= cluster_size.len() {
+                cluster_size.resize(c + 1, 0);
+            }
+            cluster_size[c] += 1;
+        }
+        if r.object < 0 {
+            continue;
+        }
+        let a = objects.entry(r.object).or_default();
+        a.clean += 1;
+        a.sx += f64::from(r.xy[0]);
+        a.sy += f64::from(r.xy[1]);
+        if r.reached {
+            a.reached += 1;
+            if r.ground {
+                a.ground += 1;
+            } else if r.cluster >= 0 {
+                match a.parts.iter_mut().find(|p| p.0 == r.cluster) {
+                    Some(p) => p.1 += 1,
+                    None => a.parts.push((r.cluster, 1)),
+                }
+            }
+        }
+    }
+    objects
+        .into_iter()
+        .filter(|(_, a)| a.clean >= min_points.max(1))
+        .map(|(id, a)| {
+            let pure =
+                |&(n, o): &(i32, usize)| o as f64 >= MIN_PURITY * cluster_size[n as usize] as f64;
+            let holds = |o: usize, of: usize| of > 0 && o as f64 >= HOLD_SHARE * of as f64;
+            let detected = a.parts.iter().any(|p| holds(p.1, a.reached) && pure(p));
+            let retained = a.parts.iter().any(|p| holds(p.1, a.clean) && pure(p));
+            let outcome = if detected {
+                Outcome::Detected
+            } else if a.reached > 0 && a.ground as f64 > 0.5 * a.reached as f64 {
+                Outcome::MergedIntoGround
+            } else if a.parts.iter().any(|p| holds(p.1, a.reached)) {
+                Outcome::Merged
+            } else if a
+                .parts
+                .iter()
+                .filter(|p| p.1 as f64 >= SPLIT_SHARE * a.reached as f64)
+                .count()
+                >= 2
+            {
+                Outcome::Split
+            } else {
+                Outcome::Lost
+            };
+            let n = a.clean as f64;
+            ObjectResult {
+                id,
+                outcome,
+                retained,
+                clean: a.clean,
+                reached: a.reached,
+                distance_m: (a.sx / n).hypot(a.sy / n),
+            }
+        })
+        .collect()
+}
+
+/// The band of a distance: `k` when `edges[k] <= d < edges[k + 1]`, the last band when
+/// `d >= edges[last]`, `None` below the first edge (or for a NaN distance).
+pub fn band_index(distance_m: f64, edges: &[f64]) -> Option<usize> {
+    if edges.is_empty() || distance_m.is_nan() || distance_m < edges[0] {
+        return None;
+    }
+    Some(edges.partition_point(|&e| e <= distance_m) - 1)
+}
+
+/// Counts of object outcomes.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Tally {
+    /// Objects.
+    pub objects: u64,
+    /// Detected.
+    pub detected: u64,
+    /// Retained (a subset of detected).
+    pub retained: u64,
+    /// Split.
+    pub split: u64,
+    /// Merged into a cluster of mostly other returns.
+    pub merged: u64,
+    /// Merged into ground.
+    pub merged_into_ground: u64,
+    /// Lost.
+    pub lost: u64,
+}
+
+impl Tally {
+    /// Counts one object.
+    pub fn add(&mut self, r: &ObjectResult) {
+        self.objects += 1;
+        self.retained += u64::from(r.retained);
+        match r.outcome {
+            Outcome::Detected => self.detected += 1,
+            Outcome::MergedIntoGround => self.merged_into_ground += 1,
+            Outcome::Merged => self.merged += 1,
+            Outcome::Split => self.split += 1,
+            Outcome::Lost => self.lost += 1,
+        }
+    }
+
+    /// Counts every object.
+    pub fn of<'a>(results: impl IntoIterator<Item = &'a ObjectResult>) -> Tally {
+        let mut t = Tally::default();
+        for r in results {
+            t.add(r);
+        }
+        t
+    }
+}
+
+/// The per-band counts of `results` for band `edges` (see [`band_index`]).
+pub fn band_metrics(results: &[ObjectResult], edges: &[f64]) -> Vec<BandMetrics> {
+    let mut tallies = vec![Tally::default(); edges.len()];
+    for r in results {
+        if let Some(b) = band_index(r.distance_m, edges) {
+            tallies[b].add(r);
+        }
+    }
+    tallies
+        .into_iter()
+        .enumerate()
+        .map(|(k, t)| BandMetrics {
+            lo_m: edges[k],
+            hi_m: edges.get(k + 1).copied(),
+            objects: t.objects,
+            detected: t.detected,
+            retained: t.retained,
+            split: t.split,
+            merged: t.merged,
+            merged_into_ground: t.merged_into_ground,
+            lost: t.lost,
+        })
+        .collect()
+}
+
+/// Object outcomes of one object class in one frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ClassMetrics {
+    /// Class name (`kind` in the scene's object list).
+    pub kind: String,
+    /// Outcome counts.
+    #[serde(flatten)]
+    pub counts: Tally,
+}
+
+/// Default distance band edges, metres.
+pub const DEFAULT_BANDS: [f64; 5] = [0.0, 5.0, 10.0, 20.0, 40.0];
+
 /// Per-frame metrics of one sweep cell (one row of the tidy table).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct FrameMetrics {
@@ -277,43 +519,50 @@ pub struct FrameMetrics {
     pub range_change_rms_m: f64,
     /// 95th percentile of the absolute range change, metres.
     pub range_change_p95_m: f64,
-    /// Clusters (objects) found.
+    /// Clusters (at least `min_points` returns) found.
     pub clusters: u64,
+    /// Of those, object clusters (passing the object rule).
+    pub object_clusters: u64,
     /// Clusters of the clean baseline.
     pub baseline_clusters: u64,
-    /// Baseline clusters matched (IoU >= 0.5).
+    /// Object clusters of the clean baseline.
+    pub baseline_object_clusters: u64,
+    /// Baseline object clusters matched by a noisy cluster (IoU >= 0.5).
     pub matched: u64,
-    /// Share of baseline clusters matched.
+    /// Share of baseline object clusters matched (IoU rule).
     pub object_survival: Option<f64>,
-    /// Baseline clusters split.
-    pub split: u64,
-    /// Noisy clusters merging baseline clusters.
-    pub merged: u64,
-    /// Baseline clusters lost.
-    pub lost: u64,
-    /// Noisy clusters matching nothing of the baseline.
+    /// Noisy object clusters less than 20 % of whose returns come from any baseline cluster.
     pub false_clusters: u64,
-    /// Ground-plane distance of the farthest matched baseline cluster's centroid, metres.
+    /// Ground-plane distance of the farthest matched baseline object cluster, metres.
     pub farthest_matched_m: Option<f64>,
-    /// Same for the farthest baseline cluster.
+    /// Same for the farthest baseline object cluster.
     pub baseline_farthest_m: Option<f64>,
-    /// Ground precision against the capture's labels.
-    pub ground_precision: Option<f64>,
-    /// Ground recall against the capture's labels.
-    pub ground_recall: Option<f64>,
-    /// Object detection precision against the capture's labels.
-    pub object_precision: Option<f64>,
-    /// Object detection recall against the capture's labels.
-    pub object_recall: Option<f64>,
+    /// True when the objects are the capture's labelled objects (else baseline object clusters).
+    pub labelled: bool,
     /// Objects of the frame (labelled objects, or clean-baseline object clusters).
-    #[serde(default)]
     pub objects: u64,
     /// Of those, detected.
-    #[serde(default)]
     pub detected: u64,
+    /// Of those, retained (a subset of detected).
+    pub retained: u64,
+    /// Of those, split.
+    pub split: u64,
+    /// Of those, merged into a cluster of mostly other returns.
+    pub merged: u64,
+    /// Of those, merged into ground.
+    pub merged_into_ground: u64,
+    /// Of those, lost.
+    pub lost: u64,
+    /// Ground precision against the labels, over the returns that reach ground removal.
+    pub ground_precision: Option<f64>,
+    /// Ground recall against the labels, over the returns that reach ground removal.
+    pub ground_recall: Option<f64>,
+    /// Share of the labelled ground returns dropped before ground removal.
+    pub ground_lost_before_share: Option<f64>,
     /// Object outcomes per distance band, in band order (the same in every row).
-    #[serde(default)]
     pub bands: Vec<BandMetrics>,
+    /// Object outcomes per object class (labelled captures naming classes), by name.
+    pub classes: Vec<ClassMetrics>,
 }
 
 #[cfg(test)]

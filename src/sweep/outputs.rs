@@ -3,7 +3,7 @@
 
 use super::plan::{Vary, VaryKind};
 use super::run::{Panel, Row};
-use super::tables::{self, Group, METRICS};
+use super::tables::{self, Group};
 use crate::error::{Error, Result};
 use crate::writers::html::{Figure, Page, Section};
 use crate::writers::png::{self, BirdsEyePanel, LinePlot, Series};
@@ -83,8 +83,12 @@ pub fn write_outputs(
     let json = serde_json::to_vec_pretty(&tables::tidy_json(&keys, rows))
         .map_err(|e| Error::Invalid(format!("sweep.json: {e}")))?;
     put(TIDY_JSON, &json)?;
-    let groups = tables::aggregate(rows);
-    put(AGGREGATE_CSV, &tables::aggregate_csv(&keys, &groups))?;
+    let metrics = tables::metrics(rows);
+    let groups = tables::aggregate(rows, &metrics);
+    put(
+        AGGREGATE_CSV,
+        &tables::aggregate_csv(&keys, &groups, &metrics),
+    )?;
 
     let mut page = Page {
         title: "lidar-noise sweep".into(),
@@ -100,11 +104,23 @@ pub fn write_outputs(
             .push(format!("varied: {} = {}", v.key, v.values.join(", ")));
     }
     intro.paragraphs.push(
-        "Metrics compare each frame with the same frame without noise stages (same filters, \
-         ground and clustering). A clean cluster survives when a noisy cluster has \
-         point-membership IoU >= 0.5 with it (greedy one-to-one); split, merged, lost and \
-         false clusters use a 20 % share rule (see the sweep module documentation). Bands and \
-         intervals: 95 % Student-t confidence interval of the mean over seeds and frames."
+        "Objects are the capture's labelled objects when it has labels, else the object \
+         clusters of the same frame without noise stages (clusters 0.4-6 m tall with a \
+         footprint up to 18 m by default: [cluster] object_* keys). An object is detected \
+         when one noisy cluster holds at least half of its returns that reach clustering \
+         with purity >= 0.5, retained when the same holds against all its clean returns \
+         (dropped returns count as lost); otherwise it is merged into ground, merged, split \
+         or lost (exclusive, in that order; see the sweep metrics module documentation). \
+         Distance bands are [lo, hi) on the horizontal distance of the object's clean \
+         centroid, the last one open. Object survival is the older IoU >= 0.5 match of \
+         clean object clusters. Ground precision and recall count only the returns that \
+         reach ground removal."
+            .into(),
+    );
+    intro.paragraphs.push(
+        "Intervals: each seed is first reduced to its mean over frames (shares pooled over \
+         frames), then the 95 % Student-t interval of the mean is taken over seeds; frames \
+         of one capture are not independent samples. With one seed there is no interval."
             .into(),
     );
     intro.paragraphs.push(format!(
@@ -153,7 +169,14 @@ pub fn write_outputs(
                 heading: format!("Plots: {capture}"),
                 ..Section::default()
             };
-            for (mi, metric) in METRICS.iter().enumerate() {
+            for (mi, metric) in metrics.iter().enumerate() {
+                // Per band only the detected share gets a plot (the rest is in the tables).
+                if metric.name.starts_with("objects_")
+                    || metric.name.starts_with("retained_share_")
+                    || metric.name.starts_with("lost_share_")
+                {
+                    continue;
+                }
                 let mut series: Vec<Series> = Vec::new();
                 for g in &cg {
                     let Some(i) = g.metrics[mi] else { continue };
@@ -175,7 +198,7 @@ pub fn write_outputs(
                     } else {
                         label.join(", ")
                     };
-                    let point = (x, i.mean, i.lo, i.hi);
+                    let point = (x, i.mean, i.lo.unwrap_or(i.mean), i.hi.unwrap_or(i.mean));
                     match series.iter_mut().find(|s| s.label == label) {
                         Some(s) => s.points.push(point),
                         None => series.push(Series {
@@ -193,7 +216,7 @@ pub fn write_outputs(
                 let plot = LinePlot {
                     title: format!("{capture}: {}", metric.name.replace('_', " ")),
                     x_label: x_label(&varies[xi]),
-                    y_label: metric.label.into(),
+                    y_label: metric.label.clone(),
                     series,
                 };
                 let rel = format!("{sub}/{}.png", metric.name);
@@ -202,54 +225,87 @@ pub fn write_outputs(
                 written.push(path);
                 section.figures.push(Figure {
                     src: rel,
-                    caption: metric.label.into(),
+                    caption: metric.label.clone(),
                 });
             }
             page.sections.push(section);
         }
     }
 
-    let shown = [
+    let table = |names: &[String]| {
+        let cols: Vec<usize> = names
+            .iter()
+            .filter_map(|n| metrics.iter().position(|m| &m.name == n))
+            .filter(|&i| groups.iter().any(|g| g.metrics[i].is_some()))
+            .collect();
+        let mut header = vec!["capture".to_string()];
+        header.extend(keys.iter().cloned());
+        header.push("seeds".into());
+        header.extend(cols.iter().map(|&i| metrics[i].name.clone()));
+        let body = groups
+            .iter()
+            .map(|g| {
+                let mut r = vec![g.capture.clone()];
+                r.extend(g.values.iter().cloned());
+                r.push(g.seeds.to_string());
+                r.extend(cols.iter().map(|&i| match g.metrics[i] {
+                    Some(v) => match (v.lo, v.hi) {
+                        (Some(lo), Some(hi)) => format!("{:.3} [{lo:.3}, {hi:.3}]", v.mean),
+                        _ => format!("{:.3}", v.mean),
+                    },
+                    None => String::new(),
+                }));
+                r
+            })
+            .collect();
+        (header, body)
+    };
+    let shown: Vec<String> = [
+        "detected_share",
+        "retained_share",
+        "merged_share",
+        "merged_into_ground_share",
+        "split_share",
+        "lost_share",
+        "objects",
         "object_survival",
         "clusters",
-        "lost",
-        "split",
-        "merged",
+        "object_clusters",
         "false_clusters",
-        "farthest_matched_m",
         "kept",
         "range_change_rms_m",
-        "object_recall",
         "ground_recall",
-    ];
-    let cols: Vec<usize> = shown
-        .iter()
-        .filter_map(|n| METRICS.iter().position(|m| m.name == *n))
-        .filter(|&i| groups.iter().any(|g| g.metrics[i].is_some()))
-        .collect();
-    let mut header = vec!["capture".to_string()];
-    header.extend(keys.iter().cloned());
-    header.push("rows".into());
-    header.extend(cols.iter().map(|&i| METRICS[i].name.to_string()));
-    let body = groups
-        .iter()
-        .map(|g| {
-            let mut r = vec![g.capture.clone()];
-            r.extend(g.values.iter().cloned());
-            r.push(g.rows.to_string());
-            r.extend(cols.iter().map(|&i| match g.metrics[i] {
-                Some(v) => format!("{:.3} [{:.3}, {:.3}]", v.mean, v.lo, v.hi),
-                None => String::new(),
-            }));
-            r
-        })
-        .collect();
+        "ground_lost_before_share",
+    ]
+    .map(String::from)
+    .to_vec();
     page.sections.push(Section {
-        heading: "Table (mean [95 % interval])".into(),
+        heading: "Table (mean [95 % interval over seeds])".into(),
         paragraphs: vec![format!("All metrics: {AGGREGATE_CSV}.")],
         figures: Vec::new(),
-        table: Some((header, body)),
+        table: Some(table(&shown)),
     });
+    if let Some(first) = rows.first() {
+        let mut by_band = Vec::new();
+        for b in &first.metrics.bands {
+            let name = tables::band_name(b);
+            by_band.push(format!("objects_{name}"));
+            by_band.push(format!("detected_share_{name}"));
+        }
+        if !by_band.is_empty() {
+            page.sections.push(Section {
+                heading: "Objects by distance band (mean [95 % interval over seeds])".into(),
+                paragraphs: vec![
+                    "objects_<band>: objects in the band per frame; detected_share_<band>: \
+                     detected objects over objects in the band. Bands are [lo, hi) on the \
+                     horizontal distance of the object's clean centroid; the last is open."
+                        .into(),
+                ],
+                figures: Vec::new(),
+                table: Some(table(&by_band)),
+            });
+        }
+    }
     let path = dir.join(INDEX_HTML);
     crate::writers::write_file(&page, &path, protected)?;
     written.push(path);

@@ -341,6 +341,28 @@ fn retain_stages(table: &mut Table, keep: impl Fn(&str) -> bool) {
     }
 }
 
+/// Parses `--bands`: comma-separated, strictly ascending, finite edges of at least 0.
+pub fn parse_bands(text: &str) -> Result<Vec<f64>> {
+    let bad = |m: String| Error::Invalid(format!("--bands {text}: {m}"));
+    let edges: Vec<f64> = text
+        .split(',')
+        .map(|e| {
+            e.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite() && *v >= 0.0)
+                .ok_or_else(|| bad(format!("`{e}` is not a distance of 0 m or more")))
+        })
+        .collect::<Result<_>>()?;
+    if let Some(w) = edges.windows(2).find(|w| w[0] >= w[1]) {
+        return Err(bad(format!(
+            "edges must increase ({} is followed by {})",
+            w[0], w[1]
+        )));
+    }
+    Ok(edges)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

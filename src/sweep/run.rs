@@ -8,14 +8,14 @@
 //! that produced them; a later run loads a cell whose file records the same settings
 //! instead of computing it again. The tables are always rebuilt from the cell files.
 
-use super::metrics::{self, FrameMetrics, MatchRule};
+use super::metrics::{self, ClassMetrics, FrameMetrics, MatchRule, ReturnState, Tally};
 use super::plan::{BaseConfig, Cell, Vary};
 use crate::config::Config;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::hdl32e::frames::{DecoderOptions, FrameReader};
 use crate::pipeline::{FrameResult, Pipeline};
-use crate::synth::labels::{read_labels_file, LabelRow};
+use crate::synth::labels::{check_frame, read_labels_file, LabelRow};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap};
@@ -23,7 +23,7 @@ use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
 /// Version of the metric definitions; a change makes old cell files stale.
-pub const METRICS_VERSION: u32 = 1;
+pub const METRICS_VERSION: u32 = 2;
 
 /// One capture of a sweep.
 #[derive(Clone, Debug)]
@@ -51,6 +51,8 @@ pub struct SweepSettings {
     pub frames: RangeInclusive<u32>,
     /// Output folder.
     pub output: PathBuf,
+    /// Distance band edges in metres, ascending (see [`metrics::band_index`]).
+    pub bands: Vec<f64>,
 }
 
 /// Receives progress events (from several threads).
@@ -103,9 +105,14 @@ struct CellFile {
 
 /// The baseline of one frame, reduced to what the metrics need.
 struct Reference {
+    /// Cluster id per clean return (-1 for none).
     labels: Vec<i32>,
+    /// Object cluster id per clean return (-1 for none and for non-object clusters).
+    objects: Vec<i32>,
     kept: u64,
     clusters: u64,
+    object_clusters: u64,
+    /// Horizontal centroid distance of each object cluster.
     distance: BTreeMap<i32, f64>,
 }
 
@@ -113,6 +120,12 @@ struct Reference {
 struct Truth {
     ground: Vec<bool>,
     objects: Vec<i32>,
+}
+
+/// Ground-truth labels of a capture: rows per frame and object classes by id.
+struct Labels {
+    frames: HashMap<u32, Vec<LabelRow>>,
+    classes: BTreeMap<i32, String>,
 }
 
 /// Runs (or resumes) the sweep and returns every row; `protected` are input paths.
@@ -169,7 +182,10 @@ pub fn run(
         outcome.loaded += loaded;
         if !pending.is_empty() {
             let truth = match &capture.labels {
-                Some(p) => Some(group_labels(read_labels_file(p)?)),
+                Some(p) => Some(Labels {
+                    frames: group_labels(read_labels_file(p)?),
+                    classes: read_classes(p)?,
+                }),
                 None => None,
             };
             let chunk = (4 * rayon::current_num_threads()).max(8);
@@ -256,6 +272,7 @@ fn cell_settings(
         "capture_bytes": bytes,
         "labels": capture.labels.as_ref().and_then(|p| p.file_name()).map(|n| n.to_string_lossy()),
         "frames": [s.frames.start(), s.frames.end()],
+        "bands": s.bands,
         "decoder": {
             "calibration": s.decoder.calibration.source,
             "interpolate_azimuth": s.decoder.interpolate_azimuth,
@@ -283,22 +300,31 @@ fn group_labels(rows: Vec<LabelRow>) -> HashMap<u32, Vec<LabelRow>> {
     out
 }
 
+/// Object classes (`kind` by `id`) of `<name>.objects.json` beside `<name>.labels.csv.gz`;
+/// empty when there is no such file.
+fn read_classes(labels: &Path) -> Result<BTreeMap<i32, String>> {
+    let name = labels.file_name().unwrap_or_default().to_string_lossy();
+    let Some(stem) = name.split(".labels.").next().filter(|s| *s != name) else {
+        return Ok(BTreeMap::new());
+    };
+    let path = labels.with_file_name(format!("{stem}.objects.json"));
+    let Ok(text) = std::fs::read(&path) else {
+        return Ok(BTreeMap::new());
+    };
+    let value: serde_json::Value = serde_json::from_slice(&text)
+        .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+    let mut out = BTreeMap::new();
+    for o in value["objects"].as_array().map_or(&[][..], Vec::as_slice) {
+        if let (Some(id), Some(kind)) = (o["id"].as_i64(), o["kind"].as_str()) {
+            out.insert(id as i32, kind.to_string());
+        }
+    }
+    Ok(out)
+}
+
 fn truth_of(frame: &Frame, labels: &HashMap<u32, Vec<LabelRow>>, origin: &Path) -> Result<Truth> {
     let rows = labels.get(&frame.index).map_or(&[][..], Vec::as_slice);
-    let lines_up = rows.len() == frame.returns.len()
-        && rows
-            .iter()
-            .zip(&frame.returns)
-            .all(|(l, r)| (l.packet, l.block, l.laser) == (r.packet, r.block, r.laser));
-    if !lines_up {
-        return Err(Error::Invalid(format!(
-            "{}: the labels of frame {} ({} rows) do not line up with its {} decoded returns",
-            origin.display(),
-            frame.index,
-            rows.len(),
-            frame.returns.len()
-        )));
-    }
+    check_frame(rows, frame, origin)?;
     Ok(Truth {
         ground: rows.iter().map(|l| l.label == 0).collect(),
         objects: rows
@@ -318,13 +344,34 @@ fn labels_per_clean(r: &FrameResult) -> Vec<i32> {
 }
 
 fn reference_of(r: &FrameResult) -> Reference {
+    let labels = labels_per_clean(r);
+    // Cluster ids are 0..n in id order, so a dense lookup is enough.
+    let mut object = vec![
+        false;
+        r.clusters
+            .iter()
+            .map(|c| c.id + 1)
+            .max()
+            .unwrap_or(0)
+            .max(0) as usize
+    ];
+    for c in r.clusters.iter().filter(|c| c.object && c.id >= 0) {
+        object[c.id as usize] = true;
+    }
+    let objects = labels
+        .iter()
+        .map(|&l| if l >= 0 && object[l as usize] { l } else { -1 })
+        .collect();
     Reference {
-        labels: labels_per_clean(r),
+        labels,
+        objects,
         kept: r.counts.kept,
         clusters: r.clusters.len() as u64,
+        object_clusters: r.counts.objects,
         distance: r
             .clusters
             .iter()
+            .filter(|c| c.object)
             .map(|c| (c.id, c.centroid[0].hypot(c.centroid[1])))
             .collect(),
     }
@@ -334,7 +381,9 @@ fn frame_metrics(
     r: &FrameResult,
     reference: &Reference,
     truth: Option<&Truth>,
+    classes: &BTreeMap<i32, String>,
     min_points: usize,
+    bands: &[f64],
 ) -> FrameMetrics {
     use crate::noise::Fate;
     let count = |f: Fate| r.noisy.fate.iter().filter(|&&x| x == f).count() as u64;
@@ -345,11 +394,56 @@ fn frame_metrics(
     );
     let noisy = labels_per_clean(r);
     let rule = MatchRule::default();
-    let m = metrics::match_objects(&reference.labels, &noisy, rule);
+    // IoU survival of the baseline's object clusters.
+    let m = metrics::match_objects(&reference.objects, &noisy, rule);
+    // Clutter: noisy object clusters that come from no baseline cluster at all.
+    let noisy_objects: Vec<i32> = {
+        let mut object = vec![
+            false;
+            r.clusters
+                .iter()
+                .map(|c| c.id + 1)
+                .max()
+                .unwrap_or(0)
+                .max(0) as usize
+        ];
+        for c in r.clusters.iter().filter(|c| c.object && c.id >= 0) {
+            object[c.id as usize] = true;
+        }
+        noisy
+            .iter()
+            .map(|&l| if l >= 0 && object[l as usize] { l } else { -1 })
+            .collect()
+    };
+    let clutter = metrics::match_objects(&reference.labels, &noisy_objects, rule);
     let farthest = |ids: &mut dyn Iterator<Item = i32>| {
         ids.filter_map(|id| reference.distance.get(&id).copied())
             .max_by(f64::total_cmp)
     };
+    // Per clean return: reached, method ground, noisy cluster, clean position.
+    let mut states: Vec<ReturnState> = r
+        .noisy
+        .clean
+        .iter()
+        .zip(&noisy)
+        .map(|(c, &n)| ReturnState {
+            object: -1,
+            reached: false,
+            ground: false,
+            cluster: n,
+            xy: [c.x, c.y],
+        })
+        .collect();
+    for (&k, &g) in r.kept.iter().zip(&r.ground) {
+        states[k as usize].reached = true;
+        states[k as usize].ground = g;
+    }
+    let object_ids = truth.map_or(&reference.objects, |t| &t.objects);
+    for (s, &o) in states.iter_mut().zip(object_ids) {
+        s.object = o;
+    }
+    let results = metrics::object_outcomes(&states, min_points);
+    let whole = Tally::of(&results);
     let mut out = FrameMetrics {
         frame: r.noisy.index,
         returns: r.noisy.len() as u64,
@@ -362,26 +456,48 @@ fn frame_metrics(
         range_change_rms_m: change.rms,
         range_change_p95_m: change.p95_abs,
         clusters: r.clusters.len() as u64,
+        object_clusters: r.counts.objects,
         baseline_clusters: reference.clusters,
+        baseline_object_clusters: reference.object_clusters,
         matched: m.matched() as u64,
         object_survival: m.survival(),
-        split: m.split as u64,
-        merged: m.merged as u64,
-        lost: m.lost as u64,
-        false_clusters: m.false_clusters as u64,
+        false_clusters: clutter.false_clusters as u64,
         farthest_matched_m: farthest(&mut m.pairs.iter().map(|p| p.0)),
         baseline_farthest_m: farthest(&mut reference.distance.keys().copied()),
+        labelled: truth.is_some(),
+        objects: whole.objects,
+        detected: whole.detected,
+        retained: whole.retained,
+        split: whole.split,
+        merged: whole.merged,
+        merged_into_ground: whole.merged_into_ground,
+        lost: whole.lost,
+        bands: metrics::band_metrics(&results, bands),
         ..FrameMetrics::default()
     };
     if let Some(t) = truth {
-        let mut predicted = vec![false; r.noisy.len()];
-        for (&k, &g) in r.kept.iter().zip(&r.ground) {
-            predicted[k as usize] = g;
-        }
+        // Ground precision and recall over the returns that reach ground removal; the
+        // ground returns dropped before it are reported on their own.
+        let truth_reached: Vec<bool> = r.kept.iter().map(|&k| t.ground[k as usize]).collect();
         (out.ground_precision, out.ground_recall) =
-            metrics::precision_recall(&t.ground, &predicted);
-        (out.object_precision, out.object_recall) =
-            metrics::detection_scores(&t.objects, &noisy, min_points, rule);
+            metrics::precision_recall(&truth_reached, &r.ground);
+        let ground_total = t.ground.iter().filter(|&&g| g).count();
+        let ground_reached = truth_reached.iter().filter(|&&g| g).count();
+        out.ground_lost_before_share = (ground_total > 0)
+            .then(|| (ground_total - ground_reached) as f64 / ground_total as f64);
+        let mut by_class: BTreeMap<&str, Tally> = BTreeMap::new();
+        for o in &results {
+            if let Some(kind) = classes.get(&o.id) {
+                by_class.entry(kind).or_default().add(o);
+            }
+        }
+        out.classes = by_class
+            .into_iter()
+            .map(|(kind, counts)| ClassMetrics {
+                kind: kind.to_string(),
+                counts,
+            })
+            .collect();
     }
     out
 }
@@ -391,7 +507,7 @@ fn compute_chunk(
     s: &SweepSettings,
     capture: &CaptureInput,
     cells: &[Pending],
-    labels: Option<&HashMap<u32, Vec<LabelRow>>>,
+    labels: Option<&Labels>,
     protected: &[&Path],
     observer: &dyn Observer,
     first: &mut bool,
@@ -410,6 +526,8 @@ fn compute_chunk(
         };
         which.push(i);
     }
+    let empty = BTreeMap::new();
+    let classes = labels.map_or(&empty, |l| &l.classes);
     let mut reader = FrameReader::open(&capture.path, &s.decoder)?;
     let batch_size = (2 * rayon::current_num_threads()).max(4);
     let mut results: Vec<Vec<FrameMetrics>> = vec![Vec::new(); cells.len()];
@@ -424,7 +542,12 @@ fn compute_chunk(
             Some(l) => batch
                 .iter()
                 .map(|f| {
-                    truth_of(f, l, capture.labels.as_deref().unwrap_or(Path::new(""))).map(Some)
+                    truth_of(
+                        f,
+                        &l.frames,
+                        capture.labels.as_deref().unwrap_or(Path::new("")),
+                    )
+                    .map(Some)
                 })
                 .collect::<Result<_>>()?,
             None => batch.iter().map(|_| None).collect(),
@@ -444,7 +567,14 @@ fn compute_chunk(
                 let (c, f) = (i / batch.len(), i % batch.len());
                 let r = cells[c].pipeline.process(batch[f].clone())?;
                 let reference = &refs[which[c] * batch.len() + f];
-                let m = frame_metrics(&r, reference, truths[f].as_ref(), cells[c].min_points);
+                let m = frame_metrics(
+                    &r,
+                    reference,
+                    truths[f].as_ref(),
+                    classes,
+                    cells[c].min_points,
+                    &s.bands,
+                );
                 observer.frame_done();
                 Ok(m)
             })

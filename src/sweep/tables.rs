@@ -1,111 +1,236 @@
 //! Tables of a sweep: the tidy CSV and JSON (one row per capture, frame, values, seed)
-//! and the aggregate CSV (mean and 95 % interval over seeds and frames).
+//! and the aggregate CSV (mean and 95 % interval over seeds).
 //!
-//! The interval is the Student-t 95 % confidence interval of the mean,
-//! `mean +- t(0.975, n-1) * sd / sqrt(n)` over the rows that have the metric; with a
-//! single row both bounds equal the mean.
+//! Frames of one capture are not independent samples (the same scene, the same objects,
+//! correlated noise), so the aggregate first reduces each seed to one value: the mean of
+//! the metric over the seed's frames (for shares such as the detected share, the pooled
+//! ratio: detected objects over objects, summed over the frames). The interval is then the
+//! Student-t 95 % confidence interval of the mean over seeds,
+//! `mean +- t(0.975, n-1) * sd / sqrt(n)` with `n` the number of seeds that have the
+//! metric and the exact t quantile. With a single seed there is no interval: the bounds
+//! are left empty.
 
-use super::metrics::FrameMetrics;
+use super::metrics::{BandMetrics, FrameMetrics};
 use super::run::Row;
 use serde::Serialize;
+
+/// How a column is read from a row.
+pub type Getter = Box<dyn Fn(&FrameMetrics) -> Option<f64> + Send + Sync>;
 
 /// One metric column: name, axis label with unit, and how to read it from a row.
 pub struct Metric {
     /// Column name (snake_case).
-    pub name: &'static str,
+    pub name: String,
     /// Axis label with its unit.
-    pub label: &'static str,
+    pub label: String,
     /// The value of a row, if defined.
-    pub get: fn(&FrameMetrics) -> Option<f64>,
+    pub get: Getter,
+    /// For shares: the row's weight (its denominator); a seed's value is then the
+    /// weighted mean of its frames, i.e. the pooled ratio. `None`: plain mean.
+    pub weight: Option<Getter>,
     /// True when it needs ground-truth labels.
     pub needs_labels: bool,
 }
 
-macro_rules! metric {
-    ($name:ident, $label:expr, int) => {
-        Metric {
-            name: stringify!($name),
-            label: $label,
-            get: |m| Some(m.$name as f64),
-            needs_labels: false,
-        }
-    };
-    ($name:ident, $label:expr, float) => {
-        Metric {
-            name: stringify!($name),
-            label: $label,
-            get: |m| Some(m.$name),
-            needs_labels: false,
-        }
-    };
-    ($name:ident, $label:expr, opt) => {
-        Metric {
-            name: stringify!($name),
-            label: $label,
-            get: |m| m.$name,
-            needs_labels: false,
-        }
-    };
-    ($name:ident, $label:expr, truth) => {
-        Metric {
-            name: stringify!($name),
-            label: $label,
-            get: |m| m.$name,
-            needs_labels: true,
-        }
-    };
+fn plain(name: &str, label: &str, get: fn(&FrameMetrics) -> Option<f64>) -> Metric {
+    Metric {
+        name: name.into(),
+        label: label.into(),
+        get: Box::new(get),
+        weight: None,
+        needs_labels: false,
+    }
 }
 
-/// Every aggregated metric, in column order.
-pub const METRICS: &[Metric] = &[
-    metric!(
-        object_survival,
-        "object survival (share of clean clusters matched)",
-        opt
-    ),
-    metric!(kept, "returns kept (count)", int),
-    metric!(occluded, "returns dropped by occlusion (count)", int),
-    metric!(
-        below_power,
-        "returns dropped below power threshold (count)",
-        int
-    ),
-    metric!(
-        below_min_range,
-        "returns dropped below minimum range (count)",
-        int
-    ),
-    metric!(
-        range_change_mean_m,
-        "mean range change of kept returns (m)",
-        float
-    ),
-    metric!(
-        range_change_rms_m,
-        "RMS range change of kept returns (m)",
-        float
-    ),
-    metric!(
-        range_change_p95_m,
-        "95th percentile |range change| (m)",
-        float
-    ),
-    metric!(clusters, "clusters (count)", int),
-    metric!(matched, "clean clusters matched (count)", int),
-    metric!(split, "clean clusters split (count)", int),
-    metric!(merged, "merged clusters (count)", int),
-    metric!(lost, "clean clusters lost (count)", int),
-    metric!(false_clusters, "false clusters (count)", int),
-    metric!(farthest_matched_m, "farthest matched object (m)", opt),
-    metric!(ground_precision, "ground precision (share)", truth),
-    metric!(ground_recall, "ground recall (share)", truth),
-    metric!(
-        object_precision,
-        "object detection precision (share)",
-        truth
-    ),
-    metric!(object_recall, "object detection recall (share)", truth),
-];
+/// A share `part / whole` of a count group, pooled over frames.
+fn share(
+    name: String,
+    label: String,
+    part: impl Fn(&FrameMetrics) -> Option<u64> + Send + Sync + 'static,
+    whole: impl Fn(&FrameMetrics) -> Option<u64> + Send + Sync + 'static,
+) -> Metric {
+    let whole = std::sync::Arc::new(whole);
+    let w2 = whole.clone();
+    Metric {
+        name,
+        label,
+        get: Box::new(move |m| {
+            let w = whole(m)?;
+            (w > 0).then(|| part(m).unwrap_or(0) as f64 / w as f64)
+        }),
+        weight: Some(Box::new(move |m| w2(m).map(|w| w as f64))),
+        needs_labels: false,
+    }
+}
+
+/// Short name of a band for column names: `5_10m`, `40m_plus`.
+pub fn band_name(b: &BandMetrics) -> String {
+    match b.hi_m {
+        Some(hi) => format!("{}_{}m", b.lo_m, hi),
+        None => format!("{}m_plus", b.lo_m),
+    }
+}
+
+/// Human name of a band: `[5, 10) m`, `>= 40 m`.
+pub fn band_title(b: &BandMetrics) -> String {
+    match b.hi_m {
+        Some(hi) => format!("[{}, {}) m", b.lo_m, hi),
+        None => format!(">= {} m", b.lo_m),
+    }
+}
+
+/// Every aggregated metric of `rows`, in column order: the fixed ones, then per distance
+/// band (layout of the first row) and per object class (every class seen).
+pub fn metrics(rows: &[Row]) -> Vec<Metric> {
+    macro_rules! int {
+        ($f:ident, $l:expr) => {
+            plain(stringify!($f), $l, |m| Some(m.$f as f64))
+        };
+    }
+    macro_rules! opt {
+        ($f:ident, $l:expr) => {
+            plain(stringify!($f), $l, |m| m.$f)
+        };
+    }
+    macro_rules! object_share {
+        ($f:ident, $what:expr) => {
+            share(
+                concat!(stringify!($f), "_share").into(),
+                format!("objects {} (share)", $what),
+                |m| Some(m.$f),
+                |m| Some(m.objects),
+            )
+        };
+    }
+    let mut out = vec![
+        object_share!(detected, "detected"),
+        object_share!(retained, "retained"),
+        object_share!(split, "split"),
+        object_share!(merged, "merged"),
+        object_share!(merged_into_ground, "merged into ground"),
+        object_share!(lost, "lost"),
+        int!(objects, "objects (count)"),
+        opt!(
+            object_survival,
+            "object survival (share of clean object clusters matched, IoU >= 0.5)"
+        ),
+        int!(kept, "returns kept (count)"),
+        int!(occluded, "returns dropped by occlusion (count)"),
+        int!(below_power, "returns dropped below power threshold (count)"),
+        int!(
+            below_min_range,
+            "returns dropped below minimum range (count)"
+        ),
+        plain(
+            "range_change_mean_m",
+            "mean range change of kept returns (m)",
+            |m| Some(m.range_change_mean_m),
+        ),
+        plain(
+            "range_change_rms_m",
+            "RMS range change of kept returns (m)",
+            |m| Some(m.range_change_rms_m),
+        ),
+        plain(
+            "range_change_p95_m",
+            "95th percentile |range change| (m)",
+            |m| Some(m.range_change_p95_m),
+        ),
+        int!(clusters, "clusters (count)"),
+        int!(object_clusters, "object clusters (count)"),
+        int!(matched, "clean object clusters matched (count)"),
+        int!(false_clusters, "false object clusters (count)"),
+        opt!(farthest_matched_m, "farthest matched object cluster (m)"),
+    ];
+    for (name, label, get) in [
+        (
+            "ground_precision",
+            "ground precision over reaching returns (share)",
+            (|m: &FrameMetrics| m.ground_precision) as fn(&FrameMetrics) -> Option<f64>,
+        ),
+        (
+            "ground_recall",
+            "ground recall over reaching returns (share)",
+            |m: &FrameMetrics| m.ground_recall,
+        ),
+        (
+            "ground_lost_before_share",
+            "ground returns dropped before ground removal (share)",
+            |m: &FrameMetrics| m.ground_lost_before_share,
+        ),
+    ] {
+        let mut m = plain(name, label, get);
+        m.needs_labels = true;
+        out.push(m);
+    }
+    if let Some(first) = rows.first() {
+        for (k, b) in first.metrics.bands.iter().enumerate() {
+            let (name, title) = (band_name(b), band_title(b));
+            out.push(plain(
+                &format!("objects_{name}"),
+                &format!("objects at {title} (count)"),
+                |_| None,
+            ));
+            let last = out.len() - 1;
+            out[last].get = Box::new(move |m| m.bands.get(k).map(|b| b.objects as f64));
+            for (what, part) in [
+                (
+                    "detected",
+                    (|b: &BandMetrics| b.detected) as fn(&BandMetrics) -> u64,
+                ),
+                ("retained", |b: &BandMetrics| b.retained),
+                ("lost", |b: &BandMetrics| b.lost),
+            ] {
+                out.push(share(
+                    format!("{what}_share_{name}"),
+                    format!("objects {what} at {title} (share)"),
+                    move |m| m.bands.get(k).map(part),
+                    move |m| m.bands.get(k).map(|b| b.objects),
+                ));
+            }
+        }
+    }
+    let mut kinds: Vec<&str> = rows
+        .iter()
+        .flat_map(|r| r.metrics.classes.iter().map(|c| c.kind.as_str()))
+        .collect();
+    kinds.sort_unstable();
+    kinds.dedup();
+    for kind in kinds {
+        let (k1, k2) = (kind.to_string(), kind.to_string());
+        let mut m = share(
+            format!("detected_share_{}", safe_name(kind)),
+            format!("{kind} objects detected (share)"),
+            move |m| {
+                m.classes
+                    .iter()
+                    .find(|c| c.kind == k1)
+                    .map(|c| c.counts.detected)
+            },
+            move |m| {
+                m.classes
+                    .iter()
+                    .find(|c| c.kind == k2)
+                    .map(|c| c.counts.objects)
+            },
+        );
+        m.needs_labels = true;
+        out.push(m);
+    }
+    out
+}
+
+fn safe_name(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() {
+                c.to_ascii_lowercase()
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
 
 fn fmt_opt(v: Option<f64>) -> String {
     v.map_or_else(String::new, |x| x.to_string())
@@ -133,25 +258,42 @@ pub const FRAME_COLUMNS: &[&str] = &[
     "range_change_rms_m",
     "range_change_p95_m",
     "clusters",
+    "object_clusters",
     "baseline_clusters",
+    "baseline_object_clusters",
     "matched",
     "object_survival",
-    "split",
-    "merged",
-    "lost",
     "false_clusters",
     "farthest_matched_m",
     "baseline_farthest_m",
+    "labelled",
+    "objects",
+    "detected",
+    "retained",
+    "split",
+    "merged",
+    "merged_into_ground",
+    "lost",
     "ground_precision",
     "ground_recall",
-    "object_precision",
-    "object_recall",
+    "ground_lost_before_share",
+];
+
+/// Per-band columns of the tidy table, each followed by `_<band>` (see [`band_name`]).
+pub const BAND_COLUMNS: &[&str] = &[
+    "objects",
+    "detected",
+    "retained",
+    "split",
+    "merged",
+    "merged_into_ground",
+    "lost",
 ];
 
 fn frame_values(m: &FrameMetrics) -> Vec<String> {
     let i = |x: u64| x.to_string();
     let f = |x: f64| x.to_string();
-    vec![
+    let mut v = vec![
         i(m.returns),
         i(m.kept),
         i(m.baseline_kept),
@@ -162,28 +304,56 @@ fn frame_values(m: &FrameMetrics) -> Vec<String> {
         f(m.range_change_rms_m),
         f(m.range_change_p95_m),
         i(m.clusters),
+        i(m.object_clusters),
         i(m.baseline_clusters),
+        i(m.baseline_object_clusters),
         i(m.matched),
         fmt_opt(m.object_survival),
-        i(m.split),
-        i(m.merged),
-        i(m.lost),
         i(m.false_clusters),
         fmt_opt(m.farthest_matched_m),
         fmt_opt(m.baseline_farthest_m),
+        m.labelled.to_string(),
+        i(m.objects),
+        i(m.detected),
+        i(m.retained),
+        i(m.split),
+        i(m.merged),
+        i(m.merged_into_ground),
+        i(m.lost),
         fmt_opt(m.ground_precision),
         fmt_opt(m.ground_recall),
-        fmt_opt(m.object_precision),
-        fmt_opt(m.object_recall),
-    ]
+        fmt_opt(m.ground_lost_before_share),
+    ];
+    for b in &m.bands {
+        v.extend(
+            [
+                b.objects,
+                b.detected,
+                b.retained,
+                b.split,
+                b.merged,
+                b.merged_into_ground,
+                b.lost,
+            ]
+            .map(i),
+        );
+    }
+    v
 }
 
-/// The tidy CSV: capture, frame, one column per varied key, seed, then the metrics.
+/// The tidy CSV: capture, frame, one column per varied key, seed, then the metrics and
+/// the per-band counts (`objects_0_5m`, `detected_0_5m`, ...; band layout of the first row).
 pub fn tidy_csv(keys: &[String], rows: &[Row]) -> Vec<u8> {
     let mut header = vec!["capture".to_string(), "frame".to_string()];
     header.extend(keys.iter().cloned());
     header.push("seed".into());
     header.extend(FRAME_COLUMNS.iter().map(|s| s.to_string()));
+    if let Some(first) = rows.first() {
+        for b in &first.metrics.bands {
+            let name = band_name(b);
+            header.extend(BAND_COLUMNS.iter().map(|c| format!("{c}_{name}")));
+        }
+    }
     let body = rows
         .iter()
         .map(|r| {
@@ -233,53 +403,69 @@ pub fn tidy_json(keys: &[String], rows: &[Row]) -> serde_json::Value {
     })
 }
 
-/// Mean and 95 % interval of one metric over a group.
+/// Mean and 95 % interval of one metric over a group's seeds.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Interval {
-    /// Rows with a value.
+    /// Seeds with a value.
     pub n: usize,
-    /// Mean.
+    /// Mean over seeds.
     pub mean: f64,
-    /// Lower bound.
-    pub lo: f64,
-    /// Upper bound.
-    pub hi: f64,
+    /// Lower bound; `None` with a single seed (no interval).
+    pub lo: Option<f64>,
+    /// Upper bound; `None` with a single seed.
+    pub hi: Option<f64>,
 }
 
-/// Student t quantile 0.975 for `df` degrees of freedom (1.96 past 30).
-fn t975(df: usize) -> f64 {
-    const T: [f64; 30] = [
-        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160,
-        2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056,
-        2.052, 2.048, 2.045, 2.042,
-    ];
-    match df {
-        0 => 0.0,
-        d if d <= 30 => T[d - 1],
-        d if d <= 60 => 2.0,
-        _ => 1.96,
-    }
+/// Student t quantile `p` for `df` degrees of freedom (exact, via `statrs`).
+pub fn t_quantile(p: f64, df: usize) -> Option<f64> {
+    use statrs::distribution::{ContinuousCDF, StudentsT};
+    let t = StudentsT::new(0.0, 1.0, df as f64).ok()?;
+    Some(t.inverse_cdf(p))
 }
 
-/// Mean and t interval of `values`; `None` when empty.
+/// Mean and t interval of `values` (one per seed); `None` when empty, no bounds for one.
 pub fn interval(values: &[f64]) -> Option<Interval> {
     let n = values.len();
     if n == 0 {
         return None;
     }
     let mean = values.iter().sum::<f64>() / n as f64;
-    let half = if n > 1 {
-        let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
-        t975(n - 1) * (var / n as f64).sqrt()
-    } else {
-        0.0
-    };
+    let half = (n > 1)
+        .then(|| {
+            let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+            t_quantile(0.975, n - 1).map(|t| t * (var / n as f64).sqrt())
+        })
+        .flatten();
     Some(Interval {
         n,
         mean,
-        lo: mean - half,
-        hi: mean + half,
+        lo: half.map(|h| mean - h),
+        hi: half.map(|h| mean + h),
     })
+}
+
+/// One value per seed: the metric's mean over the seed's frames (weighted for shares).
+pub fn per_seed(metric: &Metric, rows: &[&Row]) -> Vec<f64> {
+    let mut seeds: Vec<u64> = rows.iter().map(|r| r.seed).collect();
+    seeds.sort_unstable();
+    seeds.dedup();
+    seeds
+        .into_iter()
+        .filter_map(|seed| {
+            let (mut sum, mut weight) = (0.0, 0.0);
+            for r in rows.iter().filter(|r| r.seed == seed) {
+                let Some(v) = (metric.get)(&r.metrics) else {
+                    continue;
+                };
+                let w = metric.weight.as_ref().map_or(Some(1.0), |w| w(&r.metrics));
+                if let Some(w) = w.filter(|&w| w > 0.0) {
+                    sum += v * w;
+                    weight += w;
+                }
+            }
+            (weight > 0.0).then(|| sum / weight)
+        })
+        .collect()
 }
 
 /// One group of the aggregate table: a capture and a combination of varied values.
@@ -291,48 +477,54 @@ pub struct Group {
     pub values: Vec<String>,
     /// Rows (seeds x frames) in the group.
     pub rows: usize,
-    /// Interval of each metric of [`METRICS`], in order.
+    /// Seeds in the group.
+    pub seeds: usize,
+    /// Interval of each metric of `metrics`, in order.
     pub metrics: Vec<Option<Interval>>,
 }
 
-/// Aggregates rows over seeds and frames, keeping the rows' order of first appearance.
-pub fn aggregate(rows: &[Row]) -> Vec<Group> {
+/// Aggregates rows per seed, then over seeds, keeping the rows' order of first appearance.
+pub fn aggregate(rows: &[Row], metrics: &[Metric]) -> Vec<Group> {
     let mut order: Vec<(String, Vec<String>)> = Vec::new();
-    let mut members: Vec<Vec<&FrameMetrics>> = Vec::new();
+    let mut members: Vec<Vec<&Row>> = Vec::new();
     for r in rows {
         let key = (r.capture.clone(), r.values.clone());
         match order.iter().position(|k| *k == key) {
-            Some(i) => members[i].push(&r.metrics),
+            Some(i) => members[i].push(r),
             None => {
                 order.push(key);
-                members.push(vec![&r.metrics]);
+                members.push(vec![r]);
             }
         }
     }
     order
         .into_iter()
         .zip(members)
-        .map(|((capture, values), ms)| Group {
-            capture,
-            values,
-            rows: ms.len(),
-            metrics: METRICS
-                .iter()
-                .map(|m| {
-                    let v: Vec<f64> = ms.iter().filter_map(|x| (m.get)(x)).collect();
-                    interval(&v)
-                })
-                .collect(),
+        .map(|((capture, values), rs)| {
+            let mut seeds: Vec<u64> = rs.iter().map(|r| r.seed).collect();
+            seeds.sort_unstable();
+            seeds.dedup();
+            Group {
+                capture,
+                values,
+                rows: rs.len(),
+                seeds: seeds.len(),
+                metrics: metrics
+                    .iter()
+                    .map(|m| interval(&per_seed(m, &rs)))
+                    .collect(),
+            }
         })
         .collect()
 }
 
-/// The aggregate CSV: capture, varied keys, rows, then `<metric>_mean,_lo,_hi` each.
-pub fn aggregate_csv(keys: &[String], groups: &[Group]) -> Vec<u8> {
+/// The aggregate CSV: capture, varied keys, rows, seeds, then `<metric>_mean,_lo,_hi` each.
+pub fn aggregate_csv(keys: &[String], groups: &[Group], metrics: &[Metric]) -> Vec<u8> {
     let mut header = vec!["capture".to_string()];
     header.extend(keys.iter().cloned());
     header.push("rows".into());
-    for m in METRICS {
+    header.push("seeds".into());
+    for m in metrics {
         for s in ["mean", "lo", "hi"] {
             header.push(format!("{}_{s}", m.name));
         }
@@ -343,10 +535,11 @@ pub fn aggregate_csv(keys: &[String], groups: &[Group]) -> Vec<u8> {
             let mut v = vec![g.capture.clone()];
             v.extend(g.values.iter().cloned());
             v.push(g.rows.to_string());
+            v.push(g.seeds.to_string());
             for i in &g.metrics {
                 v.push(fmt_opt(i.map(|i| i.mean)));
-                v.push(fmt_opt(i.map(|i| i.lo)));
-                v.push(fmt_opt(i.map(|i| i.hi)));
+                v.push(fmt_opt(i.and_then(|i| i.lo)));
+                v.push(fmt_opt(i.and_then(|i| i.hi)));
             }
             v
         })
@@ -362,8 +555,24 @@ mod tests {
     fn interval_of_known_values() {
         let i = interval(&[1.0, 2.0, 3.0]).unwrap();
         assert_eq!(i.mean, 2.0);
-        // sd = 1, n = 3, t(2) = 4.303.
-        assert!((i.hi - (2.0 + 4.303 / 3f64.sqrt())).abs() < 1e-9);
+        // sd = 1, n = 3, t(0.975, 2) = 4.302653.
+        assert!((i.hi.unwrap() - (2.0 + 4.302653 / 3f64.sqrt())).abs() < 1e-6);
         assert!(interval(&[]).is_none());
+        let one = interval(&[0.7]).unwrap();
+        assert_eq!((one.mean, one.lo, one.hi), (0.7, None, None));
+    }
+
+    #[test]
+    fn t_quantiles_are_exact() {
+        for (df, t) in [
+            (1, 12.706205),
+            (2, 4.302653),
+            (9, 2.262157),
+            (40, 2.021075),
+            (100, 1.983972),
+        ] {
+            let q = t_quantile(0.975, df).unwrap();
+            assert!((q - t).abs() < 1e-5, "df {df}: {q} vs {t}");
+        }
     }
 }

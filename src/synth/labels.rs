@@ -1,19 +1,29 @@
 //! Ground-truth labels of a synthesized capture.
 //!
 //! Format (`<name>.labels.csv.gz`): a gzip-compressed CSV file, UTF-8, `\n` line
-//! ends, with the header line `frame,packet,block,laser,label` and one row per
-//! emitted return (raw distance != 0) in capture order:
+//! ends, with the header line `frame,firing,laser,label` and one row per emitted
+//! return (raw distance != 0) in capture order:
 //! - `frame`: zero-based rotation index (rotation k starts at the block whose
 //!   azimuth wraps to 0 for the k-th time; the capture starts at azimuth 0.00).
 //!   The frame is decided per block by the block azimuth, so a block just before
 //!   the wrap belongs wholly to frame k even where its last lasers' interpolated
 //!   azimuths pass 360°;
-//! - `packet`: zero-based index of the record in the pcap, position packets counted
-//!   (the decoder's `Return::packet`);
-//! - `block`: 0..11 within the packet; `laser`: laser id 0..31;
+//! - `firing`: zero-based index of the firing (data block) within its frame, counting
+//!   the frame's firings that emitted at least one return, in capture order. A firing
+//!   that emitted nothing has no row and takes no index, so the key depends only on
+//!   the frame's returns, not on how the capture file numbers its records: a label
+//!   file survives re-encoding the capture (other packet sizes, position packets
+//!   added or removed);
+//! - `laser`: laser id 0..31 (firing order within the block);
 //! - `label`: 0 for the ground, k for object id k (see `<name>.objects.json`).
 //!
-//! The reader also accepts the same CSV uncompressed.
+//! `(frame, firing, laser)` identifies a return inside its capture. The synthesizer
+//! writes single-return (strongest) captures; the format has no return-kind column,
+//! so labels of dual-return captures are not defined.
+//!
+//! The reader also accepts the same CSV uncompressed, and the previous format
+//! (`frame,packet,block,laser,label`, keyed by capture record and block), which it
+//! converts to firings with [`Firings`].
 
 use crate::error::{Error, Result};
 use flate2::read::MultiGzDecoder;
@@ -23,7 +33,9 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::path::Path;
 
 /// Header line of a labels file.
-pub const HEADER: &str = "frame,packet,block,laser,label";
+pub const HEADER: &str = "frame,firing,laser,label";
+/// Header line of the previous format (record and block instead of firing), still read.
+pub const OLD_HEADER: &str = "frame,packet,block,laser,label";
 /// File name extension of a labels file (after `<name>.labels.`).
 pub const EXTENSION: &str = "csv.gz";
 
@@ -32,20 +44,45 @@ pub const EXTENSION: &str = "csv.gz";
 pub struct LabelRow {
     /// Zero-based rotation index.
     pub frame: u32,
-    /// Zero-based capture record index (position packets counted).
-    pub packet: u32,
-    /// Block within the packet, 0..11.
-    pub block: u8,
+    /// Zero-based index within the frame of the firing, among firings with a return.
+    pub firing: u32,
     /// Laser id, 0..31.
     pub laser: u8,
     /// 0 = ground, k = object id.
     pub label: u16,
 }
 
+/// Numbers firings within frames from returns given in capture order.
+///
+/// A firing is one data block (`packet`, `block`); the first firing seen in a frame is 0,
+/// and the index grows by one each time the block changes within the frame.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Firings {
+    last: Option<(u32, u32, u8)>,
+    next: u32,
+}
+
+impl Firings {
+    /// The firing index of a return of `frame` carried by record `packet`, block `block`.
+    pub fn firing(&mut self, frame: u32, packet: u32, block: u8) -> u32 {
+        match self.last {
+            Some((f, p, b)) if f == frame => {
+                if (p, b) != (packet, block) {
+                    self.next += 1;
+                }
+            }
+            _ => self.next = 0,
+        }
+        self.last = Some((frame, packet, block));
+        self.next
+    }
+}
+
 /// Streaming writer of a gzip-compressed labels file.
 pub struct LabelWriter<W: Write> {
     out: GzEncoder<W>,
     line: String,
+    firings: Firings,
 }
 
 impl<W: Write> LabelWriter<W> {
@@ -57,6 +94,7 @@ impl<W: Write> LabelWriter<W> {
         Ok(LabelWriter {
             out,
             line: String::with_capacity(32),
+            firings: Firings::default(),
         })
     }
 
@@ -67,10 +105,28 @@ impl<W: Write> LabelWriter<W> {
         // Writing to a String cannot fail.
         let _ = writeln!(
             self.line,
-            "{},{},{},{},{}",
-            row.frame, row.packet, row.block, row.laser, row.label
+            "{},{},{},{}",
+            row.frame, row.firing, row.laser, row.label
         );
         self.out.write_all(self.line.as_bytes())
+    }
+
+    /// Appends the row of a return given by its capture position (returns in capture order).
+    pub fn write_return(
+        &mut self,
+        frame: u32,
+        packet: u32,
+        block: u8,
+        laser: u8,
+        label: u16,
+    ) -> std::io::Result<()> {
+        let firing = self.firings.firing(frame, packet, block);
+        self.write(&LabelRow {
+            frame,
+            firing,
+            laser,
+            label,
+        })
     }
 
     /// Finishes the gzip stream and returns the underlying writer.
@@ -95,40 +151,59 @@ pub fn read_labels<R: Read>(input: R, origin: &Path) -> Result<Vec<LabelRow>> {
         Error::Invalid(format!("{}: line {line}: {message}", origin.display()))
     };
     let mut rows = Vec::new();
-    let mut saw_header = false;
+    let mut old: Option<bool> = None;
+    let mut firings = Firings::default();
     for (i, line) in reader.lines().enumerate() {
         let line = line.map_err(|e| Error::io(origin, e))?;
         let n = i + 1;
         if n == 1 {
-            if line.trim_end() != HEADER {
-                return Err(bad(n, format!("expected the header `{HEADER}`")));
-            }
-            saw_header = true;
+            old = match line.trim_end() {
+                HEADER => Some(false),
+                OLD_HEADER => Some(true),
+                _ => return Err(bad(n, format!("expected the header `{HEADER}`"))),
+            };
             continue;
         }
         if line.is_empty() {
             continue;
         }
         let fields: Vec<&str> = line.trim_end().split(',').collect();
-        if fields.len() != 5 {
-            return Err(bad(n, format!("expected 5 fields, found {}", fields.len())));
+        let width = if old == Some(true) { 5 } else { 4 };
+        if fields.len() != width {
+            return Err(bad(
+                n,
+                format!("expected {width} fields, found {}", fields.len()),
+            ));
         }
         fn num<T: std::str::FromStr>(s: &str) -> Option<T> {
             s.parse().ok()
         }
-        let row = (|| {
-            Some(LabelRow {
-                frame: num(fields[0])?,
-                packet: num(fields[1])?,
-                block: num(fields[2]).filter(|&b: &u8| b < 12)?,
-                laser: num(fields[3]).filter(|&l: &u8| l < 32)?,
-                label: num(fields[4])?,
-            })
-        })()
+        let row = if old == Some(true) {
+            (|| {
+                let frame = num(fields[0])?;
+                let packet = num(fields[1])?;
+                let block = num(fields[2]).filter(|&b: &u8| b < 12)?;
+                Some(LabelRow {
+                    frame,
+                    firing: firings.firing(frame, packet, block),
+                    laser: num(fields[3]).filter(|&l: &u8| l < 32)?,
+                    label: num(fields[4])?,
+                })
+            })()
+        } else {
+            (|| {
+                Some(LabelRow {
+                    frame: num(fields[0])?,
+                    firing: num(fields[1])?,
+                    laser: num(fields[2]).filter(|&l: &u8| l < 32)?,
+                    label: num(fields[3])?,
+                })
+            })()
+        }
         .ok_or_else(|| bad(n, format!("invalid row `{line}`")))?;
         rows.push(row);
     }
-    if !saw_header {
+    if old.is_none() {
         return Err(bad(
             1,
             format!("empty file: expected the header `{HEADER}`"),
@@ -143,6 +218,51 @@ pub fn read_labels_file(path: &Path) -> Result<Vec<LabelRow>> {
     read_labels(f, path)
 }
 
+/// The `(firing, laser)` key of every return of a decoded frame, in order.
+pub fn frame_keys(frame: &crate::frame::Frame) -> Vec<(u32, u8)> {
+    let mut firings = Firings::default();
+    frame
+        .returns
+        .iter()
+        .map(|r| (firings.firing(frame.index, r.packet, r.block), r.laser))
+        .collect()
+}
+
+/// Checks that `rows` (the labels of one frame) line up with the frame's decoded returns,
+/// and says where they first differ otherwise; `origin` names the labels file.
+pub fn check_frame(rows: &[LabelRow], frame: &crate::frame::Frame, origin: &Path) -> Result<()> {
+    let keys = frame_keys(frame);
+    let head = || {
+        format!(
+            "{}: the labels of frame {} do not line up with the decoded capture",
+            origin.display(),
+            frame.index
+        )
+    };
+    for (k, (row, key)) in rows.iter().zip(&keys).enumerate() {
+        if (row.firing, row.laser) != *key {
+            return Err(Error::Invalid(format!(
+                "{}: return {k} of the frame: expected firing {} laser {} (decoded), found firing {} laser {} (labels)",
+                head(),
+                key.0,
+                key.1,
+                row.firing,
+                row.laser
+            )));
+        }
+    }
+    if rows.len() != keys.len() {
+        return Err(Error::Invalid(format!(
+            "{}: {} label rows but {} decoded returns (the first {} agree)",
+            head(),
+            rows.len(),
+            keys.len(),
+            rows.len().min(keys.len())
+        )));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -150,18 +270,29 @@ mod tests {
     #[test]
     fn rejects_bad_rows() {
         let p = Path::new("x.csv");
-        assert!(read_labels(&b"frame,packet,block,laser,label\n0,1,12,0,0\n"[..], p).is_err());
+        assert!(read_labels(&b"frame,firing,laser,label\n0,1,32,0\n"[..], p).is_err());
         assert!(read_labels(&b"nope\n"[..], p).is_err());
-        let rows = read_labels(&b"frame,packet,block,laser,label\n0,1,11,31,2\n"[..], p).unwrap();
+        let rows = read_labels(&b"frame,firing,laser,label\n0,1,31,2\n"[..], p).unwrap();
         assert_eq!(
             rows,
             vec![LabelRow {
                 frame: 0,
-                packet: 1,
-                block: 11,
+                firing: 1,
                 laser: 31,
                 label: 2
             }]
+        );
+    }
+
+    #[test]
+    fn old_format_is_converted_to_firings() {
+        let p = Path::new("x.csv");
+        let text = b"frame,packet,block,laser,label\n0,3,4,0,0\n0,3,4,1,1\n0,3,6,0,0\n0,5,0,2,2\n1,5,1,0,0\n";
+        let rows = read_labels(&text[..], p).unwrap();
+        let keys: Vec<(u32, u32, u8)> = rows.iter().map(|r| (r.frame, r.firing, r.laser)).collect();
+        assert_eq!(
+            keys,
+            vec![(0, 0, 0), (0, 0, 1), (0, 1, 0), (0, 2, 2), (1, 0, 0)]
         );
     }
 }

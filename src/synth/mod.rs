@@ -78,17 +78,18 @@ pub struct CastReturn {
     pub label: u16,
 }
 
-impl CastReturn {
-    /// The labels-file row of this return.
-    pub fn label_row(&self) -> labels::LabelRow {
-        labels::LabelRow {
-            frame: self.frame,
-            packet: self.packet,
-            block: self.block,
-            laser: self.laser,
-            label: self.label,
-        }
-    }
+/// The labels-file rows of returns given in capture order (firings numbered per frame).
+pub fn label_rows<'a>(returns: impl IntoIterator<Item = &'a CastReturn>) -> Vec<labels::LabelRow> {
+    let mut firings = labels::Firings::default();
+    returns
+        .into_iter()
+        .map(|r| labels::LabelRow {
+            frame: r.frame,
+            firing: firings.firing(r.frame, r.packet, r.block),
+            laser: r.laser,
+            label: r.label,
+        })
+        .collect()
 }
 
 /// One capture record produced by the synthesizer.
@@ -323,7 +324,7 @@ pub fn write_capture<P: Write, L: Write>(
             record.payload(),
         )?;
         for r in returns {
-            labels.write(&r.label_row())?;
+            labels.write_return(r.frame, r.packet, r.block, r.laser, r.label)?;
         }
         Ok(())
     })?;

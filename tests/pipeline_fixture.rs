@@ -6,7 +6,7 @@ use lidar_noise::config::Config;
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use lidar_noise::noise::Fate;
 use lidar_noise::pipeline::{FrameResult, Pipeline};
-use lidar_noise::synth::labels::{read_labels_file, LabelRow};
+use lidar_noise::synth::labels::{check_frame, read_labels_file, LabelRow};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -30,11 +30,8 @@ fn run(config: &Config) -> Vec<(FrameResult, Vec<u16>)> {
         .unwrap()
         .map(|frame| {
             let frame = frame.unwrap();
-            let labels = &by_frame[&frame.index];
-            assert_eq!(labels.len(), frame.returns.len());
-            for (l, r) in labels.iter().zip(&frame.returns) {
-                assert_eq!((l.packet, l.block, l.laser), (r.packet, r.block, r.laser));
-            }
+            let labels: Vec<LabelRow> = by_frame[&frame.index].iter().map(|l| **l).collect();
+            check_frame(&labels, &frame, Path::new("crossroad.labels.csv.gz")).unwrap();
             let labels: Vec<u16> = labels.iter().map(|l| l.label).collect();
             (pipeline.process(frame).unwrap(), labels)
         })

@@ -1,6 +1,11 @@
 //! Object matching metrics on hand-made partitions (cluster id per clean return).
 
-use lidar_noise::sweep::metrics::{detection_scores, match_objects, precision_recall, MatchRule};
+use lidar_noise::sweep::metrics::{
+    band_index, band_metrics, match_objects, object_outcomes, precision_recall, MatchRule,
+    ObjectResult, Outcome, ReturnState, Tally,
+};
+use lidar_noise::sweep::run::Row;
+use lidar_noise::sweep::tables::{aggregate, interval, metrics, per_seed, t_quantile};
 
 fn rule() -> MatchRule {
     MatchRule::default()
@@ -117,7 +122,7 @@ fn no_reference_clusters_gives_no_survival() {
 }
 
 #[test]
-fn precision_and_recall_count_dropped_truth_as_missed() {
+fn precision_and_recall_of_a_labelling() {
     let truth = [true, true, true, false];
     let predicted = [true, true, false, true];
     let (p, r) = precision_recall(&truth, &predicted);
@@ -126,14 +131,259 @@ fn precision_and_recall_count_dropped_truth_as_missed() {
     assert_eq!(precision_recall(&[false], &[false]), (None, None));
 }
 
+/// `n` returns of `object`, reaching, not ground, in noisy cluster `cluster`, at (x, 0).
+fn ret(n: usize, object: i32, cluster: i32, x: f32) -> Vec<ReturnState> {
+    vec![
+        ReturnState {
+            object,
+            reached: true,
+            ground: false,
+            cluster,
+            xy: [x, 0.0],
+        };
+        n
+    ]
+}
+
+/// `n` returns of `object` dropped before ground removal.
+fn dropped(n: usize, object: i32, x: f32) -> Vec<ReturnState> {
+    let mut v = ret(n, object, -1, x);
+    for r in &mut v {
+        r.reached = false;
+    }
+    v
+}
+
+/// `n` returns of `object` the method labels ground.
+fn grounded(n: usize, object: i32, x: f32) -> Vec<ReturnState> {
+    let mut v = ret(n, object, -1, x);
+    for r in &mut v {
+        r.ground = true;
+    }
+    v
+}
+
+fn outcomes(parts: Vec<Vec<ReturnState>>) -> Vec<ObjectResult> {
+    object_outcomes(&parts.concat(), 5)
+}
+
+fn one(parts: Vec<Vec<ReturnState>>) -> ObjectResult {
+    let r = outcomes(parts);
+    assert_eq!(r.len(), 1, "{r:?}");
+    r[0]
+}
+
 #[test]
-fn detection_ignores_objects_smaller_than_min_points() {
-    // Truth objects 1 (10 returns) and 2 (3 returns); min_points 5.
-    let mut truth = vec![1; 10];
-    truth.extend([2, 2, 2]);
-    let mut noisy = vec![0; 10];
-    noisy.extend([-1, -1, -1]);
-    let (p, r) = detection_scores(&truth, &noisy, 5, rule());
-    assert_eq!(p, Some(1.0));
-    assert_eq!(r, Some(1.0));
+fn a_whole_pure_cluster_is_detected_and_retained() {
+    let r = one(vec![ret(20, 1, 0, 3.0)]);
+    assert_eq!(
+        (r.outcome, r.retained, r.clean, r.reached),
+        (Outcome::Detected, true, 20, 20)
+    );
+    assert!((r.distance_m - 3.0).abs() < 1e-9);
+}
+
+#[test]
+fn purity_just_above_and_below_one_half() {
+    // Object 1 (10 returns) in cluster 0 with 9 clutter returns: purity 10/19 > 0.5.
+    let r = outcomes(vec![ret(10, 1, 0, 3.0), ret(9, -1, 0, 3.0)]);
+    assert_eq!(r[0].outcome, Outcome::Detected);
+    // With 11 clutter returns: purity 10/21 < 0.5, held but impure: merged.
+    let r = outcomes(vec![ret(10, 1, 0, 3.0), ret(11, -1, 0, 3.0)]);
+    assert_eq!(r[0].outcome, Outcome::Merged);
+    assert!(!r[0].retained);
+    // Exactly 0.5 counts as pure.
+    let r = outcomes(vec![ret(10, 1, 0, 3.0), ret(10, -1, 0, 3.0)]);
+    assert_eq!(r[0].outcome, Outcome::Detected);
+}
+
+#[test]
+fn merged_into_another_object() {
+    // Objects 1 (10 returns) and 2 (30 returns) share noisy cluster 0: object 2 is the
+    // majority (30/40) and detected; object 1 (10/40) is merged.
+    let r = outcomes(vec![ret(10, 1, 0, 3.0), ret(30, 2, 0, 4.0)]);
+    assert_eq!(r[0].id, 1);
+    assert_eq!(r[0].outcome, Outcome::Merged);
+    assert_eq!(r[1].outcome, Outcome::Detected);
+    let t = Tally::of(&r);
+    assert_eq!((t.objects, t.detected, t.merged, t.lost), (2, 1, 1, 0));
+}
+
+#[test]
+fn merged_into_ground() {
+    // 12 of 20 reaching returns labelled ground, 8 in a pure cluster: not detected (8 < 10).
+    let r = one(vec![grounded(12, 1, 5.0), ret(8, 1, 0, 5.0)]);
+    assert_eq!(r.outcome, Outcome::MergedIntoGround);
+    // Exactly half ground is not "most": 10 ground, 10 clustered -> detected.
+    let r = one(vec![grounded(10, 1, 5.0), ret(10, 1, 0, 5.0)]);
+    assert_eq!(r.outcome, Outcome::Detected);
+}
+
+#[test]
+fn an_even_two_way_split_is_still_detected() {
+    // Each half holds exactly 50 % of the reaching returns, purely: detected.
+    let r = one(vec![ret(10, 1, 0, 5.0), ret(10, 1, 1, 5.0)]);
+    assert_eq!(r.outcome, Outcome::Detected);
+}
+
+#[test]
+fn split_over_two_clusters() {
+    // 40 % + 40 % + 20 % unclustered: no cluster holds half, two hold >= 20 %.
+    let r = one(vec![
+        ret(8, 1, 0, 5.0),
+        ret(8, 1, 1, 5.0),
+        ret(4, 1, -1, 5.0),
+    ]);
+    assert_eq!(r.outcome, Outcome::Split);
+    // 45 % + 15 % + 40 % unclustered: only one part holds >= 20 %: lost.
+    let r = one(vec![
+        ret(9, 1, 0, 5.0),
+        ret(3, 1, 1, 5.0),
+        ret(8, 1, -1, 5.0),
+    ]);
+    assert_eq!(r.outcome, Outcome::Lost);
+}
+
+#[test]
+fn dropped_returns_are_not_retained_but_may_be_detected() {
+    // 20 clean returns, 12 dropped by noise, 8 reach and form a pure cluster:
+    // detected (8 >= 0.5 * 8) but not retained (8 < 0.5 * 20).
+    let r = one(vec![dropped(12, 1, 5.0), ret(8, 1, 0, 5.0)]);
+    assert_eq!((r.outcome, r.retained), (Outcome::Detected, false));
+    assert_eq!((r.clean, r.reached), (20, 8));
+}
+
+#[test]
+fn dropped_then_lost() {
+    // Every return dropped: nothing reaches clustering, the object is lost.
+    let r = one(vec![dropped(20, 1, 5.0)]);
+    assert_eq!(
+        (r.outcome, r.retained, r.reached),
+        (Outcome::Lost, false, 0)
+    );
+    // Some reach but none is clustered: lost too.
+    let r = one(vec![dropped(15, 1, 5.0), ret(5, 1, -1, 5.0)]);
+    assert_eq!(r.outcome, Outcome::Lost);
+}
+
+#[test]
+fn objects_smaller_than_min_points_are_not_counted() {
+    let r = outcomes(vec![ret(4, 1, 0, 5.0), ret(5, 2, 1, 5.0)]);
+    assert_eq!(r.iter().map(|o| o.id).collect::<Vec<_>>(), vec![2]);
+}
+
+#[test]
+fn outcome_counts_add_up_on_a_mixed_frame() {
+    let r = outcomes(vec![
+        ret(20, 1, 0, 2.0),   // detected, retained
+        dropped(30, 2, 7.0),  // lost
+        grounded(9, 3, 12.0), // merged into ground
+        ret(5, 4, 1, 25.0),   // split (5 + 5 of 12 reaching) ...
+        ret(5, 4, 2, 25.0),   // ... over clusters 1 and 2
+        ret(2, 4, -1, 25.0),  // (unclustered)
+        ret(5, 5, 3, 50.0),   // merged: 5 of cluster 3's 25
+        ret(20, 6, 3, 50.0),  // detected (20/25)
+    ]);
+    let t = Tally::of(&r);
+    assert_eq!(
+        (
+            t.objects,
+            t.detected,
+            t.retained,
+            t.split,
+            t.merged,
+            t.merged_into_ground,
+            t.lost
+        ),
+        (6, 2, 2, 1, 1, 1, 1)
+    );
+    assert_eq!(
+        t.detected + t.split + t.merged + t.merged_into_ground + t.lost,
+        t.objects
+    );
+    let bands = band_metrics(&r, &[0.0, 5.0, 10.0, 20.0, 40.0]);
+    let per: Vec<(u64, u64)> = bands.iter().map(|b| (b.objects, b.detected)).collect();
+    assert_eq!(per, vec![(1, 1), (1, 0), (1, 0), (1, 0), (2, 1)]);
+    assert_eq!((bands[4].lo_m, bands[4].hi_m), (40.0, None));
+    assert_eq!((bands[1].lo_m, bands[1].hi_m), (5.0, Some(10.0)));
+}
+
+#[test]
+fn band_edges_are_lower_inclusive_upper_exclusive() {
+    let edges = [0.0, 5.0, 10.0, 20.0, 40.0];
+    assert_eq!(band_index(0.0, &edges), Some(0));
+    assert_eq!(band_index(4.999_999, &edges), Some(0));
+    assert_eq!(band_index(5.0, &edges), Some(1));
+    assert_eq!(band_index(9.99, &edges), Some(1));
+    assert_eq!(band_index(10.0, &edges), Some(2));
+    assert_eq!(band_index(40.0, &edges), Some(4));
+    assert_eq!(band_index(1e6, &edges), Some(4));
+    assert_eq!(band_index(f64::NAN, &edges), None);
+    assert_eq!(band_index(1.0, &[2.0, 5.0]), None);
+    // Distance is horizontal: an object at (3, 4) with any height is at exactly 5 m.
+    let mut at = ret(10, 1, 0, 3.0);
+    for r in &mut at {
+        r.xy = [3.0, 4.0];
+    }
+    let r = object_outcomes(&at, 5);
+    assert_eq!(band_index(r[0].distance_m, &edges), Some(1));
+}
+
+fn row(seed: u64, frame: u32, objects: u64, detected: u64, kept: u64) -> Row {
+    let mut m = lidar_noise::sweep::metrics::FrameMetrics {
+        frame,
+        objects,
+        detected,
+        kept,
+        ..Default::default()
+    };
+    m.bands = band_metrics(&[], &[0.0, 5.0]);
+    Row {
+        capture: "c".into(),
+        values: vec!["1".into()],
+        seed,
+        metrics: m,
+    }
+}
+
+#[test]
+fn aggregation_reduces_each_seed_first() {
+    // Seed 1: 3 frames, kept 10, 20, 30 (mean 20); seed 2: 1 frame, kept 40.
+    // Over frames the mean would be 25; per seed it is (20 + 40) / 2 = 30.
+    let rows = vec![
+        row(1, 0, 4, 4, 10),
+        row(1, 1, 4, 2, 20),
+        row(1, 2, 2, 0, 30),
+        row(2, 0, 10, 5, 40),
+    ];
+    let ms = metrics(&rows);
+    let kept = ms.iter().find(|m| m.name == "kept").unwrap();
+    let refs: Vec<&Row> = rows.iter().collect();
+    assert_eq!(per_seed(kept, &refs), vec![20.0, 40.0]);
+    // Shares are pooled per seed: seed 1 detected 6 of 10 objects.
+    let share = ms.iter().find(|m| m.name == "detected_share").unwrap();
+    assert_eq!(per_seed(share, &refs), vec![0.6, 0.5]);
+    let groups = aggregate(&rows, &ms);
+    assert_eq!(groups.len(), 1);
+    assert_eq!((groups[0].rows, groups[0].seeds), (4, 2));
+    let i = groups[0].metrics[ms.iter().position(|m| m.name == "kept").unwrap()].unwrap();
+    assert_eq!((i.n, i.mean), (2, 30.0));
+    // sd of (20, 40) = sqrt(200); half-width = t(0.975, 1) * sqrt(200) / sqrt(2) = 12.706 * 10.
+    assert!((i.hi.unwrap() - (30.0 + 127.062_047)).abs() < 1e-3, "{i:?}");
+    // Band columns exist, and with one seed no interval is invented.
+    assert!(ms.iter().any(|m| m.name == "detected_share_5m_plus"));
+    let single: Vec<Row> = rows.into_iter().filter(|r| r.seed == 1).collect();
+    let g = aggregate(&single, &ms);
+    let i = g[0].metrics[0].unwrap();
+    assert_eq!((i.n, i.lo, i.hi), (1, None, None));
+}
+
+#[test]
+fn t_quantile_and_interval_match_known_values() {
+    assert!((t_quantile(0.975, 2).unwrap() - 4.302_653).abs() < 1e-6);
+    assert!((t_quantile(0.975, 30).unwrap() - 2.042_272).abs() < 1e-6);
+    // Past 30 degrees of freedom the quantile is not 1.96.
+    assert!((t_quantile(0.975, 31).unwrap() - 2.039_513).abs() < 1e-6);
+    let i = interval(&[1.0, 2.0, 3.0]).unwrap();
+    assert!((i.lo.unwrap() - (2.0 - 4.302_653 / 3f64.sqrt())).abs() < 1e-6);
 }

@@ -71,19 +71,27 @@ fn labels_line_up_with_the_decoded_returns_one_to_one() {
     let scene = Scene::preset("crossroad").unwrap();
     let (pcap, label_bytes) = synthesize(&scene);
     let rows = labels::read_labels(&label_bytes[..], Path::new("mem.labels")).unwrap();
-    let decoded: Vec<_> = decode(pcap)
-        .into_iter()
+    let frames = decode(pcap);
+    let decoded = frames.iter().map(|f| f.returns.len()).sum::<usize>();
+    assert_eq!(rows.len(), decoded);
+    let keys: Vec<(u32, u32, u8)> = frames
+        .iter()
         .flat_map(|f| {
-            let index = f.index;
-            f.returns.into_iter().map(move |r| (index, r))
+            labels::frame_keys(f)
+                .into_iter()
+                .map(move |(firing, laser)| (f.index, firing, laser))
         })
         .collect();
-    assert_eq!(rows.len(), decoded.len());
-    for (row, (frame, r)) in rows.iter().zip(&decoded) {
-        assert_eq!(
-            (row.frame, row.packet, row.block, row.laser),
-            (*frame, r.packet, r.block, r.laser)
-        );
+    for (row, key) in rows.iter().zip(&keys) {
+        assert_eq!((row.frame, row.firing, row.laser), *key);
+    }
+    for f in &frames {
+        let of_frame: Vec<_> = rows
+            .iter()
+            .filter(|r| r.frame == f.index)
+            .copied()
+            .collect();
+        labels::check_frame(&of_frame, f, Path::new("mem.labels")).unwrap();
     }
     let objects = rows.iter().filter(|r| r.label > 0).count();
     let ground = rows.iter().filter(|r| r.label == 0).count();

@@ -13,8 +13,9 @@ fn load(text: &str) -> Result<Config, String> {
 
 #[test]
 fn object_keys_are_read_and_validated_with_key_and_line() {
-    let c = load("[cluster]\nmin_points = 5\nobject_min_height_m = 0.3\nobject_max_extent_m = 20\n")
-        .unwrap();
+    let c =
+        load("[cluster]\nmin_points = 5\nobject_min_height_m = 0.3\nobject_max_extent_m = 20\n")
+            .unwrap();
     assert_eq!(c.objects.min_height_m, 0.3);
     assert_eq!(c.objects.max_extent_m, 20.0);
     assert_eq!(c.objects.max_height_m, ObjectRule::default().max_height_m);

@@ -3,6 +3,7 @@
 mod common;
 
 use assert_cmd::Command;
+use lidar_noise::sweep::run::METRICS_VERSION;
 use std::path::{Path, PathBuf};
 
 fn fixture(name: &str) -> PathBuf {
@@ -88,9 +89,17 @@ fn a_cell_with_other_settings_is_recomputed() {
     let text = std::fs::read_to_string(&p).unwrap();
     std::fs::write(
         &p,
-        text.replace("\"metrics_version\": 1", "\"metrics_version\": 0"),
+        text.replace(
+            &format!("\"metrics_version\": {METRICS_VERSION}"),
+            "\"metrics_version\": 0",
+        ),
     )
     .unwrap();
+    assert_ne!(
+        std::fs::read_to_string(&p).unwrap(),
+        text,
+        "tampering failed"
+    );
     let msg = sweep(&out);
     assert!(msg.contains("1 cells computed, 7 loaded"), "{msg}");
     assert_eq!(std::fs::read_to_string(&p).unwrap(), text);

@@ -39,6 +39,7 @@ fn bench(c: &mut Criterion) {
                     decoder: DecoderOptions::default(),
                     frames: 0..=u32::MAX,
                     output: dir.path().to_path_buf(),
+                    bands: lidar_noise::sweep::metrics::DEFAULT_BANDS.to_vec(),
                 };
                 let outcome = run(&settings, &captures, &Silent).unwrap();
                 assert_eq!(outcome.computed, 42);

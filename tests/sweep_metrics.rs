@@ -387,3 +387,121 @@ fn t_quantile_and_interval_match_known_values() {
     let i = interval(&[1.0, 2.0, 3.0]).unwrap();
     assert!((i.lo.unwrap() - (2.0 - 4.302_653 / 3f64.sqrt())).abs() < 1e-6);
 }
+
+#[test]
+fn bands_option_needs_increasing_non_negative_edges() {
+    use lidar_noise::sweep::plan::parse_bands;
+    assert_eq!(
+        parse_bands("0,5,10,20,40").unwrap(),
+        vec![0.0, 5.0, 10.0, 20.0, 40.0]
+    );
+    assert_eq!(parse_bands(" 2.5 , 7").unwrap(), vec![2.5, 7.0]);
+    for bad in ["0,5,5", "10,5", "-1,5", "0,x", "", "0,inf"] {
+        let e = parse_bands(bad).unwrap_err().to_string();
+        assert!(e.contains("--bands"), "{bad}: {e}");
+    }
+}
+
+fn fixture(name: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures")
+        .join(name)
+}
+
+fn sweep_cmd(out: &std::path::Path, extra: &[&str]) -> std::process::Output {
+    assert_cmd::Command::cargo_bin("lidar-noise")
+        .unwrap()
+        .arg("--quiet")
+        .arg("sweep")
+        .arg(fixture("crossroad.pcap"))
+        .args([
+            "--vary",
+            "occlusion=on,off",
+            "--seeds",
+            "1",
+            "--bands",
+            "0,10",
+        ])
+        .args(extra)
+        .arg("-o")
+        .arg(out)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn a_labelled_sweep_reports_objects_by_band_and_class() {
+    let tmp = tempfile::tempdir().unwrap();
+    let o = sweep_cmd(tmp.path(), &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("sweep.json")).unwrap()).unwrap();
+    let rows = json["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 4, "2 cells x 2 frames");
+    for r in rows {
+        let m = &r["metrics"];
+        assert_eq!(m["labelled"], true);
+        let n = |v: &serde_json::Value| v.as_u64().unwrap();
+        let objects = n(&m["objects"]);
+        assert!(objects >= 10, "{m}");
+        let outcomes = ["detected", "split", "merged", "merged_into_ground", "lost"];
+        assert_eq!(outcomes.iter().map(|k| n(&m[k])).sum::<u64>(), objects);
+        assert!(n(&m["retained"]) <= n(&m["detected"]));
+        let bands = m["bands"].as_array().unwrap();
+        assert_eq!(bands.len(), 2);
+        assert_eq!(
+            (bands[0]["lo_m"].as_f64(), bands[0]["hi_m"].as_f64()),
+            (Some(0.0), Some(10.0))
+        );
+        assert_eq!(
+            (bands[1]["lo_m"].as_f64(), bands[1]["hi_m"].is_null()),
+            (Some(10.0), true)
+        );
+        assert_eq!(n(&bands[0]["objects"]) + n(&bands[1]["objects"]), objects);
+        let classes = m["classes"].as_array().unwrap();
+        assert!(classes.iter().any(|c| c["kind"] == "car"), "{m}");
+        assert_eq!(
+            classes.iter().map(|c| n(&c["objects"])).sum::<u64>(),
+            objects
+        );
+        assert!(m["ground_lost_before_share"].as_f64().is_some());
+    }
+    // The aggregate has per-band and per-class columns and, with one seed, no bounds.
+    let agg = std::fs::read_to_string(tmp.path().join("aggregate.csv")).unwrap();
+    let mut lines = agg.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let first: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert!(!first[col("detected_share_0_10m_mean")].is_empty());
+    assert!(first[col("detected_share_0_10m_lo")].is_empty());
+    assert!(first[col("detected_share_car_mean")].parse::<f64>().is_ok());
+    let csv = std::fs::read_to_string(tmp.path().join("sweep.csv")).unwrap();
+    assert!(csv.lines().next().unwrap().contains("detected_10m_plus"));
+    let html = std::fs::read_to_string(tmp.path().join("index.html")).unwrap();
+    assert!(html.contains("Objects by distance band"));
+}
+
+#[test]
+fn labels_that_do_not_line_up_are_refused_naming_the_frame() {
+    use lidar_noise::synth::labels::{read_labels_file, LabelWriter};
+    let tmp = tempfile::tempdir().unwrap();
+    let mut rows = read_labels_file(&fixture("crossroad.labels.csv.gz")).unwrap();
+    // Change the laser of the 5th row of frame 1.
+    let k = rows.iter().position(|r| r.frame == 1).unwrap() + 4;
+    rows[k].laser = (rows[k].laser + 1) % 32;
+    let mut w = LabelWriter::new(Vec::new()).unwrap();
+    for r in &rows {
+        w.write(r).unwrap();
+    }
+    let bad = tmp.path().join("bad.labels.csv.gz");
+    std::fs::write(&bad, w.finish().unwrap()).unwrap();
+    let out = tmp.path().join("o");
+    let o = sweep_cmd(&out, &["--labels", bad.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("bad.labels.csv.gz") && err.contains("frame 1") && err.contains("return 4"),
+        "{err}"
+    );
+    assert!(!out.join("sweep.csv").exists(), "no partial output");
+}

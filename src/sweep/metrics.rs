@@ -117,69 +117,80 @@ impl ObjectMatch {
 ///
 /// The arrays are read pairwise; entries past the shorter one are ignored.
 pub fn match_objects(reference: &[i32], noisy: &[i32], rule: MatchRule) -> ObjectMatch {
-    let mut ref_size: BTreeMap<i32, usize> = BTreeMap::new();
-    let mut noisy_size: BTreeMap<i32, usize> = BTreeMap::new();
-    let mut overlap: BTreeMap<(i32, i32), usize> = BTreeMap::new();
+    // Ids are small non-negative integers (cluster ids 0..n): dense counts, and per
+    // reference cluster the few noisy clusters it overlaps, found by a linear scan.
+    let len = |ids: &[i32]| (ids.iter().copied().max().unwrap_or(-1) + 1).max(0) as usize;
+    let mut ref_size = vec![0usize; len(reference)];
+    let mut noisy_size = vec![0usize; len(noisy)];
+    let mut parts: Vec<Vec<(i32, usize)>> = vec![Vec::new(); ref_size.len()];
     for (&c, &n) in reference.iter().zip(noisy) {
         if c >= 0 {
-            *ref_size.entry(c).or_default() += 1;
+            ref_size[c as usize] += 1;
         }
         if n >= 0 {
-            *noisy_size.entry(n).or_default() += 1;
+            noisy_size[n as usize] += 1;
         }
         if c >= 0 && n >= 0 {
-            *overlap.entry((c, n)).or_default() += 1;
+            let p = &mut parts[c as usize];
+            match p.iter_mut().find(|x| x.0 == n) {
+                Some(x) => x.1 += 1,
+                None => p.push((n, 1)),
+            }
         }
     }
+    let overlap: Vec<(i32, i32, usize)> = parts
+        .iter()
+        .enumerate()
+        .flat_map(|(c, p)| p.iter().map(move |&(n, o)| (c as i32, n, o)))
+        .collect();
     let mut candidates: Vec<(f64, i32, i32)> = overlap
         .iter()
-        .map(|(&(c, n), &o)| {
-            let union = ref_size[&c] + noisy_size[&n] - o;
+        .map(|&(c, n, o)| {
+            let union = ref_size[c as usize] + noisy_size[n as usize] - o;
             (o as f64 / union as f64, c, n)
         })
         .filter(|&(iou, _, _)| iou >= rule.min_iou)
         .collect();
     candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
-    let mut used_ref = std::collections::BTreeSet::new();
-    let mut used_noisy = std::collections::BTreeSet::new();
+    let mut used_ref = vec![false; ref_size.len()];
+    let mut used_noisy = vec![false; noisy_size.len()];
     let mut pairs = Vec::new();
     for (iou, c, n) in candidates {
-        if used_ref.contains(&c) || used_noisy.contains(&n) {
+        if used_ref[c as usize] || used_noisy[n as usize] {
             continue;
         }
-        used_ref.insert(c);
-        used_noisy.insert(n);
+        used_ref[c as usize] = true;
+        used_noisy[n as usize] = true;
         pairs.push((c, n, iou));
     }
     pairs.sort_by_key(|p| (p.0, p.1));
     // Holding: how many noisy clusters hold each reference cluster and vice versa.
-    let mut holders: BTreeMap<i32, usize> = BTreeMap::new();
-    let mut held: BTreeMap<i32, usize> = BTreeMap::new();
-    let mut sourced: BTreeMap<i32, bool> = BTreeMap::new();
-    for (&(c, n), &o) in &overlap {
-        if o as f64 >= rule.min_share * ref_size[&c] as f64 {
-            *holders.entry(c).or_default() += 1;
-            *held.entry(n).or_default() += 1;
+    let mut holders = vec![0usize; ref_size.len()];
+    let mut held = vec![0usize; noisy_size.len()];
+    let mut sourced = vec![false; noisy_size.len()];
+    for &(c, n, o) in &overlap {
+        let (c, n) = (c as usize, n as usize);
+        if o as f64 >= rule.min_share * ref_size[c] as f64 {
+            holders[c] += 1;
+            held[n] += 1;
         }
-        if o as f64 >= rule.min_share * noisy_size[&n] as f64 {
-            sourced.insert(n, true);
+        if o as f64 >= rule.min_share * noisy_size[n] as f64 {
+            sourced[n] = true;
         }
     }
-    let split = holders.values().filter(|&&h| h >= 2).count();
-    let lost = ref_size.keys().filter(|c| !holders.contains_key(c)).count();
-    let merged = held.values().filter(|&&h| h >= 2).count();
-    let false_clusters = noisy_size
-        .keys()
-        .filter(|n| !sourced.contains_key(n))
-        .count();
+    let present = |size: &[usize]| size.iter().filter(|&&s| s > 0).count();
     ObjectMatch {
-        reference: ref_size.len(),
-        noisy: noisy_size.len(),
+        reference: present(&ref_size),
+        noisy: present(&noisy_size),
         pairs,
-        split,
-        merged,
-        lost,
-        false_clusters,
+        split: holders.iter().filter(|&&h| h >= 2).count(),
+        merged: held.iter().filter(|&&h| h >= 2).count(),
+        lost: (0..ref_size.len())
+            .filter(|&c| ref_size[c] > 0 && holders[c] == 0)
+            .count(),
+        false_clusters: (0..noisy_size.len())
+            .filter(|&n| noisy_size[n] > 0 && !sourced[n])
+            .count(),
     }
 }
 

@@ -118,6 +118,20 @@ fn committed_fixtures_match_the_synthesizer() {
                 .unwrap();
         let rows = labels::read_labels(&label_bytes[..], Path::new("mem")).unwrap();
         assert!(committed_rows == rows, "fixtures/{preset} labels are stale");
+        // And in the current format (the reader also converts the former one).
+        let mut text = String::new();
+        std::io::Read::read_to_string(
+            &mut flate2::read::GzDecoder::new(
+                &std::fs::read(dir.join(format!("{preset}.labels.{}", labels::EXTENSION))).unwrap()
+                    [..],
+            ),
+            &mut text,
+        )
+        .unwrap();
+        assert!(
+            text.starts_with(labels::HEADER),
+            "fixtures/{preset} labels are in an old format"
+        );
     }
 }
 

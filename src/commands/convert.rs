@@ -2,8 +2,8 @@
 
 use crate::cli::Global;
 use crate::hdl32e::frames::FrameReader;
-use crate::options::{parse_range, DecoderArgs};
-use crate::writers::ply::{PlyEncoding, PlyFrame};
+use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
+use crate::writers::ply::PlyFrame;
 use crate::writers::write_file;
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
@@ -20,22 +20,18 @@ pub struct Args {
     /// Frames to write, by sweep index: N, A..B (both included), A.. or ..B.
     #[arg(long, value_name = "RANGE")]
     pub frames: Option<String>,
-    /// Write ASCII PLY instead of binary little-endian.
-    #[arg(long)]
-    pub ascii: bool,
+    /// Point-cloud format (PLY, LAS, LAZ) and PLY encoding.
+    #[command(flatten)]
+    pub output_format: FrameOutputArgs,
     /// Decoder settings shared by the commands that read captures.
     #[command(flatten)]
     pub decoder: DecoderArgs,
 }
 
-/// File name of a frame's PLY.
-pub fn frame_file_name(index: u32) -> String {
-    format!("frame_{index:05}.ply")
-}
-
 /// Decodes the capture and writes the selected frames.
 pub fn run(args: Args, global: Global) -> Result<()> {
     let options = args.decoder.to_options()?;
+    let output = args.output_format.to_output()?;
     let range = match &args.frames {
         Some(text) => parse_range("--frames", text)?,
         None => 0..=u32::MAX,
@@ -52,16 +48,9 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             break;
         }
         if range.contains(&frame.index) {
-            let path = args.output.join(frame_file_name(frame.index));
-            let ply = PlyFrame {
-                encoding: if args.ascii {
-                    PlyEncoding::Ascii
-                } else {
-                    PlyEncoding::BinaryLittleEndian
-                },
-                ..PlyFrame::new(&frame.returns, &source, frame.index, frame.start_time())
-            };
-            write_file(&ply, &path, &[args.capture.as_path()])?;
+            let path = args.output.join(output.file_name(frame.index));
+            let ply = PlyFrame::new(&frame.returns, &source, frame.index, frame.start_time());
+            write_file(&*output.document(ply), &path, &[args.capture.as_path()])?;
             written += 1;
             progress.inc(1);
         }

@@ -3,12 +3,12 @@
 use crate::cli::Global;
 use crate::config::Config;
 use crate::hdl32e::frames::{CaptureSummary, DecoderOptions, FrameReader};
-use crate::options::{parse_range, DecoderArgs};
+use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
 use crate::pipeline::report::{cluster_table, FrameClusters, FrameReport, Totals, FATE_CODES};
 use crate::pipeline::{FrameResult, Pipeline};
 use crate::writers::json::JsonDoc;
-use crate::writers::ply::{PlyColumns, PlyEncoding, PlyFrame};
-use crate::writers::write_file;
+use crate::writers::ply::{PlyColumns, PlyFrame};
+use crate::writers::{write_file, FrameOutput};
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -44,15 +44,15 @@ pub struct Args {
     /// Frames to process, by sweep index: N, A..B (both included), A.. or ..B.
     #[arg(long, value_name = "RANGE")]
     pub frames: Option<String>,
-    /// Also write the dropped returns in each PLY, with a `fate` field.
+    /// Also write the dropped returns in each point cloud, with a `fate` field.
     #[arg(long)]
     pub keep_dropped: bool,
-    /// Write no PLY files (reports only).
+    /// Write no point clouds (reports only).
     #[arg(long, conflicts_with = "keep_dropped")]
     pub no_ply: bool,
-    /// Write ASCII PLY instead of binary little-endian.
-    #[arg(long)]
-    pub ascii: bool,
+    /// Point-cloud format (PLY, LAS, LAZ) and PLY encoding.
+    #[command(flatten)]
+    pub output_format: FrameOutputArgs,
     /// Also write each frame's single-linkage merge tree (SciPy linkage layout, CSV).
     #[arg(long)]
     pub linkage_out: bool,
@@ -69,7 +69,7 @@ struct Plan {
     frames: RangeInclusive<u32>,
     keep_dropped: bool,
     ply: bool,
-    encoding: PlyEncoding,
+    output: FrameOutput,
     linkage: bool,
 }
 
@@ -122,11 +122,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         },
         keep_dropped: args.keep_dropped,
         ply: !args.no_ply,
-        encoding: if args.ascii {
-            PlyEncoding::Ascii
-        } else {
-            PlyEncoding::BinaryLittleEndian
-        },
+        output: args.output_format.to_output()?,
         linkage: args.linkage_out,
     };
     let mut inputs: Vec<&Path> = args.captures.iter().map(PathBuf::as_path).collect();
@@ -271,7 +267,7 @@ fn write_ply(
     inputs: &[&Path],
 ) -> Result<()> {
     let ground: Vec<u8> = r.ground.iter().map(|&g| u8::from(g)).collect();
-    let path = dir.join(super::convert::frame_file_name(r.noisy.index));
+    let path = dir.join(plan.output.file_name(r.noisy.index));
     let comments = vec![
         format!("config {}", plan.config.source.display()),
         format!("seed {}", plan.config.seed),
@@ -305,10 +301,9 @@ fn write_ply(
                 cluster: Some(&cluster_all),
             },
             comments: &comments,
-            encoding: plan.encoding,
             ..PlyFrame::new(&returns, source, r.noisy.index, start)
         };
-        write_file(&ply, &path, inputs)?;
+        write_file(&*plan.output.document(ply), &path, inputs)?;
     } else {
         let range_clean: Vec<f32> = r
             .kept
@@ -329,10 +324,9 @@ fn write_ply(
                 cluster: Some(&r.labels),
             },
             comments: &comments,
-            encoding: plan.encoding,
             ..PlyFrame::new(&r.survivors, source, r.noisy.index, start)
         };
-        write_file(&ply, &path, inputs)?;
+        write_file(&*plan.output.document(ply), &path, inputs)?;
     }
     Ok(())
 }

@@ -160,15 +160,8 @@ impl<'a> PlyFrame<'a> {
             h.push_str(&clean);
             h.push('\n');
         };
-        comment(&format!("lidar-noise {}", env!("CARGO_PKG_VERSION")));
-        comment(&format!("source {}", self.source));
-        comment(&format!("frame {}", self.frame_index));
-        comment(&format!(
-            "time is seconds since {:.6} s past the hour",
-            self.frame_start_time
-        ));
-        for c in self.comments {
-            comment(c);
+        for line in self.provenance_lines() {
+            comment(&line);
         }
         let _ = writeln!(h, "element vertex {}", self.returns.len());
         for (name, ty) in BASE_PROPERTIES.iter().chain(self.present_optional()) {
@@ -176,6 +169,22 @@ impl<'a> PlyFrame<'a> {
         }
         h.push_str("end_header\n");
         h
+    }
+
+    /// The provenance lines (tool version, source, frame, time origin, then the extra
+    /// comments), as written in the PLY `comment` lines and the LAS provenance record.
+    pub fn provenance_lines(&self) -> Vec<String> {
+        let mut lines = vec![
+            format!("lidar-noise {}", env!("CARGO_PKG_VERSION")),
+            format!("source {}", self.source),
+            format!("frame {}", self.frame_index),
+            format!(
+                "time is seconds since {:.6} s past the hour",
+                self.frame_start_time
+            ),
+        ];
+        lines.extend(self.comments.iter().cloned());
+        lines
     }
 
     /// The optional properties present in this frame, in file order.

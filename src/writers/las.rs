@@ -95,7 +95,7 @@ pub const BASE_DIMS: [ExtraDim; 4] = [
 pub const OPTIONAL_DIMS: [ExtraDim; 4] = [
     dim("range_clean", ExtraType::F32, "metres before noise"),
     dim("power", ExtraType::F32, "fraction of emitted power"),
-    dim("fate", ExtraType::U8, "0 kept 1 occl 2 power 3 minrange"),
+    dim("fate", ExtraType::U8, "0 kept 1 occl 2 power 3 range"),
     dim("cluster", ExtraType::I32, "cluster id, -1 = none"),
 ];
 

@@ -4,7 +4,7 @@ use crate::calibration::Calibration;
 use crate::error::{Error, Result};
 use crate::hdl32e::decode::DualSelect;
 use crate::hdl32e::frames::DecoderOptions;
-use crate::writers::ply::PlyEncoding;
+use crate::writers::ply::{PlyEncoding, PlyStyle};
 use crate::writers::{FrameFormat, FrameOutput};
 use std::ops::RangeInclusive;
 use std::path::PathBuf;
@@ -66,15 +66,26 @@ pub struct FrameOutputArgs {
     /// Write ASCII PLY instead of binary little-endian (PLY only).
     #[arg(long)]
     pub ascii: bool,
+    /// PLY property names: plain, or cloudcompare (`scalar_<name>`, which CloudCompare
+    /// loads as scalar fields).
+    #[arg(long, value_enum, value_name = "STYLE", default_value_t = PlyStyle::Plain)]
+    pub ply_style: PlyStyle,
 }
 
 impl FrameOutputArgs {
     /// Checks the combination and returns the writer settings.
     pub fn to_output(&self) -> Result<FrameOutput> {
-        if self.ascii && self.format != FrameFormat::Ply {
-            return Err(Error::Invalid(
-                "--ascii applies to --format ply only".to_string(),
-            ));
+        if self.format != FrameFormat::Ply {
+            if self.ascii {
+                return Err(Error::Invalid(
+                    "--ascii applies to --format ply only".to_string(),
+                ));
+            }
+            if self.ply_style != PlyStyle::Plain {
+                return Err(Error::Invalid(
+                    "--ply-style applies to --format ply only".to_string(),
+                ));
+            }
         }
         Ok(FrameOutput {
             format: self.format,
@@ -83,6 +94,7 @@ impl FrameOutputArgs {
             } else {
                 PlyEncoding::BinaryLittleEndian
             },
+            ply_style: self.ply_style,
         })
     }
 }

@@ -62,6 +62,8 @@ pub struct FrameOutput {
     pub format: FrameFormat,
     /// PLY payload encoding (PLY only).
     pub encoding: ply::PlyEncoding,
+    /// PLY property naming (PLY only).
+    pub ply_style: ply::PlyStyle,
 }
 
 impl FrameOutput {
@@ -75,6 +77,7 @@ impl FrameOutput {
         match self.format {
             FrameFormat::Ply => {
                 frame.encoding = self.encoding;
+                frame.style = self.ply_style;
                 Box::new(frame)
             }
             FrameFormat::Las | FrameFormat::Laz => Box::new(las::LasFrame {

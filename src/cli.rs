@@ -37,6 +37,8 @@ pub enum Command {
     Synth(commands::synth::SynthArgs),
     /// Run every combination of varied settings and seeds; tables, plots and a web page.
     Sweep(commands::sweep::Args),
+    /// Compare two result folders field by field (exit 0 same, 1 different).
+    Compare(commands::compare::Args),
 }
 
 /// Settings every command receives.
@@ -73,6 +75,8 @@ pub fn main() -> i32 {
         Command::Validate(args) => commands::validate::run(args, global),
         Command::Synth(args) => commands::synth::run(args, global),
         Command::Sweep(args) => commands::sweep::run(args, global),
+        // compare has three outcomes (same, different, unusable), not two.
+        Command::Compare(args) => return commands::compare::run(args, global),
     };
     match result {
         Ok(()) => EXIT_OK,

@@ -39,7 +39,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     let mut reader = FrameReader::open(&args.capture, &options)?;
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("cannot create the output folder {}", args.output.display()))?;
-    let source = args.capture.display().to_string();
+    let source = super::capture_label(&args.capture);
     let progress = super::progress(global, "frames");
     let mut written = 0u32;
     while let Some(frame) = reader.next() {

@@ -1,5 +1,6 @@
 //! One module per subcommand: each parses nothing itself and calls the library.
 
+pub mod compare;
 pub mod convert;
 pub mod info;
 pub mod run;
@@ -36,6 +37,15 @@ pub fn progress(global: Global, unit: &'static str) -> indicatif::ProgressBar {
     }
     bar.enable_steady_tick(std::time::Duration::from_millis(200));
     bar
+}
+
+/// How outputs name a capture: its file name, not the path as typed, so the same capture
+/// run from another folder gives identical reports.
+pub fn capture_label(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
 }
 
 /// Output names of captures: each file's stem, with `-2`, `-3`, ... added where two

@@ -148,7 +148,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         run_capture(
             &plan,
             reader,
-            &path.display().to_string(),
+            &super::capture_label(path),
             &dir,
             &inputs,
             global,

@@ -79,6 +79,7 @@ struct Summary<'a> {
     tool: &'static str,
     version: &'static str,
     capture: String,
+    config: String,
     settings: crate::config::EffectiveConfig<'a>,
     power_constants: &'a crate::noise::PowerConstants,
     decoder: DecoderSettings,
@@ -213,6 +214,7 @@ fn run_capture(
         tool: "lidar-noise",
         version: env!("CARGO_PKG_VERSION"),
         capture: source.to_string(),
+        config: plan.config.provenance(),
         settings: plan.config.effective(),
         power_constants: plan.pipeline.chain().ideal_power().constants(),
         decoder: DecoderSettings {
@@ -268,8 +270,8 @@ fn write_ply(
 ) -> Result<()> {
     let ground: Vec<u8> = r.ground.iter().map(|&g| u8::from(g)).collect();
     let path = dir.join(plan.output.file_name(r.noisy.index));
-    let comments = vec![
-        format!("config {}", plan.config.source.display()),
+    let mut comments = vec![
+        format!("config {}", plan.config.provenance()),
         format!("seed {}", plan.config.seed),
         format!(
             "fate codes: 0 {}, 1 {}, 2 {}, 3 {}",
@@ -278,6 +280,14 @@ fn write_ply(
         "range is after noise, range_clean before; power is a fraction of emitted power".into(),
         "cluster -1 is ground or noise".into(),
     ];
+    // The whole effective configuration, so that it can be rebuilt from the file alone.
+    comments.extend(
+        plan.config
+            .effective_toml()
+            .lines()
+            .filter(|l| !l.trim().is_empty())
+            .map(|l| format!("effective-config {l}")),
+    );
     let start = r.noisy.clean.first().map_or(0.0, |c| c.time);
     if plan.keep_dropped {
         // Every return: kept ones at their noisy position, dropped ones where they were.

@@ -26,7 +26,8 @@ pub const DEFAULT_OUTPUT: &str = "lidar-noise-out";
 /// Arguments of `run`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Capture files (pcap or pcapng); none runs the built-in crossroad fixture.
+    /// Capture files (pcap or pcapng), `-` for standard input; none runs the built-in
+    /// crossroad fixture.
     #[arg(value_name = "CAPTURE")]
     pub captures: Vec<PathBuf>,
     /// Experiment configuration (default: the built-in configs/paper.toml).
@@ -126,6 +127,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         output: args.output_format.to_output()?,
         linkage: args.linkage_out,
     };
+    super::check_stdin_once(&args.captures)?;
     let mut inputs: Vec<&Path> = args.captures.iter().map(PathBuf::as_path).collect();
     if let Some(c) = &args.config {
         inputs.push(c);
@@ -144,7 +146,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         .iter()
         .zip(super::output_names(&args.captures))
     {
-        let reader = FrameReader::open(path, &plan.decoder)?;
+        let reader = super::open_capture(path, &plan.decoder)?;
         let dir = args.output.join(&name);
         run_capture(
             &plan,

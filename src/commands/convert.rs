@@ -30,6 +30,12 @@ pub struct Args {
     pub decoder: DecoderArgs,
 }
 
+/// File name of a frame's PLY (`frame_NNNNN.ply`); other formats:
+/// [`FrameOutput::file_name`].
+pub fn frame_file_name(index: u32) -> String {
+    FrameOutput::default().file_name(index)
+}
+
 /// Decodes each capture and writes the selected frames.
 pub fn run(args: Args, global: Global) -> Result<()> {
     super::check_stdin_once(&args.captures)?;

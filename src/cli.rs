@@ -1,7 +1,7 @@
 //! Command-line parsing: turns arguments into a command and its settings.
 
 use crate::commands;
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 
 /// Exit code for success.
 pub const EXIT_OK: i32 = 0;
@@ -17,6 +17,10 @@ pub struct Cli {
     /// Print no warnings and no progress (errors are still printed).
     #[arg(long, short, global = true)]
     pub quiet: bool,
+    /// Worker threads (default: one per core, or RAYON_NUM_THREADS); outputs do not
+    /// depend on it.
+    #[arg(long, global = true, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
+    pub threads: Option<u16>,
     /// What to do.
     #[command(subcommand)]
     pub command: Command,
@@ -26,17 +30,60 @@ pub struct Cli {
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Run the whole pipeline: noise, detection filters, ground, clusters, reports.
+    #[command(after_help = "Examples:
+  lidar-noise run                                   # the built-in crossroad scan -> lidar-noise-out/
+  lidar-noise run scan.pcap -c configs/rain.toml --set rain.rate_mm_h=3 --seed 7 -o out
+  lidar-noise run scan.pcap --keep-dropped --format laz --frames 0..9")]
     Run(commands::run::Args),
     /// Describe a capture: format, packets, sensor, frames, returns.
+    #[command(after_help = "Examples:
+  lidar-noise info scan.pcap
+  lidar-noise info *.pcap --json | jq .full_frames
+  tcpdump -r big.pcap -w - 'udp port 2368' | lidar-noise info -")]
     Info(commands::info::Args),
-    /// Decode a capture to one PLY point cloud per frame.
+    /// Decode captures to one point cloud (PLY, LAS or LAZ) per frame, without noise.
+    #[command(after_help = "Examples:
+  lidar-noise convert scan.pcap -o frames --frames 0..9
+  lidar-noise convert a.pcap b.pcap -o frames --format laz      # frames/a/, frames/b/
+  lidar-noise convert scan.pcap -o frames --ply-style cloudcompare")]
     Convert(commands::convert::Args),
     /// Check an experiment configuration without running it.
+    #[command(after_help = "Examples:
+  lidar-noise validate configs/rain.toml
+  lidar-noise validate -c configs/paper.toml --set rain.rate_mm_h=1 --seed 3
+  lidar-noise validate -c configs/paper.toml --set rain.rate_mm_h=1 --print > my.toml")]
     Validate(commands::validate::Args),
     /// Ray-cast a scene into a synthetic HDL-32E capture with ground-truth labels.
+    #[command(after_help = "Examples:
+  lidar-noise synth --preset crossroad -o scenes
+  lidar-noise synth my-scene.toml --rotations 20 --seed 4 -o scenes")]
     Synth(commands::synth::SynthArgs),
     /// Run every combination of varied settings and seeds; tables, plots and a web page.
+    #[command(after_help = "Examples:
+  lidar-noise sweep scan.pcap --vary rain.rate_mm_h=0,1,3,7 --vary occlusion=on,off -o sweep-out
+  lidar-noise sweep a.pcap b.pcap --config configs/paper.toml --vary rain.rate_mm_h=0,7 --seeds 1..5 -o out")]
     Sweep(commands::sweep::Args),
+    /// Compare two result folders field by field (exit 0 same, 1 different, 2 usage).
+    #[command(after_help = "Examples:
+  lidar-noise compare tests/expected out
+  lidar-noise compare expected out --tolerance ground_fraction=1e-9 --tolerance power=0.1%
+  lidar-noise compare expected out --junit compare-junit.xml")]
+    Compare(commands::compare::Args),
+    /// Print a shell completion script to stdout.
+    #[command(after_help = "Examples:
+  lidar-noise completions bash > ~/.local/share/bash-completion/completions/lidar-noise
+  lidar-noise completions zsh > ~/.zfunc/_lidar-noise
+  lidar-noise completions fish > ~/.config/fish/completions/lidar-noise.fish")]
+    Completions {
+        /// The shell.
+        #[arg(value_enum)]
+        shell: clap_complete::Shell,
+    },
+    /// Print the manual page (roff) to stdout.
+    #[command(after_help = "Examples:
+  lidar-noise man > lidar-noise.1 && man ./lidar-noise.1
+  lidar-noise man | gzip > /usr/local/share/man/man1/lidar-noise.1.gz")]
+    Man,
 }
 
 /// Settings every command receives.
@@ -66,6 +113,15 @@ pub fn main() -> i32 {
         }
     };
     let global = Global { quiet: cli.quiet };
+    if let Some(n) = cli.threads {
+        if let Err(e) = rayon::ThreadPoolBuilder::new()
+            .num_threads(usize::from(n))
+            .build_global()
+        {
+            eprintln!("lidar-noise: error: --threads {n}: {e}");
+            return EXIT_ERROR;
+        }
+    }
     let result = match cli.command {
         Command::Run(args) => commands::run::run(args, global),
         Command::Info(args) => commands::info::run(args, global),
@@ -73,6 +129,20 @@ pub fn main() -> i32 {
         Command::Validate(args) => commands::validate::run(args, global),
         Command::Synth(args) => commands::synth::run(args, global),
         Command::Sweep(args) => commands::sweep::run(args, global),
+        // compare has three outcomes (same, different, unusable), not two.
+        Command::Compare(args) => return commands::compare::run(args, global),
+        Command::Completions { shell } => {
+            clap_complete::generate(
+                shell,
+                &mut Cli::command(),
+                "lidar-noise",
+                &mut std::io::stdout(),
+            );
+            Ok(())
+        }
+        Command::Man => clap_mangen::Man::new(Cli::command())
+            .render(&mut std::io::stdout())
+            .map_err(anyhow::Error::from),
     };
     match result {
         Ok(()) => EXIT_OK,

@@ -10,6 +10,7 @@ pub mod capture;
 pub mod cli;
 pub mod cluster;
 pub mod commands;
+pub mod compare;
 pub mod config;
 pub mod error;
 pub mod frame;

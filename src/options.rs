@@ -4,6 +4,8 @@ use crate::calibration::Calibration;
 use crate::error::{Error, Result};
 use crate::hdl32e::decode::DualSelect;
 use crate::hdl32e::frames::DecoderOptions;
+use crate::writers::ply::{PlyEncoding, PlyStyle};
+use crate::writers::{FrameFormat, FrameOutput};
 use std::ops::RangeInclusive;
 use std::path::PathBuf;
 
@@ -51,6 +53,48 @@ impl DecoderArgs {
             dual: self.dual,
             cut_angle_deg: self.cut_angle,
             keep_partial: self.keep_partial,
+        })
+    }
+}
+
+/// Point-cloud output settings shared by `run` and `convert`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct FrameOutputArgs {
+    /// Point-cloud file format of each frame.
+    #[arg(long, value_enum, default_value_t = FrameFormat::Ply)]
+    pub format: FrameFormat,
+    /// Write ASCII PLY instead of binary little-endian (PLY only).
+    #[arg(long)]
+    pub ascii: bool,
+    /// PLY property names: plain, or cloudcompare (`scalar_<name>`, which CloudCompare
+    /// loads as scalar fields).
+    #[arg(long, value_enum, value_name = "STYLE", default_value_t = PlyStyle::Plain)]
+    pub ply_style: PlyStyle,
+}
+
+impl FrameOutputArgs {
+    /// Checks the combination and returns the writer settings.
+    pub fn to_output(&self) -> Result<FrameOutput> {
+        if self.format != FrameFormat::Ply {
+            if self.ascii {
+                return Err(Error::Invalid(
+                    "--ascii applies to --format ply only".to_string(),
+                ));
+            }
+            if self.ply_style != PlyStyle::Plain {
+                return Err(Error::Invalid(
+                    "--ply-style applies to --format ply only".to_string(),
+                ));
+            }
+        }
+        Ok(FrameOutput {
+            format: self.format,
+            encoding: if self.ascii {
+                PlyEncoding::Ascii
+            } else {
+                PlyEncoding::BinaryLittleEndian
+            },
+            ply_style: self.ply_style,
         })
     }
 }

@@ -289,8 +289,10 @@ fn validate_command_accepts_good_and_rejects_bad() {
     std::fs::write(&good, GOOD).unwrap();
     let args = |p: &Path, set: &[&str]| Args {
         config: Some(p.to_path_buf()),
+        config_file: None,
         set: set.iter().map(|s| s.to_string()).collect(),
         seed: None,
+        print: false,
     };
     run(args(&good, &[]), QUIET).unwrap();
     let e = run(args(&good, &["noise[0].lasers=[99]"]), QUIET)

@@ -3,6 +3,7 @@
 //! scripts/update-goldens.sh and review the diff; never edit a golden to pass a test.
 
 use assert_cmd::Command;
+use lidar_noise::compare::{compare_file, Status, Tolerances};
 use std::path::Path;
 
 #[test]
@@ -23,25 +24,18 @@ fn paper_reports_on_the_crossroad_fixture_match_the_goldens() {
         .arg(tmp.path())
         .assert()
         .success();
+    // Field by field with `compare`'s rules: provenance (tool version) is not a regression.
+    let tolerances = Tolerances::default();
     for file in ["summary.json", "clusters.csv"] {
-        let fresh = std::fs::read_to_string(tmp.path().join("crossroad").join(file)).unwrap();
-        let golden = std::fs::read_to_string(
-            root.join("tests/golden")
-                .join(format!("crossroad_paper_{file}")),
-        )
-        .unwrap();
-        if fresh != golden {
-            let line = fresh
-                .lines()
-                .zip(golden.lines())
-                .position(|(a, b)| a != b)
-                .unwrap_or(0);
+        let golden = root
+            .join("tests/golden")
+            .join(format!("crossroad_paper_{file}"));
+        let fresh = tmp.path().join("crossroad").join(file);
+        if let Status::Different { count, listed } = compare_file(&golden, &fresh, &tolerances) {
             panic!(
-                "{file} differs from tests/golden/crossroad_paper_{file} from line {}:\n  now:    {}\n  golden: {}\n\
+                "{file} differs from tests/golden/crossroad_paper_{file} in {count} fields:\n  {}\n\
                  If the change is deliberate, run scripts/update-goldens.sh and review the diff.",
-                line + 1,
-                fresh.lines().nth(line).unwrap_or(""),
-                golden.lines().nth(line).unwrap_or("")
+                listed.join("\n  ")
             );
         }
     }

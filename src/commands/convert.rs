@@ -1,49 +1,80 @@
-//! `lidar-noise convert`: one PLY per frame.
+//! `lidar-noise convert`: one point cloud per frame, no noise.
 
 use crate::cli::Global;
-use crate::hdl32e::frames::FrameReader;
-use crate::options::{parse_range, DecoderArgs};
-use crate::writers::ply::{PlyEncoding, PlyFrame};
-use crate::writers::write_file;
+use crate::hdl32e::frames::DecoderOptions;
+use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
+use crate::writers::ply::PlyFrame;
+use crate::writers::{write_file, FrameOutput};
 use anyhow::{Context, Result};
+use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `convert`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Capture file (pcap or pcapng).
-    #[arg(value_name = "CAPTURE")]
-    pub capture: PathBuf,
-    /// Output folder (created if missing); frames are written as frame_NNNNN.ply.
+    /// Capture files (pcap or pcapng), `-` for standard input.
+    #[arg(value_name = "CAPTURE", required = true)]
+    pub captures: Vec<PathBuf>,
+    /// Output folder (created if missing); frames are written as frame_NNNNN.<format>,
+    /// in a subfolder named after each capture when several are given.
     #[arg(short, long, value_name = "DIR")]
     pub output: PathBuf,
     /// Frames to write, by sweep index: N, A..B (both included), A.. or ..B.
     #[arg(long, value_name = "RANGE")]
     pub frames: Option<String>,
-    /// Write ASCII PLY instead of binary little-endian.
-    #[arg(long)]
-    pub ascii: bool,
+    /// Point-cloud format (PLY, LAS, LAZ) and PLY encoding.
+    #[command(flatten)]
+    pub output_format: FrameOutputArgs,
     /// Decoder settings shared by the commands that read captures.
     #[command(flatten)]
     pub decoder: DecoderArgs,
 }
 
-/// File name of a frame's PLY.
+/// File name of a frame's PLY (`frame_NNNNN.ply`); other formats:
+/// [`FrameOutput::file_name`].
 pub fn frame_file_name(index: u32) -> String {
-    format!("frame_{index:05}.ply")
+    FrameOutput::default().file_name(index)
 }
 
-/// Decodes the capture and writes the selected frames.
+/// Decodes each capture and writes the selected frames.
 pub fn run(args: Args, global: Global) -> Result<()> {
+    super::check_stdin_once(&args.captures)?;
     let options = args.decoder.to_options()?;
+    let output = args.output_format.to_output()?;
     let range = match &args.frames {
         Some(text) => parse_range("--frames", text)?,
         None => 0..=u32::MAX,
     };
-    let mut reader = FrameReader::open(&args.capture, &options)?;
-    std::fs::create_dir_all(&args.output)
-        .with_context(|| format!("cannot create the output folder {}", args.output.display()))?;
-    let source = args.capture.display().to_string();
+    let several = args.captures.len() > 1;
+    for (capture, name) in args
+        .captures
+        .iter()
+        .zip(super::output_names(&args.captures))
+    {
+        // One capture keeps the historical layout (frames directly in DIR).
+        let dir = if several {
+            args.output.join(name)
+        } else {
+            args.output.clone()
+        };
+        convert_one(&args, capture, &dir, &options, output, &range, global)?;
+    }
+    Ok(())
+}
+
+fn convert_one(
+    args: &Args,
+    capture: &Path,
+    dir: &Path,
+    options: &DecoderOptions,
+    output: FrameOutput,
+    range: &RangeInclusive<u32>,
+    global: Global,
+) -> Result<()> {
+    let mut reader = super::open_capture(capture, options)?;
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
+    let source = super::capture_label(capture);
     let progress = super::progress(global, "frames");
     let mut written = 0u32;
     while let Some(frame) = reader.next() {
@@ -52,16 +83,9 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             break;
         }
         if range.contains(&frame.index) {
-            let path = args.output.join(frame_file_name(frame.index));
-            let ply = PlyFrame {
-                encoding: if args.ascii {
-                    PlyEncoding::Ascii
-                } else {
-                    PlyEncoding::BinaryLittleEndian
-                },
-                ..PlyFrame::new(&frame.returns, &source, frame.index, frame.start_time())
-            };
-            write_file(&ply, &path, &[args.capture.as_path()])?;
+            let path = dir.join(output.file_name(frame.index));
+            let ply = PlyFrame::new(&frame.returns, &source, frame.index, frame.start_time());
+            write_file(&*output.document(ply), &path, &[capture])?;
             written += 1;
             progress.inc(1);
         }
@@ -69,12 +93,12 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     }
     progress.finish_and_clear();
     let summary = reader.summary();
-    super::warn_truncation(global, &args.capture, &summary);
+    super::warn_truncation(global, capture, &summary);
     if written == 0 {
         anyhow::bail!(
             "{}: no frame in {} (the capture has {} full frames{}); pick others with --frames \
              or add --keep-partial",
-            args.capture.display(),
+            capture.display(),
             args.frames.as_deref().unwrap_or("the capture"),
             summary.full_frames,
             if summary.partial_frames > 0 {
@@ -87,13 +111,9 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     if !global.quiet {
         eprintln!(
             "{}: wrote {written} frames to {}",
-            args.capture.display(),
-            display(&args.output)
+            capture.display(),
+            dir.display()
         );
     }
     Ok(())
-}
-
-fn display(path: &Path) -> String {
-    path.display().to_string()
 }

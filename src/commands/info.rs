@@ -1,7 +1,7 @@
 //! `lidar-noise info`: what a capture contains.
 
 use crate::cli::Global;
-use crate::hdl32e::frames::{CaptureSummary, FrameReader};
+use crate::hdl32e::frames::CaptureSummary;
 use crate::options::DecoderArgs;
 use anyhow::Result;
 use std::io::Write;
@@ -10,7 +10,7 @@ use std::path::PathBuf;
 /// Arguments of `info`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Capture files (pcap or pcapng).
+    /// Capture files (pcap or pcapng), `-` for standard input.
     #[arg(required = true, value_name = "CAPTURE")]
     pub captures: Vec<PathBuf>,
     /// Print JSON (one object per capture, one per line) instead of text.
@@ -23,11 +23,12 @@ pub struct Args {
 
 /// Reads each capture to the end and prints its summary.
 pub fn run(args: Args, global: Global) -> Result<()> {
+    super::check_stdin_once(&args.captures)?;
     let options = args.decoder.to_options()?;
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     for path in &args.captures {
-        let mut reader = FrameReader::open(path, &options)?;
+        let mut reader = super::open_capture(path, &options)?;
         for frame in reader.by_ref() {
             frame?;
         }

@@ -1,5 +1,6 @@
 //! One module per subcommand: each parses nothing itself and calls the library.
 
+pub mod compare;
 pub mod convert;
 pub mod info;
 pub mod run;
@@ -38,6 +39,58 @@ pub fn progress(global: Global, unit: &'static str) -> indicatif::ProgressBar {
     bar
 }
 
+/// The capture path that stands for standard input.
+pub const STDIN: &str = "-";
+
+/// True when `path` is `-`, standard input.
+pub fn is_stdin(path: &Path) -> bool {
+    path.as_os_str() == STDIN
+}
+
+/// How outputs name a capture: its file name, not the path as typed, so the same capture
+/// run from another folder gives identical reports; `stdin` for `-`.
+pub fn capture_label(path: &Path) -> String {
+    if is_stdin(path) {
+        return "stdin".into();
+    }
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}
+
+/// Opens a capture file, or reads standard input to its end for `-` (the reader reads the
+/// capture twice, to identify the sensor and then to decode, so a pipe is buffered in
+/// memory).
+pub fn open_capture(
+    path: &Path,
+    options: &crate::hdl32e::frames::DecoderOptions,
+) -> anyhow::Result<crate::hdl32e::frames::FrameReader> {
+    use anyhow::Context;
+    use std::io::Read;
+    if !is_stdin(path) {
+        return Ok(crate::hdl32e::frames::FrameReader::open(path, options)?);
+    }
+    let mut bytes = Vec::new();
+    std::io::stdin()
+        .lock()
+        .read_to_end(&mut bytes)
+        .context("cannot read the capture from standard input")?;
+    Ok(crate::hdl32e::frames::FrameReader::from_bytes(
+        std::sync::Arc::from(bytes),
+        Path::new("<stdin>"),
+        options,
+    )?)
+}
+
+/// Refuses `-` given more than once (standard input can be read only once).
+pub fn check_stdin_once(paths: &[std::path::PathBuf]) -> anyhow::Result<()> {
+    if paths.iter().filter(|p| is_stdin(p)).count() > 1 {
+        anyhow::bail!("`-` (standard input) can be given only once");
+    }
+    Ok(())
+}
+
 /// Output names of captures: each file's stem, with `-2`, `-3`, ... added where two
 /// captures share a stem, so every capture gets its own folder.
 pub fn output_names(paths: &[std::path::PathBuf]) -> Vec<String> {
@@ -45,6 +98,10 @@ pub fn output_names(paths: &[std::path::PathBuf]) -> Vec<String> {
     paths
         .iter()
         .map(|path| {
+            if is_stdin(path) {
+                used.insert("stdin".to_string());
+                return "stdin".to_string();
+            }
             let stem = path.file_stem().map_or_else(
                 || "capture".to_string(),
                 |s| s.to_string_lossy().into_owned(),

@@ -3,12 +3,12 @@
 use crate::cli::Global;
 use crate::config::Config;
 use crate::hdl32e::frames::{CaptureSummary, DecoderOptions, FrameReader};
-use crate::options::{parse_range, DecoderArgs};
+use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
 use crate::pipeline::report::{cluster_table, FrameClusters, FrameReport, Totals, FATE_CODES};
 use crate::pipeline::{FrameResult, Pipeline};
 use crate::writers::json::JsonDoc;
-use crate::writers::ply::{PlyColumns, PlyEncoding, PlyFrame};
-use crate::writers::write_file;
+use crate::writers::ply::{PlyColumns, PlyFrame};
+use crate::writers::{write_file, FrameOutput};
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -26,7 +26,8 @@ pub const DEFAULT_OUTPUT: &str = "lidar-noise-out";
 /// Arguments of `run`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Capture files (pcap or pcapng); none runs the built-in crossroad fixture.
+    /// Capture files (pcap or pcapng), `-` for standard input; none runs the built-in
+    /// crossroad fixture.
     #[arg(value_name = "CAPTURE")]
     pub captures: Vec<PathBuf>,
     /// Experiment configuration (default: the built-in configs/paper.toml).
@@ -44,15 +45,15 @@ pub struct Args {
     /// Frames to process, by sweep index: N, A..B (both included), A.. or ..B.
     #[arg(long, value_name = "RANGE")]
     pub frames: Option<String>,
-    /// Also write the dropped returns in each PLY, with a `fate` field.
+    /// Also write the dropped returns in each point cloud, with a `fate` field.
     #[arg(long)]
     pub keep_dropped: bool,
-    /// Write no PLY files (reports only).
+    /// Write no point clouds (reports only).
     #[arg(long, conflicts_with = "keep_dropped")]
     pub no_ply: bool,
-    /// Write ASCII PLY instead of binary little-endian.
-    #[arg(long)]
-    pub ascii: bool,
+    /// Point-cloud format (PLY, LAS, LAZ) and PLY encoding.
+    #[command(flatten)]
+    pub output_format: FrameOutputArgs,
     /// Also write each frame's single-linkage merge tree (SciPy linkage layout, CSV).
     #[arg(long)]
     pub linkage_out: bool,
@@ -69,7 +70,7 @@ struct Plan {
     frames: RangeInclusive<u32>,
     keep_dropped: bool,
     ply: bool,
-    encoding: PlyEncoding,
+    output: FrameOutput,
     linkage: bool,
 }
 
@@ -79,6 +80,7 @@ struct Summary<'a> {
     tool: &'static str,
     version: &'static str,
     capture: String,
+    config: String,
     settings: crate::config::EffectiveConfig<'a>,
     power_constants: &'a crate::noise::PowerConstants,
     decoder: DecoderSettings,
@@ -122,13 +124,10 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         },
         keep_dropped: args.keep_dropped,
         ply: !args.no_ply,
-        encoding: if args.ascii {
-            PlyEncoding::Ascii
-        } else {
-            PlyEncoding::BinaryLittleEndian
-        },
+        output: args.output_format.to_output()?,
         linkage: args.linkage_out,
     };
+    super::check_stdin_once(&args.captures)?;
     let mut inputs: Vec<&Path> = args.captures.iter().map(PathBuf::as_path).collect();
     if let Some(c) = &args.config {
         inputs.push(c);
@@ -147,12 +146,12 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         .iter()
         .zip(super::output_names(&args.captures))
     {
-        let reader = FrameReader::open(path, &plan.decoder)?;
+        let reader = super::open_capture(path, &plan.decoder)?;
         let dir = args.output.join(&name);
         run_capture(
             &plan,
             reader,
-            &path.display().to_string(),
+            &super::capture_label(path),
             &dir,
             &inputs,
             global,
@@ -217,6 +216,7 @@ fn run_capture(
         tool: "lidar-noise",
         version: env!("CARGO_PKG_VERSION"),
         capture: source.to_string(),
+        config: plan.config.provenance(),
         settings: plan.config.effective(),
         power_constants: plan.pipeline.chain().ideal_power().constants(),
         decoder: DecoderSettings {
@@ -271,9 +271,9 @@ fn write_ply(
     inputs: &[&Path],
 ) -> Result<()> {
     let ground: Vec<u8> = r.ground.iter().map(|&g| u8::from(g)).collect();
-    let path = dir.join(super::convert::frame_file_name(r.noisy.index));
-    let comments = vec![
-        format!("config {}", plan.config.source.display()),
+    let path = dir.join(plan.output.file_name(r.noisy.index));
+    let mut comments = vec![
+        format!("config {}", plan.config.provenance()),
         format!("seed {}", plan.config.seed),
         format!(
             "fate codes: 0 {}, 1 {}, 2 {}, 3 {}",
@@ -282,6 +282,14 @@ fn write_ply(
         "range is after noise, range_clean before; power is a fraction of emitted power".into(),
         "cluster -1 is ground or noise".into(),
     ];
+    // The whole effective configuration, so that it can be rebuilt from the file alone.
+    comments.extend(
+        plan.config
+            .effective_toml()
+            .lines()
+            .filter(|l| !l.trim().is_empty())
+            .map(|l| format!("effective-config {l}")),
+    );
     let start = r.noisy.clean.first().map_or(0.0, |c| c.time);
     if plan.keep_dropped {
         // Every return: kept ones at their noisy position, dropped ones where they were.
@@ -305,10 +313,9 @@ fn write_ply(
                 cluster: Some(&cluster_all),
             },
             comments: &comments,
-            encoding: plan.encoding,
             ..PlyFrame::new(&returns, source, r.noisy.index, start)
         };
-        write_file(&ply, &path, inputs)?;
+        write_file(&*plan.output.document(ply), &path, inputs)?;
     } else {
         let range_clean: Vec<f32> = r
             .kept
@@ -329,10 +336,9 @@ fn write_ply(
                 cluster: Some(&r.labels),
             },
             comments: &comments,
-            encoding: plan.encoding,
             ..PlyFrame::new(&r.survivors, source, r.noisy.index, start)
         };
-        write_file(&ply, &path, inputs)?;
+        write_file(&*plan.output.document(ply), &path, inputs)?;
     }
     Ok(())
 }

@@ -22,15 +22,16 @@ pub struct SynthArgs {
     /// Output folder (created if missing).
     #[arg(short = 'o', long = "output", value_name = "DIR")]
     pub output: PathBuf,
-    /// Number of full rotations (overrides the scene).
-    #[arg(long)]
+    /// Number of full rotations (overrides the scene). `--frames` is a deprecated
+    /// spelling: elsewhere `--frames` picks a frame range.
+    #[arg(long = "rotations", value_name = "N", alias = "frames")]
     pub frames: Option<u32>,
     /// Range-noise seed (overrides the scene).
     #[arg(long)]
     pub seed: Option<u64>,
     /// Cast every laser of a block at the block azimuth instead of interpolating
-    /// towards the next block.
-    #[arg(long)]
+    /// towards the next block (`--no-interpolation` is the old spelling).
+    #[arg(long = "no-interpolate", alias = "no-interpolation")]
     pub no_interpolation: bool,
 }
 
@@ -44,7 +45,7 @@ pub fn run(args: SynthArgs, global: crate::cli::Global) -> anyhow::Result<()> {
     };
     if let Some(frames) = args.frames {
         if !(1..=100_000).contains(&frames) {
-            bail!("--frames {frames}: must be 1..100000");
+            bail!("--rotations {frames}: must be 1..100000");
         }
         scene.frames = frames;
     }

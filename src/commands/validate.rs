@@ -9,20 +9,42 @@ pub struct Args {
     /// Configuration file (TOML); the built-in configs/paper.toml when omitted.
     #[arg(value_name = "CONFIG")]
     pub config: Option<PathBuf>,
+    /// The configuration file as `run` and `sweep` take it (same as CONFIG).
+    #[arg(
+        short = 'c',
+        long = "config",
+        value_name = "FILE",
+        conflicts_with = "config"
+    )]
+    pub config_file: Option<PathBuf>,
     /// Override a key before validation, e.g. `noise[1].rate_mm_h=3` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
     /// Override the seed.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Print the effective configuration (overrides applied, defaults filled in) as TOML
+    /// to stdout instead of the summary; save it to rerun the same experiment.
+    #[arg(long)]
+    pub print: bool,
 }
 
 /// Validates the configuration: prints "CONFIG: ok" and the stage list to stdout and the
 /// warnings to stderr, or returns the error naming key and line.
 pub fn run(args: Args, global: crate::cli::Global) -> anyhow::Result<()> {
-    let (config, warnings) = Config::load(args.config.as_deref(), &args.set, args.seed)?;
+    let path = args.config.as_deref().or(args.config_file.as_deref());
+    let (config, warnings) = Config::load(path, &args.set, args.seed)?;
     for w in &warnings {
         global.warn(w);
+    }
+    if args.print {
+        println!(
+            "# effective configuration of {}\n# written by lidar-noise {} (validate --print)\n",
+            config.provenance(),
+            env!("CARGO_PKG_VERSION")
+        );
+        print!("{}", config.effective_toml());
+        return Ok(());
     }
     println!("{}: ok", config.source.display());
     println!("seed {}", config.seed);

@@ -134,6 +134,9 @@ pub struct Config {
     pub objects: ObjectRule,
     /// Where the configuration came from (file path or the built-in label).
     pub source: PathBuf,
+    /// The command-line overrides applied on top of the file, as given
+    /// (`--set KEY=VALUE`, then `--seed N`), for provenance.
+    pub overrides: Vec<String>,
 }
 
 impl Config {
@@ -195,6 +198,11 @@ impl Config {
         if let Some(s) = seed {
             config.seed = s;
         }
+        config.overrides = sets
+            .iter()
+            .map(|s| format!("--set {s}"))
+            .chain(seed.map(|s| format!("--seed {s}")))
+            .collect();
         let warnings = ctx.warnings.into_inner();
         Ok((config, warnings))
     }
@@ -203,6 +211,24 @@ impl Config {
     pub fn effective_toml(&self) -> String {
         // Serialising plain numbers, strings and tables cannot fail.
         toml::to_string(&self.effective()).unwrap_or_default()
+    }
+
+    /// Where the configuration came from with its command-line overrides, e.g.
+    /// `<built-in configs/paper.toml> --set rain.rate_mm_h=1 --seed 7`. A file is named
+    /// by its file name, like captures, so that the same run from another folder writes
+    /// the same reports (the effective settings are recorded beside it anyway).
+    pub fn provenance(&self) -> String {
+        let mut text = match self.source.file_name() {
+            Some(name) if self.source != Path::new(DEFAULT_LABEL) => {
+                name.to_string_lossy().into_owned()
+            }
+            _ => self.source.display().to_string(),
+        };
+        for o in &self.overrides {
+            text.push(' ');
+            text.push_str(o);
+        }
+        text
     }
 
     /// The effective settings after overrides as JSON, with the same key names.
@@ -535,5 +561,6 @@ fn read_config(root: &Section<'_>, file: &Path) -> Result<Config> {
         cluster,
         objects,
         source: file.to_path_buf(),
+        overrides: Vec::new(),
     })
 }

@@ -124,15 +124,47 @@ fn parse_value(text: &str) -> Value {
         .unwrap_or_else(|| Value::String(text.to_string()))
 }
 
+/// Resolves the stage shorthand `<stage type>.<option>` (e.g. `rain.rate_mm_h`) to the
+/// path of that option in the first stage of that type, `noise[i].<option>`, appending a
+/// stage of that type when the configuration has none. Any other key gives `None`.
+/// `--set` and `sweep --vary` share it.
+pub fn stage_shorthand(root: &mut Table, key: &str) -> Option<String> {
+    let (stage, option) = key.split_once('.')?;
+    let is_stage = crate::noise::REGISTRY.iter().any(|k| k.name == stage);
+    if !is_stage || option.is_empty() || option.contains(['.', '[']) {
+        return None;
+    }
+    let Value::Array(items) = root
+        .entry("noise")
+        .or_insert_with(|| Value::Array(Vec::new()))
+    else {
+        // `noise` is not an array: the plain path reports that.
+        return None;
+    };
+    let of_type = |v: &Value| v.get("type").and_then(Value::as_str) == Some(stage);
+    let i = match items.iter().position(of_type) {
+        Some(i) => i,
+        None => {
+            let mut t = Table::new();
+            t.insert("type".into(), Value::String(stage.into()));
+            items.push(Value::Table(t));
+            items.len() - 1
+        }
+    };
+    Some(format!("noise[{i}].{option}"))
+}
+
 /// Applies one `key=value` override to `root`, recording its path in `locator`.
 ///
 /// Intermediate tables are created when missing; an array index may be one past the end
-/// to append a new table (e.g. a new `[[noise]]` stage).
+/// to append a new table (e.g. a new `[[noise]]` stage). The key may be the stage
+/// shorthand of [`stage_shorthand`].
 pub fn apply_set(root: &mut Table, arg: &str, locator: &mut Locator) -> Result<(), String> {
     let (path, text) = arg
         .split_once('=')
         .ok_or_else(|| "expected key=value".to_string())?;
-    let segments = parse_path(path.trim())?;
+    let expanded = stage_shorthand(root, path.trim());
+    let segments = parse_path(expanded.as_deref().unwrap_or(path.trim()))?;
     let value = parse_value(text.trim());
     let mut cur: &mut Value = {
         let Some(Segment::Key(first)) = segments.first() else {
@@ -208,6 +240,22 @@ mod tests {
         );
         assert!(parse_path("noise[x]").is_err());
         assert!(parse_path("a..b").is_err());
+    }
+
+    #[test]
+    fn stage_shorthand_finds_or_appends_the_stage() {
+        let mut root: Table =
+            toml::from_str("[[noise]]\ntype = \"occlusion\"\n[[noise]]\ntype = \"rain\"\n")
+                .unwrap();
+        let mut loc = Locator::default();
+        apply_set(&mut root, "rain.rate_mm_h=3", &mut loc).unwrap();
+        assert_eq!(root["noise"][1]["rate_mm_h"].as_integer(), Some(3));
+        assert_eq!(loc.sets[0].0, "noise[1].rate_mm_h");
+        let mut empty = Table::new();
+        apply_set(&mut empty, "rain.rate_mm_h=2", &mut loc).unwrap();
+        assert_eq!(empty["noise"][0]["type"].as_str(), Some("rain"));
+        assert_eq!(stage_shorthand(&mut empty, "detection.min_power"), None);
+        assert_eq!(stage_shorthand(&mut empty, "rain.a.b"), None);
     }
 
     #[test]

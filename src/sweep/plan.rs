@@ -250,16 +250,10 @@ impl BaseConfig {
         // Values first, on the stage list as written, so that `noise[i]` paths keep
         // meaning what they mean in the file; removals come last.
         for (v, value) in varies.iter().zip(&cell.values) {
+            // `--set` resolves the `<stage type>.<option>` shorthand itself.
             let set = match &v.kind {
                 VaryKind::Toggle { .. } => continue,
-                VaryKind::StageOption { stage, option } => {
-                    let i = match stage_index(&table, stage) {
-                        Some(i) => i,
-                        None => push_stage(&mut table, stage),
-                    };
-                    format!("noise[{i}].{option}={value}")
-                }
-                VaryKind::Path => format!("{}={value}", v.key),
+                VaryKind::StageOption { .. } | VaryKind::Path => format!("{}={value}", v.key),
             };
             apply_set(&mut table, &set, &mut locator)
                 .map_err(|m| fail(format!("--vary {}: {m}", v.key)))?;
@@ -314,22 +308,6 @@ fn stage_index(table: &Table, stage: &str) -> Option<usize> {
         .as_array()?
         .iter()
         .position(|v| stage_type(v) == Some(stage))
-}
-
-fn push_stage(table: &mut Table, stage: &str) -> usize {
-    let entry = table
-        .entry("noise")
-        .or_insert_with(|| Value::Array(Vec::new()));
-    if !entry.is_array() {
-        *entry = Value::Array(Vec::new());
-    }
-    let Value::Array(list) = entry else {
-        return 0;
-    };
-    let mut t = Table::new();
-    t.insert("type".into(), Value::String(stage.into()));
-    list.push(Value::Table(t));
-    list.len() - 1
 }
 
 fn retain_stages(table: &mut Table, keep: impl Fn(&str) -> bool) {

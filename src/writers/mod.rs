@@ -8,6 +8,7 @@ pub mod atomic;
 pub mod csv;
 pub mod html;
 pub mod json;
+pub mod las;
 pub mod ply;
 pub mod png;
 
@@ -29,4 +30,60 @@ pub trait Output {
 /// Writes `doc` to `path` atomically, refusing to overwrite any of `protected_inputs`.
 pub fn write_file(doc: &dyn Output, path: &Path, protected_inputs: &[&Path]) -> Result<()> {
     atomic::write_atomically(path, protected_inputs, |out| doc.write_to(out))
+}
+
+/// File format of a frame's point cloud (`--format`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum FrameFormat {
+    /// PLY (binary little-endian or ASCII), every field a vertex property.
+    #[default]
+    Ply,
+    /// LAS 1.4, point format 6, extra fields as extra bytes.
+    Las,
+    /// LAZ: LAS compressed with LASzip.
+    Laz,
+}
+
+impl FrameFormat {
+    /// File extension, without the dot.
+    pub fn extension(self) -> &'static str {
+        match self {
+            FrameFormat::Ply => "ply",
+            FrameFormat::Las => "las",
+            FrameFormat::Laz => "laz",
+        }
+    }
+}
+
+/// How frames are written: the format and the PLY encoding.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrameOutput {
+    /// File format.
+    pub format: FrameFormat,
+    /// PLY payload encoding (PLY only).
+    pub encoding: ply::PlyEncoding,
+    /// PLY property naming (PLY only).
+    pub ply_style: ply::PlyStyle,
+}
+
+impl FrameOutput {
+    /// File name of frame `index`: `frame_NNNNN.<extension>`.
+    pub fn file_name(&self, index: u32) -> String {
+        format!("frame_{index:05}.{}", self.format.extension())
+    }
+
+    /// The frame as a document of the chosen format.
+    pub fn document<'a>(&self, mut frame: ply::PlyFrame<'a>) -> Box<dyn Output + 'a> {
+        match self.format {
+            FrameFormat::Ply => {
+                frame.encoding = self.encoding;
+                frame.style = self.ply_style;
+                Box::new(frame)
+            }
+            FrameFormat::Las | FrameFormat::Laz => Box::new(las::LasFrame {
+                frame,
+                compressed: self.format == FrameFormat::Laz,
+            }),
+        }
+    }
 }

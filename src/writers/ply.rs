@@ -18,6 +18,8 @@
 //! | `ground` | uchar | optional: 1 = ground, 0 = not |
 //! | `cluster` | int | optional: cluster id, -1 = none |
 //!
+//! With [`PlyStyle::Cloudcompare`] every property but `x y z` is named `scalar_<name>`.
+//!
 //! No 64-bit properties: many readers (Open3D among them) reject or mangle them, which is
 //! also why `time` is relative to the frame and stored as float (about 0.1 µs resolution
 //! over a 0.1 s sweep). Provenance goes in `comment` lines.
@@ -88,6 +90,18 @@ pub enum PlyEncoding {
     Ascii,
 }
 
+/// Property naming of the PLY header.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum PlyStyle {
+    /// The property names of the table above.
+    #[default]
+    Plain,
+    /// Every property but `x y z` named `scalar_<name>`: CloudCompare (2.11 at least)
+    /// loads only such properties as scalar fields without asking, e.g. in `-SILENT`
+    /// command-line mode (it shows them without the prefix).
+    Cloudcompare,
+}
+
 /// One frame ready to be written as PLY.
 #[derive(Clone, Copy, Debug)]
 pub struct PlyFrame<'a> {
@@ -105,6 +119,8 @@ pub struct PlyFrame<'a> {
     pub comments: &'a [String],
     /// Payload encoding.
     pub encoding: PlyEncoding,
+    /// Property naming.
+    pub style: PlyStyle,
 }
 
 impl<'a> PlyFrame<'a> {
@@ -123,6 +139,7 @@ impl<'a> PlyFrame<'a> {
             frame_index,
             comments: &[],
             encoding: PlyEncoding::default(),
+            style: PlyStyle::default(),
         }
     }
 
@@ -160,22 +177,35 @@ impl<'a> PlyFrame<'a> {
             h.push_str(&clean);
             h.push('\n');
         };
-        comment(&format!("lidar-noise {}", env!("CARGO_PKG_VERSION")));
-        comment(&format!("source {}", self.source));
-        comment(&format!("frame {}", self.frame_index));
-        comment(&format!(
-            "time is seconds since {:.6} s past the hour",
-            self.frame_start_time
-        ));
-        for c in self.comments {
-            comment(c);
+        for line in self.provenance_lines() {
+            comment(&line);
         }
         let _ = writeln!(h, "element vertex {}", self.returns.len());
         for (name, ty) in BASE_PROPERTIES.iter().chain(self.present_optional()) {
-            let _ = writeln!(h, "property {ty} {name}");
+            let prefix = match self.style {
+                PlyStyle::Cloudcompare if !matches!(*name, "x" | "y" | "z") => "scalar_",
+                _ => "",
+            };
+            let _ = writeln!(h, "property {ty} {prefix}{name}");
         }
         h.push_str("end_header\n");
         h
+    }
+
+    /// The provenance lines (tool version, source, frame, time origin, then the extra
+    /// comments), as written in the PLY `comment` lines and the LAS provenance record.
+    pub fn provenance_lines(&self) -> Vec<String> {
+        let mut lines = vec![
+            format!("lidar-noise {}", env!("CARGO_PKG_VERSION")),
+            format!("source {}", self.source),
+            format!("frame {}", self.frame_index),
+            format!(
+                "time is seconds since {:.6} s past the hour",
+                self.frame_start_time
+            ),
+        ];
+        lines.extend(self.comments.iter().cloned());
+        lines
     }
 
     /// The optional properties present in this frame, in file order.
@@ -356,6 +386,39 @@ mod tests {
         assert!(h.starts_with("ply\nformat binary_little_endian 1.0\n"));
         assert!(h.contains("\nelement vertex 3\n"));
         assert!(h.ends_with("end_header\n"));
+    }
+
+    #[test]
+    fn cloudcompare_style_prefixes_every_property_but_xyz() {
+        let returns: Vec<Return> = (0..2).map(ret).collect();
+        let ground = [1u8, 0];
+        let mut frame = PlyFrame::new(&returns, "a.pcap", 0, 1200.0);
+        frame.columns.ground = Some(&ground);
+        let plain = frame.header();
+        frame.style = PlyStyle::Cloudcompare;
+        let cc = frame.header();
+        let props = |h: &str| -> Vec<String> {
+            h.lines()
+                .filter_map(|l| l.strip_prefix("property "))
+                .map(|l| l.split(' ').nth(1).unwrap().to_string())
+                .collect()
+        };
+        let expected: Vec<String> = props(&plain)
+            .into_iter()
+            .map(|n| match n.as_str() {
+                "x" | "y" | "z" => n,
+                _ => format!("scalar_{n}"),
+            })
+            .collect();
+        assert_eq!(props(&cc), expected);
+        assert!(cc.contains("property uchar scalar_ground\n"));
+        // Same payload: only names change.
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        frame.write(&mut a).unwrap();
+        frame.style = PlyStyle::Plain;
+        frame.write(&mut b).unwrap();
+        assert_eq!(a.len() - cc.len(), b.len() - plain.len());
+        assert_eq!(a[cc.len()..], b[plain.len()..]);
     }
 
     #[test]

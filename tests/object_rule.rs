@@ -34,6 +34,12 @@ fn object_keys_are_read_and_validated_with_key_and_line() {
         e.contains("cluster.object_max_extent_m") && e.contains("line 3,"),
         "{e}"
     );
+    // Only the minimum is given: it is the key named.
+    let e = load("[cluster]\nobject_min_height_m = 7.0\n").unwrap_err();
+    assert!(
+        e.contains("cluster.object_min_height_m") && e.contains("line 2,") && e.contains("empty"),
+        "{e}"
+    );
     let e = load("[cluster]\nobject_max_height_m = \"tall\"\n").unwrap_err();
     assert!(e.contains("cluster.object_max_height_m"), "{e}");
 }

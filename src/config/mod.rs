@@ -426,6 +426,7 @@ fn read_cluster(root: &Section<'_>) -> Result<(ClusterOptions, ObjectRule)> {
         }
         c.max_edge_m = v;
     }
+    let mut given: Vec<&str> = Vec::new();
     for (key, into) in [
         ("object_min_height_m", &mut o.min_height_m),
         ("object_max_height_m", &mut o.max_height_m),
@@ -437,25 +438,37 @@ fn read_cluster(root: &Section<'_>) -> Result<(ClusterOptions, ObjectRule)> {
                 return Err(t.error(key, format!("{v} must be 0 or more metres (inf allowed)")));
             }
             *into = v;
+            given.push(key);
         }
     }
-    if o.min_height_m > o.max_height_m {
-        return Err(t.error(
+    for (what, lo, hi, lo_key, hi_key) in [
+        (
+            "height",
+            o.min_height_m,
+            o.max_height_m,
+            "object_min_height_m",
             "object_max_height_m",
-            format!(
-                "{} is below object_min_height_m = {}",
-                o.max_height_m, o.min_height_m
-            ),
-        ));
-    }
-    if o.min_extent_m > o.max_extent_m {
-        return Err(t.error(
+        ),
+        (
+            "extent",
+            o.min_extent_m,
+            o.max_extent_m,
+            "object_min_extent_m",
             "object_max_extent_m",
-            format!(
-                "{} is below object_min_extent_m = {}",
-                o.max_extent_m, o.min_extent_m
-            ),
-        ));
+        ),
+    ] {
+        if lo > hi {
+            // Name the key the file sets (the other may be a default).
+            let key = if given.contains(&hi_key) {
+                hi_key
+            } else {
+                lo_key
+            };
+            return Err(t.error(
+                key,
+                format!("the object {what} range is empty: {lo_key} = {lo} > {hi_key} = {hi}"),
+            ));
+        }
     }
     t.finish()?;
     Ok((c, o))

@@ -214,7 +214,14 @@ pub fn write_outputs(
                     s.points.sort_by(|a, b| a.0.total_cmp(&b.0));
                 }
                 let plot = LinePlot {
-                    title: format!("{capture}: {}", metric.name.replace('_', " ")),
+                    // The label without its unit: "objects detected at [5, 10) m".
+                    title: format!(
+                        "{capture}: {}",
+                        metric
+                            .label
+                            .rsplit_once(" (")
+                            .map_or(&*metric.label, |t| t.0)
+                    ),
                     x_label: x_label(&varies[xi]),
                     y_label: metric.label.clone(),
                     series,

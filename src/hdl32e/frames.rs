@@ -373,8 +373,9 @@ impl FrameReader {
         }
         let ts = packet::timestamp_us(payload);
         if let Some(prev) = self.prev_ts {
-            // The sensor clock restarts every hour: keep time increasing.
-            if ts + 1_800_000_000 < prev {
+            // The sensor clock restarts every hour: keep time increasing. Compared in u64:
+            // in u32 `ts + 1_800_000_000` overflows once the clock passes 41 min 35 s.
+            if u64::from(ts) + 1_800_000_000 < u64::from(prev) {
                 self.hour_offset_us += 3_600_000_000.0;
             }
         }

@@ -48,7 +48,8 @@ fn shifted(records: &[Record], start_us: u64) -> Vec<u8> {
             let new = ((start_us + elapsed) % HOUR_US) as u32;
             payload[1200..1204].copy_from_slice(&new.to_le_bytes());
         }
-        w.write_udp(r.ts_us, r.ports.0, r.ports.1, &payload).unwrap();
+        w.write_udp(r.ts_us, r.ports.0, r.ports.1, &payload)
+            .unwrap();
     }
     w.into_inner().unwrap()
 }

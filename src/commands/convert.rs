@@ -70,6 +70,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     progress.finish_and_clear();
     let summary = reader.summary();
     super::warn_truncation(global, &args.capture, &summary);
+    super::warn_capture(global, &args.capture, &summary, false);
     if written == 0 {
         anyhow::bail!(
             "{}: no frame in {} (the capture has {} full frames{}); pick others with --frames \
@@ -86,8 +87,9 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     }
     if !global.quiet {
         eprintln!(
-            "{}: wrote {written} frames to {}",
+            "{}: wrote {written} frame{} to {}",
             args.capture.display(),
+            if written == 1 { "" } else { "s" },
             display(&args.output)
         );
     }

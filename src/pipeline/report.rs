@@ -56,6 +56,13 @@ impl Totals {
         t.ground_fraction = t.stages.ground_fraction();
         t
     }
+
+    /// Adds one frame report (the running form of `of`, for streamed reports).
+    pub fn add(&mut self, f: &FrameReport) {
+        self.noise.merge(&f.noise);
+        self.stages.merge(&f.stages);
+        self.ground_fraction = self.stages.ground_fraction();
+    }
 }
 
 /// One frame's clusters in the cluster report.

@@ -10,6 +10,7 @@ pub mod html;
 pub mod json;
 pub mod ply;
 pub mod png;
+pub mod staging;
 
 use crate::error::Result;
 use std::io::Write;

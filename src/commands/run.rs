@@ -169,7 +169,8 @@ pub fn run(args: Args, global: Global) -> Result<()> {
                 staged.push(s);
                 reports.push(report);
             }
-            Ok((Err(e), _)) => {
+            Ok((Err(e), s)) => {
+                drop(s);
                 drop(staged);
                 folder.abandon();
                 return Err(e);
@@ -268,10 +269,9 @@ fn run_capture(
     );
     if spool.frames == 0 {
         // The reader stopped at the end of the range: count the frames of the whole capture.
-        while !reader
-            .next_batch(batch_size, &(u32::MAX..=u32::MAX))?
-            .is_empty()
-        {}
+        for frame in reader.by_ref() {
+            frame?;
+        }
         let s = reader.summary();
         let full = s.full_frames;
         let (first, last) = if s.partial_frames > 0 {

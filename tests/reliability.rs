@@ -425,6 +425,58 @@ fn frame_range_messages_explain_the_problem() {
     assert!(e.contains("17 full frames") && e.contains("1..17"), "{e}");
 }
 
+/// Defect 8 (configs): settings that would silently do nothing are pointed out.
+#[test]
+fn configs_that_do_nothing_are_refused_or_noted() {
+    let tmp = tempfile::tempdir().unwrap();
+    for interval in ["[20, 30]", "[-100, -95]", "[-5, -5]"] {
+        let path = tmp.path().join("occ.toml");
+        std::fs::write(
+            &path,
+            format!("[[noise]]\ntype = \"occlusion\"\nelevation_deg = {interval}\n"),
+        )
+        .unwrap();
+        let o = bin().arg("validate").arg(&path).output().unwrap();
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{interval}: {e}");
+        assert!(
+            e.contains("elevation_deg") && e.contains("line 3") && e.contains("selects no laser"),
+            "{e}"
+        );
+    }
+    // An interval holding a laser (-30.67) is fine.
+    let path = tmp.path().join("ok.toml");
+    std::fs::write(
+        &path,
+        "[[noise]]\ntype = \"occlusion\"\nelevation_deg = [-31, -30]\n",
+    )
+    .unwrap();
+    run_ok(bin().arg("validate").arg(&path));
+    let empty = tmp.path().join("empty.toml");
+    std::fs::write(&empty, "").unwrap();
+    let o = run_ok(
+        bin()
+            .arg("run")
+            .arg("-c")
+            .arg(&empty)
+            .arg("--no-ply")
+            .arg("-o")
+            .arg(tmp.path().join("o")),
+    );
+    assert!(stderr(&o).contains("no noise stage"), "{}", stderr(&o));
+    let o = bin()
+        .args(["validate", "--set", "noise[2].type=\"rain\""])
+        .output()
+        .unwrap();
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains("--set noise[2].type"), "{e}");
+    assert!(
+        !e.contains("line "),
+        "blames a line of the built-in file: {e}"
+    );
+}
+
 /// Defect 9: messages say what is wrong, once.
 #[test]
 fn messages_name_the_problem_once() {

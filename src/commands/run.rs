@@ -112,6 +112,12 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     for w in &warnings {
         global.warn(w);
     }
+    if config.noise.is_empty() {
+        global.warn(&format!(
+            "{}: the configuration has no noise stage; the run measures the clean pipeline",
+            config.source.display()
+        ));
+    }
     let plan = Plan {
         pipeline: Pipeline::new(&config),
         config,

@@ -164,27 +164,25 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     let mut staged = Vec::new();
     let mut reports = Vec::new();
     for (reader, source, name) in jobs {
-        let result = folder.stage(&name).and_then(|s| {
-            Ok((
-                run_capture(&plan, reader, &source, s.path(), &inputs, global),
-                s,
-            ))
-        });
-        match result {
-            Ok((Ok(report), s)) => {
-                staged.push(s);
-                reports.push(report);
-            }
-            Ok((Err(e), s)) => {
-                drop(s);
-                drop(staged);
-                folder.abandon();
-                return Err(e);
-            }
+        let stage = match folder.stage(&name) {
+            Ok(s) => s,
             Err(e) => {
                 drop(staged);
                 folder.abandon();
                 return Err(e.into());
+            }
+        };
+        match run_capture(&plan, reader, &source, stage.path(), &inputs, global) {
+            Ok(report) => {
+                staged.push(stage);
+                reports.push(report);
+            }
+            Err(e) => {
+                // Staging folders go first, so that a folder this run created is empty.
+                drop(stage);
+                drop(staged);
+                folder.abandon();
+                return Err(e);
             }
         }
     }

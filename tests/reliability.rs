@@ -207,6 +207,44 @@ fn failed_runs_leave_nothing_behind() {
     assert_eq!(common::files(&out), before);
 }
 
+/// Defect 4 for `convert`: a failed convert leaves no frame and no folder.
+#[test]
+fn failed_convert_leaves_nothing_behind() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bad = corrupt_mid_file(tmp.path());
+    let out = tmp.path().join("ply");
+    let o = bin()
+        .arg("convert")
+        .arg(&bad)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(!out.exists(), "left {:?}", common::files(&out).keys());
+    let o = bin()
+        .arg("convert")
+        .arg(fixture("crossroad.pcap"))
+        .args(["--frames", "999", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(!out.exists());
+    run_ok(
+        bin()
+            .arg("convert")
+            .arg(fixture("crossroad.pcap"))
+            .arg("-o")
+            .arg(&out),
+    );
+    let names: Vec<String> = visible_files(&out)
+        .into_keys()
+        .map(|p| p.to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names, ["frame_00000.ply", "frame_00001.ply"], "{names:?}");
+}
+
 /// Defect 5: a second run into a folder that is being written fails at once.
 #[test]
 fn concurrent_run_into_the_same_folder_fails_at_once() {

@@ -4,8 +4,9 @@ use crate::cli::Global;
 use crate::hdl32e::frames::FrameReader;
 use crate::options::{parse_range, DecoderArgs};
 use crate::writers::ply::{PlyEncoding, PlyFrame};
+use crate::writers::staging::{self, OutputFolder};
 use crate::writers::write_file;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `convert`.
@@ -40,9 +41,46 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         Some(text) => parse_range("--frames", text)?,
         None => 0..=u32::MAX,
     };
-    let mut reader = FrameReader::open(&args.capture, &options)?;
-    std::fs::create_dir_all(&args.output)
-        .with_context(|| format!("cannot create the output folder {}", args.output.display()))?;
+    let reader = FrameReader::open(&args.capture, &options)?;
+    // Frames are written into a staging folder and moved into place only when all are
+    // written: a failed or interrupted convert leaves no frame behind.
+    let folder = OutputFolder::lock(&args.output)?;
+    let stage = match folder.stage("convert") {
+        Ok(s) => s,
+        Err(e) => {
+            folder.abandon();
+            return Err(e.into());
+        }
+    };
+    match convert(&args, global, reader, &range, stage.path()) {
+        Ok(written) => {
+            staging::commit_files(stage, &args.output)?;
+            if !global.quiet {
+                eprintln!(
+                    "{}: wrote {written} frame{} to {}",
+                    args.capture.display(),
+                    if written == 1 { "" } else { "s" },
+                    display(&args.output)
+                );
+            }
+            Ok(())
+        }
+        Err(e) => {
+            drop(stage);
+            folder.abandon();
+            Err(e)
+        }
+    }
+}
+
+/// Writes the frames in `range` into `dir`; returns how many.
+fn convert(
+    args: &Args,
+    global: Global,
+    mut reader: FrameReader,
+    range: &std::ops::RangeInclusive<u32>,
+    dir: &Path,
+) -> Result<u32> {
     let source = args.capture.display().to_string();
     let progress = super::progress(global, "frames");
     let mut written = 0u32;
@@ -52,7 +90,12 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             break;
         }
         if range.contains(&frame.index) {
-            let path = args.output.join(frame_file_name(frame.index));
+            let name = frame_file_name(frame.index);
+            crate::writers::atomic::refuse_inputs(
+                &args.output.join(&name),
+                &[args.capture.as_path()],
+            )?;
+            let path = dir.join(name);
             let ply = PlyFrame {
                 encoding: if args.ascii {
                     PlyEncoding::Ascii
@@ -85,15 +128,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             }
         );
     }
-    if !global.quiet {
-        eprintln!(
-            "{}: wrote {written} frame{} to {}",
-            args.capture.display(),
-            if written == 1 { "" } else { "s" },
-            display(&args.output)
-        );
-    }
-    Ok(())
+    Ok(written)
 }
 
 fn display(path: &Path) -> String {

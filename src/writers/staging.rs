@@ -160,6 +160,28 @@ pub fn commit(staged: Vec<Staged>) -> Result<()> {
     })
 }
 
+/// Moves every file of a staging folder into `dir` (the folder the files belong in, for
+/// commands such as `convert` whose output folder is the target itself), replacing files
+/// of the same name, with signals held off; then deletes the staging folder.
+pub fn commit_files(mut staged: Staged, dir: &Path) -> Result<()> {
+    signals::critical(|g| {
+        let entries = fs::read_dir(&staged.path).map_err(|e| Error::io(&staged.path, e))?;
+        let mut names: Vec<_> = entries
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name())
+            .collect();
+        names.sort();
+        for name in names {
+            let target = dir.join(&name);
+            fs::rename(staged.path.join(&name), &target).map_err(|e| Error::io(&target, e))?;
+        }
+        signals::remove_path(&staged.path);
+        g.unregister(&staged.path);
+        staged.done = true;
+        Ok(())
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

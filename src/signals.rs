@@ -13,11 +13,15 @@ use std::sync::{Mutex, MutexGuard, Once};
 #[derive(Default)]
 struct Registry {
     paths: Vec<PathBuf>,
+    /// Folders this process created, with their lock file: removed on a signal when
+    /// nothing else is in them, so an interrupted first run leaves no empty folder.
+    created: Vec<(PathBuf, PathBuf)>,
     exiting: bool,
 }
 
 static REGISTRY: Mutex<Registry> = Mutex::new(Registry {
     paths: Vec::new(),
+    created: Vec::new(),
     exiting: false,
 });
 static INSTALL: Once = Once::new();
@@ -49,6 +53,15 @@ pub fn install() {
                 for path in reg.paths.iter().rev() {
                     remove_path(path);
                 }
+                for (dir, lock) in &reg.created {
+                    let only_lock = std::fs::read_dir(dir).is_ok_and(|entries| {
+                        entries.filter_map(|e| e.ok()).all(|e| e.path() == *lock)
+                    });
+                    if only_lock {
+                        let _ = std::fs::remove_file(lock);
+                        let _ = std::fs::remove_dir(dir);
+                    }
+                }
                 std::process::exit(128 + signal);
             }
         });
@@ -69,6 +82,12 @@ impl Guarded<'_> {
     /// Registers a path to delete on a signal.
     pub fn register(&mut self, path: &Path) {
         self.0.paths.push(path.to_path_buf());
+    }
+
+    /// Registers a folder this process created and its lock file: on a signal both are
+    /// removed if nothing else is in the folder.
+    pub fn created_folder(&mut self, dir: &Path, lock: &Path) {
+        self.0.created.push((dir.to_path_buf(), lock.to_path_buf()));
     }
 
     /// Forgets a path (it was renamed into place or removed).

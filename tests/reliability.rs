@@ -319,11 +319,14 @@ fn interrupted_run_and_sweep_leave_nothing_partial_and_rerun_identically() {
             .arg(out);
         c
     };
+    // About 1.5 s on the shared capture, so the kills land mid-sweep.
+    let sweep_capture =
+        common::shared("hdl32e/monterey.pcap").unwrap_or_else(|| fixture("crossroad.pcap"));
     let sweep_args = |out: &Path| {
         let mut c = bin();
         c.arg("sweep")
-            .arg(fixture("crossroad.pcap"))
-            .args(["--vary", "rain.rate_mm_h=0,1,3", "--seeds", "1..2", "-o"])
+            .arg(&sweep_capture)
+            .args(["--vary", "rain.rate_mm_h=0,3", "--seeds", "1..3", "-o"])
             .arg(out);
         c
     };
@@ -335,8 +338,9 @@ fn interrupted_run_and_sweep_leave_nothing_partial_and_rerun_identically() {
         run_ok(&mut args(&reference));
         let reference = visible_files(&reference);
         let out = tmp.path().join(format!("{what}-out"));
-        for (i, delay_ms) in [30u64, 80, 150, 250, 400].into_iter().enumerate() {
+        for (i, delay_ms) in [30u64, 80, 150, 250, 400, 700].into_iter().enumerate() {
             let sigkill = i % 2 == 1;
+            let fresh = !out.exists();
             let mut child = args(&out)
                 .stdout(Stdio::null())
                 .stderr(Stdio::null())
@@ -358,6 +362,12 @@ fn interrupted_run_and_sweep_leave_nothing_partial_and_rerun_identically() {
                     "{what}: SIGINT after {delay_ms} ms gave {status:?}"
                 );
                 assert!(leftovers(&out).is_empty(), "{what}: {:?}", leftovers(&out));
+                if fresh && status.code() == Some(130) {
+                    assert!(
+                        !out.exists(),
+                        "{what}: an interrupted first run left its folder"
+                    );
+                }
             }
             if what == "run" {
                 // The results folder is whole: absent or an entire run's output.

@@ -53,6 +53,9 @@ impl OutputFolder {
             Err(fs::TryLockError::Error(e)) => return Err(Error::io(&lock_path, e)),
         }
         remove_stale(dir);
+        if created {
+            signals::critical(|g| g.created_folder(dir, &lock_path));
+        }
         Ok(OutputFolder {
             dir: dir.to_path_buf(),
             created,

@@ -175,9 +175,6 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     }
     // One sweep per folder at a time; leftovers of killed sweeps are removed under the lock.
     let _folder = crate::writers::staging::OutputFolder::lock(&args.output)?;
-    for c in &captures {
-        crate::writers::staging::remove_stale(&args.output.join("cells").join(&c.name));
-    }
     let n_cells = crate::sweep::plan::cells(&settings.varies, &settings.seeds).len();
     let bars = Bars::new(global, (n_cells * captures.len()) as u64);
     let outcome = run_sweep(&settings, &captures, &bars)?;

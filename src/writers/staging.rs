@@ -103,9 +103,14 @@ impl OutputFolder {
     }
 }
 
-/// Removes hidden leftovers of killed runs in `dir`: `.*.staging-*` folders and `.*.tmp`
-/// files. Call it only while holding the folder's lock.
+/// Removes hidden leftovers of killed runs in `dir` and its subfolders two levels down
+/// (the depth of our outputs, e.g. `plots/<capture>/`): `.*.staging-*` folders and
+/// `.*.tmp` files. Call it only while holding the folder's lock.
 pub fn remove_stale(dir: &Path) {
+    remove_stale_below(dir, 2);
+}
+
+fn remove_stale_below(dir: &Path, depth: u32) {
     let Ok(entries) = fs::read_dir(dir) else {
         return;
     };
@@ -113,6 +118,8 @@ pub fn remove_stale(dir: &Path) {
         let name = e.file_name().to_string_lossy().into_owned();
         if name.starts_with('.') && (name.contains(".staging-") || name.ends_with(".tmp")) {
             signals::remove_path(&e.path());
+        } else if depth > 0 && e.file_type().is_ok_and(|t| t.is_dir()) {
+            remove_stale_below(&e.path(), depth - 1);
         }
     }
 }

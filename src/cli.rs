@@ -112,6 +112,7 @@ pub fn main() -> i32 {
             return code;
         }
     };
+    crate::signals::install();
     let global = Global { quiet: cli.quiet };
     if let Some(n) = cli.threads {
         if let Err(e) = rayon::ThreadPoolBuilder::new()
@@ -146,9 +147,36 @@ pub fn main() -> i32 {
     };
     match result {
         Ok(()) => EXIT_OK,
+        // A reader that closed our stdout (`info X | head -1`) wanted no more: not an error.
+        Err(e) if is_broken_pipe(&e) => EXIT_OK,
         Err(e) => {
-            eprintln!("lidar-noise: error: {e:#}");
+            eprintln!("lidar-noise: error: {}", message_of(&e));
             EXIT_ERROR
         }
     }
+}
+
+/// True when the error comes from writing to a closed pipe.
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
+/// The error and its causes joined by ": ", leaving out a cause whose text the message
+/// already ends with (our errors print their source themselves, so `{:#}` said it twice).
+pub fn message_of(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let part = cause.to_string();
+        if text.ends_with(&part) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&part);
+    }
+    text
 }

@@ -19,6 +19,7 @@ pub mod hdl32e;
 pub mod noise;
 pub mod options;
 pub mod pipeline;
+pub mod signals;
 pub mod sweep;
 pub mod synth;
 pub mod writers;

@@ -123,7 +123,13 @@ pub fn parse_range(flag: &str, text: &str) -> Result<RangeInclusive<u32>> {
         }
     };
     if range.start() > range.end() {
-        return Err(bad());
+        return Err(Error::Invalid(format!(
+            "{flag} {text}: the range is reversed ({} is after {}); write {}..{}",
+            range.start(),
+            range.end(),
+            range.end(),
+            range.start()
+        )));
     }
     Ok(range)
 }

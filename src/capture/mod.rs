@@ -97,6 +97,13 @@ impl CaptureReader {
     /// Opens a capture file.
     pub fn open(path: &Path) -> Result<Self> {
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
+        // Reading a folder fails only at the first read, as "could not be read": say why.
+        if file.metadata().is_ok_and(|m| m.is_dir()) {
+            return Err(Error::Capture {
+                path: path.to_path_buf(),
+                message: "is a directory, not a capture file".into(),
+            });
+        }
         Self::from_reader(file, path)
     }
 

@@ -4,8 +4,9 @@ use crate::cli::Global;
 use crate::hdl32e::frames::DecoderOptions;
 use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
 use crate::writers::ply::PlyFrame;
+use crate::writers::staging::{self, OutputFolder, Staged};
 use crate::writers::{write_file, FrameOutput};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
@@ -37,6 +38,9 @@ pub fn frame_file_name(index: u32) -> String {
 }
 
 /// Decodes each capture and writes the selected frames.
+///
+/// Frames are written into staging folders beside their targets and moved into place only
+/// when every capture is written: a failed or interrupted convert leaves no frame behind.
 pub fn run(args: Args, global: Global) -> Result<()> {
     super::check_stdin_once(&args.captures)?;
     let options = args.decoder.to_options()?;
@@ -46,34 +50,80 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         None => 0..=u32::MAX,
     };
     let several = args.captures.len() > 1;
-    for (capture, name) in args
-        .captures
-        .iter()
-        .zip(super::output_names(&args.captures))
-    {
+    let names = super::output_names(&args.captures);
+    let folder = OutputFolder::lock(&args.output)?;
+    let mut staged: Vec<(Staged, PathBuf, u32, &Path)> = Vec::new();
+    for (capture, name) in args.captures.iter().zip(&names) {
         // One capture keeps the historical layout (frames directly in DIR).
-        let dir = if several {
-            args.output.join(name)
+        let (stage_name, target) = if several {
+            (name.as_str(), args.output.join(name))
         } else {
-            args.output.clone()
+            ("convert", args.output.clone())
         };
-        convert_one(&args, capture, &dir, &options, output, &range, global)?;
+        let result = folder
+            .stage(stage_name)
+            .map_err(anyhow::Error::from)
+            .and_then(|s| {
+                let written = convert_one(
+                    &args,
+                    capture,
+                    &target,
+                    s.path(),
+                    &options,
+                    output,
+                    &range,
+                    global,
+                )?;
+                Ok((s, written))
+            });
+        match result {
+            Ok((s, written)) => staged.push((s, target, written, capture.as_path())),
+            Err(e) => {
+                drop(staged);
+                folder.abandon();
+                return Err(e);
+            }
+        }
+    }
+    let mut done = Vec::new();
+    if several {
+        let mut stages = Vec::new();
+        for (s, target, written, capture) in staged {
+            stages.push(s);
+            done.push((target, written, capture));
+        }
+        staging::commit(stages)?;
+    } else if let Some((s, target, written, capture)) = staged.pop() {
+        staging::commit_files(s, &args.output)?;
+        done.push((target, written, capture));
+    }
+    if !global.quiet {
+        for (target, written, capture) in done {
+            eprintln!(
+                "{}: wrote {written} frame{} to {}",
+                capture.display(),
+                if written == 1 { "" } else { "s" },
+                target.display()
+            );
+        }
     }
     Ok(())
 }
 
+/// Writes the frames of `capture` in `range` into `dir` (the staging folder of `target`);
+/// returns how many.
+#[allow(clippy::too_many_arguments)]
 fn convert_one(
     args: &Args,
     capture: &Path,
+    target: &Path,
     dir: &Path,
     options: &DecoderOptions,
     output: FrameOutput,
     range: &RangeInclusive<u32>,
     global: Global,
-) -> Result<()> {
+) -> Result<u32> {
     let mut reader = super::open_capture(capture, options)?;
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
     let source = super::capture_label(capture);
     let progress = super::progress(global, "frames");
     let mut written = 0u32;
@@ -83,7 +133,9 @@ fn convert_one(
             break;
         }
         if range.contains(&frame.index) {
-            let path = dir.join(output.file_name(frame.index));
+            let name = output.file_name(frame.index);
+            crate::writers::atomic::refuse_inputs(&target.join(&name), &[capture])?;
+            let path = dir.join(name);
             let ply = PlyFrame::new(&frame.returns, &source, frame.index, frame.start_time());
             write_file(&*output.document(ply), &path, &[capture])?;
             written += 1;
@@ -94,6 +146,7 @@ fn convert_one(
     progress.finish_and_clear();
     let summary = reader.summary();
     super::warn_truncation(global, capture, &summary);
+    super::warn_capture(global, capture, &summary, false);
     if written == 0 {
         anyhow::bail!(
             "{}: no frame in {} (the capture has {} full frames{}); pick others with --frames \
@@ -108,12 +161,5 @@ fn convert_one(
             }
         );
     }
-    if !global.quiet {
-        eprintln!(
-            "{}: wrote {written} frames to {}",
-            capture.display(),
-            dir.display()
-        );
-    }
-    Ok(())
+    Ok(written)
 }

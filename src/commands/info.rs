@@ -34,9 +34,13 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         }
         let summary = reader.summary();
         super::warn_truncation(global, path, &summary);
+        if let Some(hint) = super::raw_intensity_hint(&summary) {
+            global.warn(&format!("{}: {hint}", path.display()));
+        }
         if args.json {
             let mut value = serde_json::to_value(&summary)?;
             value["file"] = serde_json::Value::from(path.display().to_string());
+            value["dead_lasers"] = serde_json::to_value(summary.dead_lasers())?;
             writeln!(out, "{}", serde_json::to_string(&value)?)?;
         } else {
             write_text(&mut out, path, &summary)?;
@@ -73,6 +77,14 @@ fn write_text(out: &mut impl Write, path: &std::path::Path, s: &CaptureSummary) 
         s.capture.fragments, s.capture.not_udp, s.capture.not_ipv4, s.capture.malformed
     )?;
     writeln!(out, "  data ports    {}", ports.join(", "))?;
+    let dead = s.dead_lasers();
+    if !dead.is_empty() {
+        writeln!(
+            out,
+            "  dead lasers   {} (no return over the capture)",
+            super::join_ids(&dead)
+        )?;
+    }
     if let Some(p) = s.packet_period_us {
         writeln!(out, "  packet period {p:.0} us")?;
     }

@@ -23,6 +23,55 @@ pub fn warn_truncation(global: Global, path: &Path, summary: &CaptureSummary) {
     }
 }
 
+/// Warns about what the decoder skipped and about suspicious data: malformed packets,
+/// lasers that never returned, and (when `check_intensity`) an intensity distribution
+/// that looks like old firmware's raw levels read as calibrated reflectivity.
+pub fn warn_capture(global: Global, path: &Path, s: &CaptureSummary, check_intensity: bool) {
+    let skipped = s.capture.malformed + s.bad_data_packets;
+    if skipped > 0 {
+        global.warn(&format!(
+            "{}: skipped {} malformed packet{} ({} with malformed headers, {} data packets \
+             with an invalid return mode byte)",
+            path.display(),
+            skipped,
+            if skipped == 1 { "" } else { "s" },
+            s.capture.malformed,
+            s.bad_data_packets
+        ));
+    }
+    let dead = s.dead_lasers();
+    if !dead.is_empty() {
+        global.warn(&format!(
+            "{}: dead laser{} (no return over the whole capture): {}",
+            path.display(),
+            if dead.len() == 1 { "" } else { "s" },
+            join_ids(&dead)
+        ));
+    }
+    if check_intensity {
+        if let Some(hint) = raw_intensity_hint(s) {
+            global.warn(&format!("{}: {hint}", path.display()));
+        }
+    }
+}
+
+/// The advice printed when the intensities look like raw levels, if they do.
+pub fn raw_intensity_hint(s: &CaptureSummary) -> Option<String> {
+    s.raw_intensity_suspected().map(|(share, median)| {
+        format!(
+            "{:.1} % of the intensities are above 100 (median {median}): this looks like old \
+             firmware's raw 0-255 levels, which reflectivity mode reads as retro-reflectors; \
+             if so, add --set sensor.intensity=\"raw\"",
+            100.0 * share
+        )
+    })
+}
+
+/// Laser ids as "3, 7, 30".
+pub fn join_ids(ids: &[u8]) -> String {
+    ids.iter().map(u8::to_string).collect::<Vec<_>>().join(", ")
+}
+
 /// A progress spinner on stderr, hidden when quiet or when stderr is not a terminal.
 pub fn progress(global: Global, unit: &'static str) -> indicatif::ProgressBar {
     use std::io::IsTerminal;

@@ -6,8 +6,8 @@ use crate::hdl32e::frames::{CaptureSummary, DecoderOptions, FrameReader};
 use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
 use crate::pipeline::report::{cluster_table, FrameClusters, FrameReport, Totals, FATE_CODES};
 use crate::pipeline::{FrameResult, Pipeline};
-use crate::writers::json::JsonDoc;
 use crate::writers::ply::{PlyColumns, PlyFrame};
+use crate::writers::staging::{self, OutputFolder};
 use crate::writers::{write_file, FrameOutput};
 use anyhow::{Context, Result};
 use rayon::prelude::*;
@@ -114,6 +114,12 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     for w in &warnings {
         global.warn(w);
     }
+    if config.noise.is_empty() {
+        global.warn(&format!(
+            "{}: the configuration has no noise stage; the run measures the clean pipeline",
+            config.source.display()
+        ));
+    }
     let plan = Plan {
         pipeline: Pipeline::new(&config),
         config,
@@ -132,14 +138,15 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     if let Some(c) = &args.config {
         inputs.push(c);
     }
+    // Every input and target is checked before anything is written.
+    let mut jobs: Vec<(FrameReader, String, String)> = Vec::new();
     if args.captures.is_empty() {
-        let dir = args.output.join("crossroad");
         let reader = FrameReader::from_bytes(
             Arc::from(DEFAULT_CAPTURE),
             Path::new(DEFAULT_CAPTURE_NAME),
             &plan.decoder,
         )?;
-        run_capture(&plan, reader, DEFAULT_CAPTURE_NAME, &dir, &inputs, global)?;
+        jobs.push((reader, DEFAULT_CAPTURE_NAME.into(), "crossroad".into()));
     }
     for (path, name) in args
         .captures
@@ -147,19 +154,69 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         .zip(super::output_names(&args.captures))
     {
         let reader = super::open_capture(path, &plan.decoder)?;
-        let dir = args.output.join(&name);
-        run_capture(
-            &plan,
-            reader,
-            &super::capture_label(path),
-            &dir,
-            &inputs,
-            global,
-        )?;
+        jobs.push((reader, super::capture_label(path), name));
+    }
+    for (_, _, name) in &jobs {
+        check_target(&args.output.join(name), &inputs)?;
+    }
+    let folder = OutputFolder::lock(&args.output)?;
+    let mut staged = Vec::new();
+    let mut reports = Vec::new();
+    for (reader, source, name) in jobs {
+        let stage = match folder.stage(&name) {
+            Ok(s) => s,
+            Err(e) => {
+                drop(staged);
+                folder.abandon();
+                return Err(e.into());
+            }
+        };
+        match run_capture(&plan, reader, &source, stage.path(), &inputs, global) {
+            Ok(report) => {
+                staged.push(stage);
+                reports.push(report);
+            }
+            Err(e) => {
+                // Staging folders go first, so that a folder this run created is empty.
+                drop(stage);
+                drop(staged);
+                folder.abandon();
+                return Err(e);
+            }
+        }
+    }
+    let targets: Vec<PathBuf> = staged.iter().map(|s| s.target().to_path_buf()).collect();
+    staging::commit(staged)?;
+    if !global.quiet {
+        for (line, dir) in reports.iter().zip(&targets) {
+            eprintln!("{line}; results in {}", dir.display());
+        }
     }
     Ok(())
 }
 
+/// Refuses a target folder that is an input, holds an input or is a file.
+fn check_target(dir: &Path, inputs: &[&Path]) -> Result<()> {
+    crate::writers::atomic::refuse_inputs(dir, inputs)?;
+    if dir.exists() && !dir.is_dir() {
+        anyhow::bail!("{}: the output is a file, not a folder", dir.display());
+    }
+    // Replacing the folder would delete an input kept inside it.
+    if let Ok(target) = std::fs::canonicalize(dir) {
+        for input in inputs {
+            if std::fs::canonicalize(input).is_ok_and(|i| i.starts_with(&target)) {
+                anyhow::bail!(
+                    "{}: refusing to replace a folder that holds an input ({})",
+                    dir.display(),
+                    input.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Runs one capture into `dir` (its staging folder); returns the line to print.
 fn run_capture(
     plan: &Plan,
     mut reader: FrameReader,
@@ -167,16 +224,15 @@ fn run_capture(
     dir: &Path,
     inputs: &[&Path],
     global: Global,
-) -> Result<()> {
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
+) -> Result<String> {
     let progress = super::progress(global, "frames");
     progress.set_message(source.to_string());
     // Frames are processed in batches in parallel; results are written in frame order,
     // and memory stays bounded by one batch whatever the capture's length.
     let batch_size = 2 * rayon::current_num_threads().max(1);
-    let mut frame_reports = Vec::new();
-    let mut frame_clusters = Vec::new();
+    // Per-frame reports are streamed to spool files and joined at the end, so memory
+    // does not grow with the capture's length.
+    let mut spool = ReportSpool::new(dir)?;
     loop {
         let batch = reader.next_batch(batch_size, &plan.frames)?;
         if batch.is_empty() {
@@ -194,22 +250,55 @@ fn run_capture(
             if plan.linkage {
                 write_linkage(plan, &result, dir, inputs)?;
             }
-            frame_reports.push(FrameReport::of(&result));
-            frame_clusters.push(FrameClusters {
-                index: result.noisy.index,
-                clusters: result.clusters,
-            });
+            let index = result.noisy.index;
+            spool.add(
+                &FrameReport::of(&result),
+                &FrameClusters {
+                    index,
+                    clusters: result.clusters,
+                },
+            )?;
             progress.inc(1);
         }
     }
     progress.finish_and_clear();
     let capture_summary = reader.summary();
     super::warn_truncation(global, Path::new(source), &capture_summary);
-    if frame_reports.is_empty() {
+    super::warn_capture(
+        global,
+        Path::new(source),
+        &capture_summary,
+        plan.config.sensor.intensity == crate::config::IntensityMode::Reflectivity,
+    );
+    if spool.frames == 0 {
+        // The reader stopped at the end of the range: count the frames of the whole capture.
+        for frame in reader.by_ref() {
+            frame?;
+        }
+        let s = reader.summary();
+        let full = s.full_frames;
+        let (first, last) = if s.partial_frames > 0 {
+            (1, full)
+        } else {
+            (0, full.saturating_sub(1))
+        };
+        let partial_note = if *plan.frames.start() == 0 && plan.frames.end() == &0 {
+            "frame 0 is the partial first sweep (add --keep-partial to process it); "
+        } else {
+            ""
+        };
         anyhow::bail!(
-            "{source}: no frame to process (the capture has {} full frames); pick others with \
-             --frames or add --keep-partial",
-            capture_summary.full_frames
+            "{source}: no frame to process in --frames {}..{}: {partial_note}the capture has {} \
+             full frame{} ({}); pick others with --frames or add --keep-partial",
+            plan.frames.start(),
+            plan.frames.end(),
+            full,
+            if full == 1 { "" } else { "s" },
+            if full == 0 {
+                "none".to_string()
+            } else {
+                format!("indexes {first}..{last}")
+            }
         );
     }
     let summary = Summary {
@@ -228,38 +317,148 @@ fn run_capture(
         },
         fate_codes: FATE_CODES,
         capture_summary: &capture_summary,
-        totals: Totals::of(&frame_reports),
-        frames: &frame_reports,
+        totals: spool.totals.clone(),
+        frames: &[],
     };
-    write_file(&JsonDoc(&summary), &dir.join("summary.json"), inputs)?;
     let clusters = ClusterReport {
         tool: "lidar-noise",
         version: env!("CARGO_PKG_VERSION"),
         capture: source.to_string(),
-        frames: &frame_clusters,
+        frames: &[],
     };
-    write_file(&JsonDoc(&clusters), &dir.join("clusters.json"), inputs)?;
-    write_file(
-        &cluster_table(&frame_clusters),
-        &dir.join("clusters.csv"),
-        inputs,
-    )?;
-    if !global.quiet {
-        let t = &summary.totals;
-        eprintln!(
-            "{source}: {} frames, {} of {} returns kept ({} occluded, {} below power, {} below \
-             min range), {:.1} % ground, {} clusters; results in {}",
-            frame_reports.len(),
-            t.noise.returns_out,
-            t.noise.returns_in,
-            t.noise.dropped.occluded,
-            t.noise.dropped.below_power,
-            t.noise.dropped.below_min_range,
-            100.0 * t.ground_fraction,
-            t.stages.clusters,
-            dir.display()
-        );
+    let frames = spool.frames;
+    spool.finish(&summary, &clusters, dir, inputs)?;
+    let t = &summary.totals;
+    Ok(format!(
+        "{source}: {} frame{}, {} of {} returns kept ({} occluded, {} below power, {} below \
+         min range), {:.1} % ground, {} clusters",
+        frames,
+        if frames == 1 { "" } else { "s" },
+        t.noise.returns_out,
+        t.noise.returns_in,
+        t.noise.dropped.occluded,
+        t.noise.dropped.below_power,
+        t.noise.dropped.below_min_range,
+        100.0 * t.ground_fraction,
+        t.stages.clusters,
+    ))
+}
+
+/// Per-frame reports written to disk as they come (summary frames, cluster frames and
+/// cluster CSV rows), with the totals kept as a running sum.
+struct ReportSpool {
+    summary_frames: std::io::BufWriter<std::fs::File>,
+    cluster_frames: std::io::BufWriter<std::fs::File>,
+    csv_rows: std::io::BufWriter<std::fs::File>,
+    totals: Totals,
+    frames: usize,
+}
+
+const SPOOL_SUMMARY: &str = ".summary-frames.part";
+const SPOOL_CLUSTERS: &str = ".clusters-frames.part";
+const SPOOL_CSV: &str = ".clusters-csv.part";
+
+impl ReportSpool {
+    fn new(dir: &Path) -> Result<Self> {
+        let open = |name: &str| -> Result<std::io::BufWriter<std::fs::File>> {
+            let path = dir.join(name);
+            let f = std::fs::File::create(&path).map_err(|e| crate::error::Error::io(&path, e))?;
+            Ok(std::io::BufWriter::new(f))
+        };
+        Ok(ReportSpool {
+            summary_frames: open(SPOOL_SUMMARY)?,
+            cluster_frames: open(SPOOL_CLUSTERS)?,
+            csv_rows: open(SPOOL_CSV)?,
+            totals: Totals::default(),
+            frames: 0,
+        })
     }
+
+    fn add(&mut self, report: &FrameReport, clusters: &FrameClusters) -> Result<()> {
+        use crate::writers::Output;
+        let sep = if self.frames == 0 { "" } else { ",\n" };
+        write_element(&mut self.summary_frames, sep, report)?;
+        write_element(&mut self.cluster_frames, sep, clusters)?;
+        let mut csv = Vec::new();
+        cluster_table(std::slice::from_ref(clusters)).write_to(&mut csv)?;
+        // Every table starts with the header line; the final file has it once.
+        let start = if self.frames == 0 {
+            0
+        } else {
+            csv.iter()
+                .position(|&b| b == b'\n')
+                .map_or(csv.len(), |i| i + 1)
+        };
+        std::io::Write::write_all(&mut self.csv_rows, &csv[start..])?;
+        self.totals.add(report);
+        self.frames += 1;
+        Ok(())
+    }
+
+    /// Writes summary.json, clusters.json and clusters.csv from the spool files, with the
+    /// same bytes as serialising the whole documents at once.
+    fn finish<S: Serialize, C: Serialize>(
+        self,
+        summary: &S,
+        clusters: &C,
+        dir: &Path,
+        inputs: &[&Path],
+    ) -> Result<()> {
+        let ReportSpool {
+            summary_frames,
+            cluster_frames,
+            csv_rows,
+            ..
+        } = self;
+        for w in [summary_frames, cluster_frames, csv_rows] {
+            w.into_inner().map_err(|e| e.into_error())?.sync_all().ok();
+        }
+        join_document(
+            summary,
+            &dir.join(SPOOL_SUMMARY),
+            &dir.join("summary.json"),
+            inputs,
+        )?;
+        join_document(
+            clusters,
+            &dir.join(SPOOL_CLUSTERS),
+            &dir.join("clusters.json"),
+            inputs,
+        )?;
+        std::fs::rename(dir.join(SPOOL_CSV), dir.join("clusters.csv"))
+            .with_context(|| format!("{}: cannot write", dir.join("clusters.csv").display()))?;
+        Ok(())
+    }
+}
+
+/// One array element as `to_writer_pretty` lays it out two levels deep.
+fn write_element<T: Serialize>(out: &mut impl std::io::Write, sep: &str, value: &T) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)?;
+    out.write_all(sep.as_bytes())?;
+    for (i, line) in text.lines().enumerate() {
+        if i > 0 {
+            out.write_all(b"\n")?;
+        }
+        out.write_all(b"    ")?;
+        out.write_all(line.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Writes `doc` (whose last field is an empty `frames` array) with the spooled elements
+/// put into that array, then deletes the spool file.
+fn join_document<T: Serialize>(doc: &T, spool: &Path, path: &Path, inputs: &[&Path]) -> Result<()> {
+    let head = serde_json::to_string_pretty(doc)?;
+    let Some(stem) = head.strip_suffix("[]\n}") else {
+        anyhow::bail!("internal: the report does not end with its frames array");
+    };
+    crate::writers::atomic::write_atomically(path, inputs, |out| {
+        out.write_all(stem.as_bytes())?;
+        out.write_all(b"[\n")?;
+        std::io::copy(&mut std::fs::File::open(spool)?, out)?;
+        out.write_all(b"\n  ]\n}\n")
+    })?;
+    std::fs::remove_file(spool).ok();
     Ok(())
 }
 

@@ -7,7 +7,7 @@ use crate::sweep::plan::{parse_seeds, BaseConfig, Vary};
 use crate::sweep::run::{
     birdseye_panels, read_frame, run as run_sweep, CaptureInput, Observer, SweepSettings,
 };
-use anyhow::{Context, Result};
+use anyhow::Result;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
@@ -61,6 +61,7 @@ struct Bars {
     cells: ProgressBar,
     frames: ProgressBar,
     _multi: MultiProgress,
+    global: Global,
 }
 
 impl Bars {
@@ -84,6 +85,7 @@ impl Bars {
             cells,
             frames,
             _multi: multi,
+            global,
         }
     }
 }
@@ -105,6 +107,9 @@ impl Observer for Bars {
     }
     fn cell_done(&self) {
         self.cells.inc(1);
+    }
+    fn warn(&self, message: &str) {
+        self.cells.suspend(|| self.global.warn(message));
     }
 }
 
@@ -173,8 +178,8 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     for cell in crate::sweep::plan::cells(&settings.varies, &settings.seeds) {
         settings.base.cell_config(&settings.varies, &cell)?;
     }
-    std::fs::create_dir_all(&args.output)
-        .with_context(|| format!("cannot create the output folder {}", args.output.display()))?;
+    // One sweep per folder at a time; leftovers of killed sweeps are removed under the lock.
+    let _folder = crate::writers::staging::OutputFolder::lock(&args.output)?;
     let n_cells = crate::sweep::plan::cells(&settings.varies, &settings.seeds).len();
     let bars = Bars::new(global, (n_cells * captures.len()) as u64);
     let outcome = run_sweep(&settings, &captures, &bars)?;

@@ -32,6 +32,18 @@ impl Locator {
             if let Some(&(line, column)) = self.spans.get(&probe) {
                 return format!(" (line {line}, column {column})");
             }
+            // A table the file does not have but a --set wrote into came from that --set
+            // (not from the line of the array it was appended to).
+            if probe != path {
+                if let Some((_, arg)) = self
+                    .sets
+                    .iter()
+                    .rev()
+                    .find(|(set_path, _)| is_prefix_path(&probe, set_path))
+                {
+                    return format!(" (in {probe}, created by --set {arg})");
+                }
+            }
             match parent_path(&probe) {
                 Some(parent) => probe = parent,
                 None => return String::new(),

@@ -91,6 +91,51 @@ pub struct CaptureSummary {
     pub decode: DecodeCounts,
     /// Container-level counters (records, fragments, truncation).
     pub capture: CaptureStats,
+    /// Returns per laser id over the whole capture (not in reports: see `dead_lasers`).
+    #[serde(skip)]
+    pub returns_per_laser: Vec<u64>,
+    /// Returns per intensity byte value over the whole capture (256 bins, not in reports).
+    #[serde(skip)]
+    pub intensity_histogram: Vec<u64>,
+}
+
+/// Returns below this count say too little about the intensity distribution.
+const MIN_RETURNS_FOR_INTENSITY_CHECK: u64 = 1000;
+
+impl CaptureSummary {
+    /// Lasers (by id) that returned nothing over the whole capture, when it has returns.
+    pub fn dead_lasers(&self) -> Vec<u8> {
+        if self.returns == 0 {
+            return Vec::new();
+        }
+        (0..self.returns_per_laser.len())
+            .filter(|&l| self.returns_per_laser[l] == 0)
+            .map(|l| l as u8)
+            .collect()
+    }
+
+    /// Share of returns with an intensity above 100 and the median intensity, when the
+    /// distribution looks like old firmware's raw 0-255 levels rather than calibrated
+    /// reflectivity (0-100 %, only retro-reflectors above 100): more than 90 % of the
+    /// returns above 100 or a median above 150.
+    pub fn raw_intensity_suspected(&self) -> Option<(f64, u8)> {
+        let total: u64 = self.intensity_histogram.iter().sum();
+        if total < MIN_RETURNS_FOR_INTENSITY_CHECK {
+            return None;
+        }
+        let above: u64 = self.intensity_histogram.iter().skip(101).sum();
+        let mut seen = 0;
+        let mut median = 0u8;
+        for (v, &n) in self.intensity_histogram.iter().enumerate() {
+            seen += n;
+            if 2 * seen >= total {
+                median = v as u8;
+                break;
+            }
+        }
+        let share = above as f64 / total as f64;
+        (share > 0.9 || median > 150).then_some((share, median))
+    }
 }
 
 struct Building {
@@ -145,7 +190,12 @@ fn identify_in(mut capture: CaptureReader) -> Result<Identity> {
     }
     identify::identify(&sample).map_err(|message| {
         let linktype = capture.linktype().unwrap_or(-1);
-        let message = if sample.products.is_empty() && !crate::capture::link::is_supported(linktype)
+        let message = if sample.products.is_empty() && capture.linktype().is_none() {
+            // pcapng packets refer to an interface description block for their link type.
+            format!(
+                "{message} (the pcapng capture has no interface description block, so no                  packet has a link type)"
+            )
+        } else if sample.products.is_empty() && !crate::capture::link::is_supported(linktype)
         {
             format!("link type {linktype} is not supported (Ethernet, Linux cooked v1/v2, raw IPv4 and BSD loopback are)")
         } else {
@@ -226,6 +276,8 @@ impl FrameReader {
                 duration_s: 0.0,
                 decode: DecodeCounts::default(),
                 capture: CaptureStats::default(),
+                returns_per_laser: vec![0; packet::LASERS],
+                intensity_histogram: vec![0; 256],
             },
             done: false,
             packet: Vec::with_capacity(packet::DATA_PACKET_BYTES),
@@ -373,8 +425,9 @@ impl FrameReader {
         }
         let ts = packet::timestamp_us(payload);
         if let Some(prev) = self.prev_ts {
-            // The sensor clock restarts every hour: keep time increasing.
-            if ts + 1_800_000_000 < prev {
+            // The sensor clock restarts every hour: keep time increasing. Compared in u64:
+            // in u32 `ts + 1_800_000_000` overflows once the clock passes 41 min 35 s.
+            if u64::from(ts) + 1_800_000_000 < u64::from(prev) {
                 self.hour_offset_us += 3_600_000_000.0;
             }
         }
@@ -404,6 +457,12 @@ impl FrameReader {
                 );
             }
             self.summary.returns += (b.frame.returns.len() - before) as u64;
+            for r in &b.frame.returns[before..] {
+                if let Some(n) = self.summary.returns_per_laser.get_mut(usize::from(r.laser)) {
+                    *n += 1;
+                }
+                self.summary.intensity_histogram[usize::from(r.intensity)] += 1;
+            }
         }
     }
 }

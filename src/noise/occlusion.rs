@@ -172,6 +172,20 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
                 format!("interval [{lo}, {hi}] is empty: lo must not exceed hi"),
             ));
         }
+        // An interval between the lasers occludes nothing: refuse it like `lasers = []`.
+        // Checked against the manual's table (a calibration file moves lasers by hundredths
+        // of a degree, and the frame's own elevations decide at run time).
+        let table = crate::calibration::Calibration::builtin();
+        let inside = |e: f64| e >= lo - ELEVATION_SLACK_DEG && e <= hi + ELEVATION_SLACK_DEG;
+        if !table.lasers.iter().any(|l| inside(l.elevation_deg)) {
+            return Err(opts.error(
+                "elevation_deg",
+                format!(
+                    "[{lo}, {hi}] selects no laser: the HDL-32E's lasers point from -30.67 to \
+                     +10.67 degrees, 1.33 degrees apart"
+                ),
+            ));
+        }
         Selection::Elevation([lo, hi])
     } else {
         return Err(opts.error(

@@ -50,11 +50,16 @@ impl Totals {
     pub fn of(frames: &[FrameReport]) -> Self {
         let mut t = Totals::default();
         for f in frames {
-            t.noise.merge(&f.noise);
-            t.stages.merge(&f.stages);
+            t.add(f);
         }
-        t.ground_fraction = t.stages.ground_fraction();
         t
+    }
+
+    /// Adds one frame report (the running form of `of`, for streamed reports).
+    pub fn add(&mut self, f: &FrameReport) {
+        self.noise.merge(&f.noise);
+        self.stages.merge(&f.stages);
+        self.ground_fraction = self.stages.ground_fraction();
     }
 }
 

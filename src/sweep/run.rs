@@ -65,6 +65,8 @@ pub trait Observer: Sync {
     fn frame_done(&self) {}
     /// One cell is done (computed or loaded).
     fn cell_done(&self) {}
+    /// Something the user should know (a cell file that did not verify).
+    fn warn(&self, _message: &str) {}
 }
 
 /// An observer that ignores everything.
@@ -101,7 +103,14 @@ struct CellFile {
     tool: String,
     settings: serde_json::Value,
     frames: Vec<FrameMetrics>,
+    /// xxh3-64 (hex) of the file's bytes with this value written as 16 zeros: an edited
+    /// or cut file does not verify and is recomputed.
+    #[serde(default)]
+    checksum: String,
 }
+
+/// What `checksum` holds while the checksum is computed.
+const CHECKSUM_PLACEHOLDER: &str = "0000000000000000";
 
 /// The baseline of one frame, reduced to what the metrics need.
 struct Reference {
@@ -141,9 +150,9 @@ pub fn run(
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
         let protected = protected_paths(capture);
         let protected: Vec<&Path> = protected.iter().map(PathBuf::as_path).collect();
-        let bytes = std::fs::metadata(&capture.path)
-            .map_err(|e| Error::io(&capture.path, e))?
-            .len();
+        // Cells are keyed on the content of every input, not on names and sizes.
+        let content = content_key(s, capture)?;
+        let mut expected_frames = None;
         // Execution order: seeds outermost so cells sharing a baseline run together.
         let mut pending = Vec::new();
         let mut loaded = 0usize;
@@ -160,11 +169,33 @@ pub fn run(
                 unseeded.seed = 0;
                 unseeded.effective_toml()
             };
-            let settings = cell_settings(s, capture, bytes, &cell, &config, &baseline);
+            let settings = cell_settings(s, capture, &content, &cell, &config, &baseline);
             let path = dir.join(cell.file_name(&s.varies));
-            if read_cell(&path).is_some_and(|f| f.settings == settings) {
-                loaded += 1;
-                continue;
+            match read_cell(&path) {
+                Some(Ok(f)) if f.settings == settings => {
+                    let expected = match expected_frames {
+                        Some(n) => n,
+                        None => {
+                            let n = count_frames(s, capture)?;
+                            expected_frames = Some(n);
+                            n
+                        }
+                    };
+                    if f.frames.len() == expected {
+                        loaded += 1;
+                        continue;
+                    }
+                    observer.warn(&format!(
+                        "{}: the cell has {} frames where its settings give {expected}; \
+                         recomputing it",
+                        path.display(),
+                        f.frames.len()
+                    ));
+                }
+                Some(Err(why)) => {
+                    observer.warn(&format!("{}: {why}; recomputing the cell", path.display()))
+                }
+                _ => {}
             }
             pending.push(Pending {
                 path,
@@ -205,7 +236,7 @@ pub fn run(
         outcome.computed += pending.len();
         for cell in &canonical {
             let path = dir.join(cell.file_name(&s.varies));
-            let file = read_cell(&path).ok_or_else(|| {
+            let file = read_cell(&path).and_then(Result::ok).ok_or_else(|| {
                 Error::Invalid(format!(
                     "{}: cell result missing or unreadable",
                     path.display()
@@ -252,10 +283,57 @@ fn protected_paths(capture: &CaptureInput) -> Vec<PathBuf> {
     p
 }
 
+/// Hashes of the capture's, labels' and calibration's content and the tool version: a
+/// cell computed from other data (same name and size included) is not reused.
+fn content_key(s: &SweepSettings, capture: &CaptureInput) -> Result<serde_json::Value> {
+    let labels = match &capture.labels {
+        Some(p) => Some(hash_file(p)?),
+        None => None,
+    };
+    Ok(serde_json::json!({
+        "tool_version": env!("CARGO_PKG_VERSION"),
+        "capture_xxh3": hash_file(&capture.path)?,
+        "labels_xxh3": labels,
+        "calibration_xxh3": format!(
+            "{:016x}",
+            xxhash_rust::xxh3::xxh3_64(format!("{:?}", s.decoder.calibration).as_bytes())
+        ),
+    }))
+}
+
+/// xxh3-64 of a file's bytes in hex, read in blocks (memory stays flat).
+pub fn hash_file(path: &Path) -> Result<String> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut hasher = xxhash_rust::xxh3::Xxh3::new();
+    let mut buf = vec![0u8; 1 << 16];
+    loop {
+        let n = file.read(&mut buf).map_err(|e| Error::io(path, e))?;
+        if n == 0 {
+            break;
+        }
+        hasher.update(&buf[..n]);
+    }
+    Ok(format!("{:016x}", hasher.digest()))
+}
+
+/// Frames of the capture in the sweep's range: the number every cell file must hold.
+fn count_frames(s: &SweepSettings, capture: &CaptureInput) -> Result<usize> {
+    let mut reader = FrameReader::open(&capture.path, &s.decoder)?;
+    let mut n = 0;
+    loop {
+        let batch = reader.next_batch(16, &s.frames)?;
+        if batch.is_empty() {
+            return Ok(n);
+        }
+        n += batch.len();
+    }
+}
+
 fn cell_settings(
     s: &SweepSettings,
     capture: &CaptureInput,
-    bytes: u64,
+    content: &serde_json::Value,
     cell: &Cell,
     config: &Config,
     baseline: &Config,
@@ -269,7 +347,7 @@ fn cell_settings(
     serde_json::json!({
         "metrics_version": METRICS_VERSION,
         "capture": capture.name,
-        "capture_bytes": bytes,
+        "content": content,
         "labels": capture.labels.as_ref().and_then(|p| p.file_name()).map(|n| n.to_string_lossy()),
         "frames": [s.frames.start(), s.frames.end()],
         "bands": s.bands,
@@ -287,9 +365,47 @@ fn cell_settings(
     })
 }
 
-fn read_cell(path: &Path) -> Option<CellFile> {
-    let text = std::fs::read(path).ok()?;
-    serde_json::from_slice(&text).ok()
+/// The cell file at `path`: None when there is none, Err(why) when it does not verify.
+fn read_cell(path: &Path) -> Option<std::result::Result<CellFile, String>> {
+    let bytes = std::fs::read(path).ok()?;
+    Some(verify_cell(&bytes))
+}
+
+fn verify_cell(bytes: &[u8]) -> std::result::Result<CellFile, String> {
+    let file: CellFile =
+        serde_json::from_slice(bytes).map_err(|e| format!("the cell file cannot be read ({e})"))?;
+    let text = std::str::from_utf8(bytes).map_err(|_| "the cell file is not UTF-8")?;
+    let field = format!("\"checksum\": \"{}\"", file.checksum);
+    let at = text
+        .rfind(&field)
+        .filter(|_| file.checksum.len() == CHECKSUM_PLACEHOLDER.len())
+        .ok_or("the cell file has no checksum")?;
+    let mut zeroed = text.as_bytes().to_vec();
+    let value_at = at + field.len() - 1 - file.checksum.len();
+    zeroed[value_at..value_at + file.checksum.len()]
+        .copy_from_slice(CHECKSUM_PLACEHOLDER.as_bytes());
+    let sum = format!("{:016x}", xxhash_rust::xxh3::xxh3_64(&zeroed));
+    if sum != file.checksum {
+        return Err(format!(
+            "the cell file was changed after it was written (checksum {sum}, recorded {})",
+            file.checksum
+        ));
+    }
+    Ok(file)
+}
+
+/// The cell file's bytes, checksum included.
+fn cell_bytes(file: &mut CellFile) -> serde_json::Result<Vec<u8>> {
+    file.checksum = CHECKSUM_PLACEHOLDER.into();
+    let mut bytes = serde_json::to_vec_pretty(&*file)?;
+    bytes.push(b'\n');
+    let sum = format!("{:016x}", xxhash_rust::xxh3::xxh3_64(&bytes));
+    let field = format!("\"checksum\": \"{CHECKSUM_PLACEHOLDER}\"");
+    let text = String::from_utf8_lossy(&bytes).into_owned();
+    let at = text.rfind(&field).unwrap_or(0) + field.len() - 1 - CHECKSUM_PLACEHOLDER.len();
+    bytes[at..at + sum.len()].copy_from_slice(sum.as_bytes());
+    file.checksum = sum;
+    Ok(bytes)
 }
 
 fn group_labels(rows: Vec<LabelRow>) -> HashMap<u32, Vec<LabelRow>> {
@@ -596,14 +712,15 @@ fn compute_chunk(
         *first = false;
     }
     for (cell, frames) in cells.iter().zip(results) {
-        let file = CellFile {
+        let mut file = CellFile {
             tool: format!("lidar-noise {}", env!("CARGO_PKG_VERSION")),
             settings: cell.settings.clone(),
             frames,
+            checksum: String::new(),
         };
+        let bytes = cell_bytes(&mut file).map_err(|e| Error::Invalid(e.to_string()))?;
         crate::writers::atomic::write_atomically(&cell.path, protected, |out| {
-            serde_json::to_writer_pretty(&mut *out, &file).map_err(std::io::Error::other)?;
-            out.write_all(b"\n")
+            out.write_all(&bytes)
         })?;
         observer.cell_done();
     }

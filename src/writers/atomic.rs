@@ -23,14 +23,25 @@ where
     F: FnOnce(&mut dyn Write) -> std::io::Result<()>,
 {
     refuse_inputs(path, protected_inputs)?;
-    let mut tmp = temp_file_for(path)?;
-    {
-        let mut out = BufWriter::with_capacity(BUFFER_BYTES, tmp.as_file_mut());
-        write(&mut out).map_err(|e| Error::io(path, e))?;
-        out.flush().map_err(|e| Error::io(path, e))?;
-    }
-    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
-    Ok(())
+    // Registered so that SIGINT/SIGTERM deletes it; created under the registry's lock so
+    // that no temporary file can appear unregistered.
+    let mut tmp = crate::signals::critical(|g| {
+        let tmp = temp_file_for(path)?;
+        g.register(tmp.path());
+        Ok::<_, Error>(tmp)
+    })?;
+    let tmp_path = tmp.path().to_path_buf();
+    let result = (|| {
+        {
+            let mut out = BufWriter::with_capacity(BUFFER_BYTES, tmp.as_file_mut());
+            write(&mut out).map_err(|e| Error::io(path, e))?;
+            out.flush().map_err(|e| Error::io(path, e))?;
+        }
+        tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
+        Ok(())
+    })();
+    crate::signals::unregister(&tmp_path);
+    result
 }
 
 /// Creates the temporary file that will become `path`: in the same folder, hidden, mode

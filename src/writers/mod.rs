@@ -11,6 +11,7 @@ pub mod json;
 pub mod las;
 pub mod ply;
 pub mod png;
+pub mod staging;
 
 use crate::error::Result;
 use std::io::Write;

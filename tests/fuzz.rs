@@ -1,0 +1,286 @@
+//! Stable-Rust fuzzing: a seeded mutation loop over the checked-in corpus
+//! (`fuzz/corpus/<target>/`, plus the shared capture when present) for the capture reader
+//! and decoder, the configuration parser with `--set`, the calibration readers and the
+//! labels reader. Every input must give `Ok` or an `Err` whose message names the file;
+//! nothing may panic. A panicking input is saved under `target/fuzz-findings/` and the
+//! test fails naming it; findings become regression tests.
+//!
+//! Time per target: `FUZZ_SECONDS` (default 1; CI runs longer), seed `FUZZ_SEED`
+//! (default fixed), so a run is reproducible for a given number of iterations.
+
+mod common;
+
+use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// xorshift64*: small, seedable, no dependency.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+const INTERESTING: [&[u8]; 12] = [
+    b"\xff\xff\xff\xff",
+    b"\x00\x00\x00\x00",
+    b"\xff\xee",
+    b"\x39\x8c",
+    b"\x21",
+    b"\x37",
+    b"-1",
+    b"1e309",
+    b"nan",
+    b"[]",
+    b"\n[[noise]]\n",
+    b"\"",
+];
+
+/// One mutation of `data`: bit flips, byte sets, interesting values, cuts, duplication,
+/// splices with another corpus entry.
+fn mutate(rng: &mut Rng, data: &mut Vec<u8>, corpus: &[Vec<u8>]) {
+    let rounds = 1 + rng.below(4);
+    for _ in 0..rounds {
+        let len = data.len();
+        match rng.below(8) {
+            0 if len > 0 => {
+                let i = rng.below(len);
+                data[i] ^= 1 << rng.below(8);
+            }
+            1 if len > 0 => {
+                let i = rng.below(len);
+                data[i] = rng.next() as u8;
+            }
+            2 => {
+                let v = INTERESTING[rng.below(INTERESTING.len())];
+                let i = rng.below(len + 1);
+                if rng.below(2) == 0 || i + v.len() > len {
+                    data.splice(i..i, v.iter().copied());
+                } else {
+                    data[i..i + v.len()].copy_from_slice(v);
+                }
+            }
+            3 if len > 0 => data.truncate(rng.below(len)),
+            4 if len > 0 => {
+                let a = rng.below(len);
+                let b = (a + rng.below(64)).min(len);
+                let chunk = data[a..b].to_vec();
+                let at = rng.below(len + 1);
+                data.splice(at..at, chunk);
+            }
+            5 if len > 0 => {
+                let a = rng.below(len);
+                let b = (a + rng.below(256)).min(len);
+                data.drain(a..b);
+            }
+            6 => {
+                let other = &corpus[rng.below(corpus.len())];
+                if !other.is_empty() {
+                    let a = rng.below(other.len());
+                    let b = (a + rng.below(512)).min(other.len());
+                    let at = rng.below(len + 1);
+                    data.splice(at..at, other[a..b].iter().copied());
+                }
+            }
+            _ if len > 0 => {
+                // Small arithmetic on a byte: off-by-one lengths and counts.
+                let i = rng.below(len);
+                data[i] = data[i].wrapping_add((rng.below(5) as u8).wrapping_sub(2));
+            }
+            _ => data.push(rng.next() as u8),
+        }
+    }
+}
+
+fn corpus(target: &str, extra: &[PathBuf]) -> Vec<Vec<u8>> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("fuzz/corpus")
+        .join(target);
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    paths.sort();
+    paths.extend(extra.iter().cloned());
+    paths.iter().map(|p| std::fs::read(p).unwrap()).collect()
+}
+
+fn seconds() -> f64 {
+    std::env::var("FUZZ_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1.0)
+}
+
+fn seed(target: &str) -> u64 {
+    let base: u64 = std::env::var("FUZZ_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0x5eed_1d4a_2026);
+    target.bytes().fold(base, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3)
+    }) | 1
+}
+
+/// Runs `check` on every corpus entry, then on mutations until the time is up.
+/// `check` returns Err(description) for a wrong (non-panicking) outcome.
+fn fuzz(target: &str, extra: &[PathBuf], check: impl Fn(&[u8]) -> Result<(), String>) {
+    let corpus = corpus(target, extra);
+    let mut rng = Rng(seed(target));
+    let deadline = Instant::now() + Duration::from_secs_f64(seconds());
+    let mut runs = 0u64;
+    let mut i = 0usize;
+    loop {
+        let input = if i < corpus.len() {
+            corpus[i].clone()
+        } else {
+            let mut d = corpus[rng.below(corpus.len())].clone();
+            mutate(&mut rng, &mut d, &corpus);
+            d
+        };
+        i += 1;
+        runs += 1;
+        let outcome = catch_unwind(AssertUnwindSafe(|| check(&input)));
+        let problem = match outcome {
+            Ok(Ok(())) => None,
+            Ok(Err(why)) => Some(why),
+            Err(_) => Some("panicked".to_string()),
+        };
+        if let Some(why) = problem {
+            let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/fuzz-findings");
+            std::fs::create_dir_all(&dir).unwrap();
+            let path = dir.join(format!("{target}-{runs}.bin"));
+            std::fs::write(&path, &input).unwrap();
+            panic!(
+                "fuzz target {target}: {why}; input saved as {}",
+                path.display()
+            );
+        }
+        if i >= corpus.len() && Instant::now() >= deadline {
+            break;
+        }
+    }
+    eprintln!("fuzz {target}: {runs} inputs, seed {}", seed(target));
+}
+
+fn names(err: &impl std::fmt::Display, name: &str) -> Result<(), String> {
+    let text = err.to_string();
+    if text.contains(name) {
+        Ok(())
+    } else {
+        Err(format!("error does not name {name}: {text}"))
+    }
+}
+
+/// Reads a capture to the end through the container reader and the decoder.
+pub fn check_capture(bytes: &[u8]) -> Result<(), String> {
+    let name = Path::new("fuzzed.pcap");
+    let mut reader =
+        match FrameReader::from_bytes(Arc::from(bytes), name, &DecoderOptions::default()) {
+            Ok(r) => r,
+            Err(e) => return names(&e, "fuzzed.pcap"),
+        };
+    for frame in reader.by_ref() {
+        if let Err(e) = frame {
+            return names(&e, "fuzzed.pcap");
+        }
+    }
+    let s = reader.summary();
+    if !(s.duration_s.is_finite() && s.duration_s >= 0.0) {
+        return Err(format!("duration {}", s.duration_s));
+    }
+    Ok(())
+}
+
+#[test]
+fn fuzz_capture_reader_and_decoder() {
+    let shared: Vec<PathBuf> = common::shared("hdl32e/monterey.pcap").into_iter().collect();
+    // The whole shared capture is large: mutate it only through splices (corpus[.] picks).
+    fuzz("capture", &shared, check_capture);
+}
+
+#[test]
+fn fuzz_config_and_set() {
+    let sets = [
+        "noise[1].rate_mm_h=3",
+        "noise[2].type=\"rain\"",
+        "detection.min_power=-1",
+        "sensor.intensity=\"raw\"",
+        "noise[0].elevation_deg=[20,30]",
+        "cluster.cutoff_m=1e309",
+        "ground.method=\"x\"",
+        "seed=",
+        "=",
+        "noise[99999999999].x=1",
+    ];
+    fuzz("config", &[], |bytes| {
+        let text = String::from_utf8_lossy(bytes);
+        // The first bytes choose the --set arguments, so both are fuzzed together.
+        let pick = bytes.first().copied().unwrap_or(0) as usize;
+        let mut chosen: Vec<String> = Vec::new();
+        if pick % 3 == 1 {
+            chosen.push(sets[pick % sets.len()].to_string());
+        }
+        if pick % 3 == 2 {
+            // A --set built from the fuzzed text itself.
+            let line = text.lines().nth(pick % 7).unwrap_or("").to_string();
+            chosen.push(line);
+        }
+        match lidar_noise::config::Config::from_toml_str(
+            &text,
+            Path::new("fuzzed.toml"),
+            &chosen,
+            None,
+        ) {
+            Ok(_) => Ok(()),
+            Err(e) => {
+                let t = e.to_string();
+                if t.contains("fuzzed.toml") || t.contains("--set") {
+                    Ok(())
+                } else {
+                    Err(format!("error names neither the file nor --set: {t}"))
+                }
+            }
+        }
+    });
+}
+
+#[test]
+fn fuzz_calibration_readers() {
+    fuzz("calibration", &[], |bytes| {
+        let text = String::from_utf8_lossy(bytes);
+        let yaml = lidar_noise::calibration::yaml::parse_str(&text, Path::new("fuzzed.yaml"));
+        let xml = lidar_noise::calibration::xml::parse_str(&text, Path::new("fuzzed.xml"));
+        if let Err(e) = yaml {
+            names(&e, "fuzzed.yaml")?;
+        }
+        if let Err(e) = xml {
+            names(&e, "fuzzed.xml")?;
+        }
+        Ok(())
+    });
+}
+
+#[test]
+fn fuzz_labels_reader() {
+    let dir = tempfile::tempdir().unwrap();
+    fuzz("labels", &[], |bytes| {
+        // Through the public file reader (gzip or not is its business).
+        let path = dir.path().join("fuzzed.labels.csv.gz");
+        std::fs::write(&path, bytes).unwrap();
+        match lidar_noise::synth::labels::read_labels_file(&path) {
+            Ok(_) => Ok(()),
+            Err(e) => names(&e, "fuzzed.labels.csv.gz"),
+        }
+    });
+}

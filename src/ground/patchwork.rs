@@ -605,6 +605,7 @@ mod tests {
             Some(z.regions() - 1)
         );
         assert_eq!(z.locate(100.1, 0.0), None);
-        assert!((z.outer_edge(z.regions() - 1) - 100.0).abs() < 1e-9);
+        assert_eq!(z.bins(0), 0..22);
+        assert_eq!(z.bins(z.regions() - 1), 348..360);
     }
 }

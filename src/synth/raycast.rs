@@ -514,6 +514,34 @@ mod tests {
     }
 
     #[test]
+    fn curb_top_and_face_are_ground_and_follow_the_slope() {
+        for slope in [0.0, 4.0] {
+            let s = scene(&format!(
+                "[sensor]\nheight_m = 2.0\n[ground]\nslope_deg = {slope}\n[[objects]]\nkind = \"curb\"\nx = 5.0\ny = 0.0\nlength_m = 2.0\nwidth_m = 4.0\nheight_m = 0.15\nreflectance = 0.3\n"
+            ));
+            let c = Caster::new(&s, &Calibration::builtin());
+            let g = &s.ground;
+            let ray = |x: f64, z: f64| {
+                let n = (x * x + (z - 2.0) * (z - 2.0)).sqrt();
+                [x / n, 0.0, (z - 2.0) / n]
+            };
+            // Onto the top at x = 5.5: it lies 0.15 m above the (sloped) ground there.
+            let top = g.z_at(5.5, 0.0) + 0.15;
+            let hit = c.cast_world(ray(5.5, top)).unwrap();
+            assert_eq!(hit.label, 0);
+            let want = (5.5f64.powi(2) + (top - 2.0).powi(2)).sqrt();
+            assert!((hit.range - want).abs() < 1e-6, "{slope}: {} {want}", hit.range);
+            // Onto the face at x = 4, halfway up.
+            let mid = g.z_at(4.0, 0.0) + 0.07;
+            let hit = c.cast_world(ray(4.0, mid)).unwrap();
+            assert_eq!(hit.label, 0);
+            let want = (16.0 + (mid - 2.0).powi(2)).sqrt();
+            assert!((hit.range - want).abs() < 1e-6, "{slope}: {} {want}", hit.range);
+            assert!(hit.cos_incidence > 0.8);
+        }
+    }
+
+    #[test]
     fn intensity_model() {
         assert_eq!(intensity(0.5, false, 1.0), 50);
         assert_eq!(intensity(1.0, false, 0.5), 50);

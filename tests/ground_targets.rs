@@ -33,11 +33,22 @@ fn default_ground_method_meets_the_targets_on_every_scene_and_noise() {
         let frames = labelled_frames(&scene);
         for (name, cfg) in &configs {
             let c = measure(&frames, cfg, &[method])[0];
-            assert!(c.tp > 1000, "{} {name}: too little ground ({})", scene.name, c.tp);
+            assert!(
+                c.tp > 1000,
+                "{} {name}: too little ground ({})",
+                scene.name,
+                c.tp
+            );
             let (p, r) = (c.precision(), c.recall());
-            eprintln!("{:>12} {name:>9}: precision {p:.4} recall {r:.4}", scene.name);
+            eprintln!(
+                "{:>12} {name:>9}: precision {p:.4} recall {r:.4}",
+                scene.name
+            );
             if p < TARGET || r < TARGET {
-                failures.push(format!("{} {name}: precision {p:.4}, recall {r:.4}", scene.name));
+                failures.push(format!(
+                    "{} {name}: precision {p:.4}, recall {r:.4}",
+                    scene.name
+                ));
             }
         }
     }
@@ -72,10 +83,16 @@ fn randomized_scenes_have_slopes_curbs_and_label_curbs_ground() {
             .map(|o| o.id)
             .collect();
         assert!(!curbs.is_empty(), "seed {seed}: no curb");
-        assert!(scene.objects.len() > curbs.len() + 5, "seed {seed}: too few objects");
+        assert!(
+            scene.objects.len() > curbs.len() + 5,
+            "seed {seed}: too few objects"
+        );
         let frames = labelled_frames(&scene);
         for (_, labels) in &frames {
-            assert!(labels.iter().all(|l| !curbs.contains(l)), "curb ids never label returns");
+            assert!(
+                labels.iter().all(|l| !curbs.contains(l)),
+                "curb ids never label returns"
+            );
         }
     }
 }

@@ -9,9 +9,13 @@
 //! `sensor.intensity = "reflectivity"`, `power.model = "lidar-equation"`,
 //! `power.reference_reflectance = 0.10`, `power.reference_range_m = 100`,
 //! `power.reflectance_floor = 0.005`, no noise stages, `detection.min_power = 0.001`,
-//! `detection.min_range_m = 0.9`, `ground.method = "range-image"` with
-//! `max_angle_delta_deg = 5`, `initial_angle_deg = 30`, `cluster.cut = "distance"` with
-//! `cutoff_m = 0.5`, `cutoff_per_m = 0`, `min_points = 10`, `max_edge_m = 2`.
+//! `detection.min_range_m = 0.9`, `ground.method = "patchwork"` (its `patchwork_*`
+//! settings are listed in `crate::ground::patchwork::Params`; the range-image keys
+//! `max_angle_delta_deg = 5`, `initial_angle_deg = 30` and the RANSAC keys keep their
+//! defaults too), `cluster.cut = "distance"` with `cutoff_m = 0.5`, `cutoff_per_m = 0`,
+//! `min_points = 10`, `max_edge_m = 2`. The built-in configuration
+//! (`configs/paper.toml`) sets `ground.method = "range-image"`, the reference study's
+//! method.
 
 pub mod overrides;
 pub mod reader;

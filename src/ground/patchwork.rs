@@ -28,31 +28,37 @@
 //!    upright (normal within `uprightness_deg` of vertical), and, in the two inner zones,
 //!    not elevated (mean height at most `elevation_m` above the expected road height)
 //!    unless it is flat (variance along the normal at most `flatness_m2`). Everywhere the
-//!    plane must lie below the highest ground the configured slope allows at that range
-//!    (a "global elevation" bound).
+//!    plane must lie below the expected road height plus `elevation_m` plus the rise of a
+//!    `max_slope_deg` slope at its distance (a "global elevation" bound).
 //!
 //! **Fixed instead of learned.** Patchwork++ adapts the elevation and flatness thresholds
 //! of the inner rings over time (mean plus a multiple of the standard deviation of the
 //! values seen in past ground regions) and reverts regions to ground using statistics of
 //! earlier frames (temporal ground revert, TGR). Here frames are independent and results
 //! must not depend on which frames came before or on thread order, so TGR is off and the
-//! thresholds are fixed settings: `elevation_m` (0.5 m above the road, i.e. a kerb or a
-//! slope of a few degrees in the inner zones passes, a car roof does not) and
-//! `flatness_m2` (0.005 m^2, above the variance Goodin rain gives the road: sigma about
+//! thresholds are fixed settings: `elevation_m` (0.5 m above the road: a kerb or a slope
+//! of a few degrees in the inner zones passes, a car roof does not) and `flatness_m2`
+//! (0.005 m^2, three times the variance Goodin rain at 7 mm/h gives the road: sigma about
 //! 0.02 x sensor height, 4 cm, i.e. 0.0016 m^2).
 //!
-//! **Our addition: per-point height test.** Patchwork++ labels every point within the
-//! fit distance of a ground plane as ground, so the lowest returns on a car or a wall
-//! (up to `distance_m` above the road) count as ground: precision 0.90-0.99 on cluttered
-//! scenes. Instead, a point of a ground region is ground when its signed distance to the
-//! plane lies within `[-below_m, h]` with `h = clamp(height_sigmas * sigma, height_min_m,
-//! distance_m)`, sigma being the RMS residual of the plane's inliers: the tolerance
-//! follows the measured noise of that region instead of a worst case. And a point whose
-//! next-higher ring in the same azimuth column rises steeply above it (a vertical step of
-//! more than `foot_rise_m` over a horizontal distance less than the rise, see
-//! [`foot_of_vertical`]) is the foot of a vertical structure and not ground. R-VPF
-//! removes whole vertical planes; this catches feet in regions where the vertical part
-//! is too small to fit a plane (poles, cones, the first ring on a car's side).
+//! **Our additions.** Patchwork++ labels every point within the fit distance of a ground
+//! plane as ground, so the lowest returns on a car or a wall count as ground: precision
+//! 0.90-0.99 on cluttered scenes. Three tests keep them out:
+//!
+//! - *Height band.* A point of a ground region is ground when its signed distance to the
+//!   plane lies within `[-below_m, t]` with `t = clamp(height_sigmas * sigma,
+//!   height_min_m, distance_m)`, sigma being the RMS residual of the plane's inliers: the
+//!   tolerance follows the measured noise of that region instead of a worst case.
+//! - *Column test.* [`vertical_points`] finds returns on vertical structure along the
+//!   scan's columns (a return with a return of one of the next rings steeply above it).
+//!   They take no part in any fit and are ground only within a quarter of the band: the
+//!   road at a wall's foot stays ground, the wall's lowest returns do not. R-VPF removes
+//!   whole vertical planes; this catches feet where the vertical part is too small to
+//!   fit a plane (poles, cones) or fills a region near the sensor (a parked car's side).
+//! - *Continuity.* Walking outwards, a region's plane must be reachable from the nearest
+//!   ground plane nearer to the sensor in its direction: their centroids may differ in
+//!   height by `continuity_m` plus the rise of a `max_slope_deg` slope over the distance
+//!   between them. A car roof is flat and upright too, but not reachable from the road.
 
 use crate::frame::Return;
 use glam::DVec3;
@@ -187,14 +193,15 @@ impl Zones {
     }
 
     /// (zone, region index) of a horizontal distance and azimuth, if inside the CZM.
-    fn locate(&self, r: f64, theta: f64) -> Option<(usize, usize)> {
+    fn locate(&self, r: f64, azimuth_deg: f64) -> Option<(usize, usize)> {
         if !(r >= self.edges[0] && r <= self.edges[4]) {
             return None;
         }
         let k = (1..4).find(|&k| r < self.edges[k]).map_or(3, |k| k - 1);
         let width = (self.edges[k + 1] - self.edges[k]) / ZONE_RINGS[k] as f64;
         let ring = (((r - self.edges[k]) / width) as usize).min(ZONE_RINGS[k] - 1);
-        let t = theta.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU;
+        // `azimuth` is in degrees, [0, 360) for decoded returns.
+        let t = azimuth_deg.rem_euclid(360.0) / 360.0;
         let sector = ((t * ZONE_SECTORS[k] as f64) as usize).min(ZONE_SECTORS[k] - 1);
         Some((k, self.first[k] + ring * ZONE_SECTORS[k] + sector))
     }
@@ -296,13 +303,20 @@ pub fn segment(returns: &[Return], p: &Params) -> Vec<bool> {
     // Region of each return (u32::MAX: outside the CZM, not finite, or a reflection).
     let mut region_of = vec![u32::MAX; n];
     let mut counts = vec![0u32; zones.regions() + 1];
-    let vertical = vertical_points(returns, p.foot_rise_m);
+    let slope = p.max_slope_deg.to_radians().tan();
+    // Above the global elevation bound nothing is ground, so nothing needs judging.
+    let horiz: Vec<f32> = returns.iter().map(|r| r.x.hypot(r.y)).collect();
+    let bound =
+        |z: f32, d: f32| f64::from(z) <= -h + p.elevation_m + p.distance_m + f64::from(d) * slope;
+    let vertical = vertical_points_with(returns, &horiz, p.foot_rise_m, |i| {
+        bound(returns[i].z, horiz[i])
+    });
     for (i, r) in returns.iter().enumerate() {
         if !(r.x.is_finite() && r.y.is_finite() && r.z.is_finite()) {
             continue;
         }
-        let (x, y, z) = (f64::from(r.x), f64::from(r.y), f64::from(r.z));
-        let Some((zone, region)) = zones.locate(x.hypot(y), y.atan2(x)) else {
+        let z = f64::from(r.z);
+        let Some((zone, region)) = zones.locate(f64::from(horiz[i]), f64::from(r.azimuth)) else {
             continue;
         };
         if zone == 0 && z < -(h + p.rnr_depth_m) && r.intensity <= p.rnr_max_intensity {
@@ -327,9 +341,9 @@ pub fn segment(returns: &[Return], p: &Params) -> Vec<bool> {
     }
 
     let upright = p.uprightness_deg.to_radians().cos();
-    let slope = p.max_slope_deg.to_radians().tan();
     let mut pts: Vec<DVec3> = Vec::new();
     let mut idx: Vec<u32> = Vec::new();
+    let mut by_z: Vec<(f32, u32)> = Vec::new();
     let mut work: Vec<DVec3> = Vec::new();
     let mut keep: Vec<bool> = Vec::new();
     let mut vpf: Vec<bool> = Vec::new();
@@ -340,14 +354,11 @@ pub fn segment(returns: &[Return], p: &Params) -> Vec<bool> {
         if slice.len() < MIN_REGION_POINTS {
             continue;
         }
+        by_z.clear();
+        by_z.extend(slice.iter().map(|&i| (returns[i as usize].z, i)));
+        by_z.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         idx.clear();
-        idx.extend_from_slice(slice);
-        idx.sort_unstable_by(|&a, &b| {
-            returns[a as usize]
-                .z
-                .total_cmp(&returns[b as usize].z)
-                .then(a.cmp(&b))
-        });
+        idx.extend(by_z.iter().map(|&(_, i)| i));
         pts.clear();
         pts.extend(idx.iter().map(|&i| {
             let r = &returns[i as usize];
@@ -359,17 +370,29 @@ pub fn segment(returns: &[Return], p: &Params) -> Vec<bool> {
         vpf.clear();
         vpf.resize(pts.len(), false);
 
-        // R-VPF: peel off vertical planes among the lowest points.
+        // R-VPF: peel off vertical planes among the lowest points (the band within
+        // vpf_seed_m + vpf_distance_m of the lowest returns; higher parts of a wall lie
+        // above any ground seed anyway).
+        let low = {
+            let top = pts[0].z + p.vpf_seed_m + p.vpf_distance_m;
+            pts.partition_point(|q| q.z < top)
+                .max(NUM_LPR.min(pts.len()))
+        };
         for _ in 0..VPF_ROUNDS {
-            let Some(fit) = iterate_fit(&pts, &keep, p.vpf_seed_m, p.vpf_distance_m, &mut work)
-            else {
+            let Some(fit) = iterate_fit(
+                &pts[..low],
+                &keep[..low],
+                p.vpf_seed_m,
+                p.vpf_distance_m,
+                &mut work,
+            ) else {
                 break;
             };
             if fit.normal.z >= upright {
                 break;
             }
             let mut removed = 0;
-            for (k, q) in pts.iter().enumerate() {
+            for (k, q) in pts[..low].iter().enumerate() {
                 if keep[k] && fit.signed(*q).abs() < p.vpf_distance_m {
                     keep[k] = false;
                     vpf[k] = true;
@@ -492,7 +515,7 @@ fn iterate_fit(
 /// Returns that lie on a vertical structure, judged along the scan's columns.
 ///
 /// The returns are organised by ring and azimuth (bins of [`COLUMN_DEG`]). A return is
-/// vertical when one of the nearest returns in azimuth (within one bin) of the next
+/// vertical when one of the nearest returns in azimuth (within half a bin) of the next
 /// [`COLUMN_RINGS`] rings up lies more than `rise_m` higher and nearer to it in
 /// horizontal distance from the sensor than it is higher (a segment steeper than 45
 /// degrees). On a road the next rings land metres farther out (at 3.3 m from a sensor
@@ -501,7 +524,25 @@ fn iterate_fit(
 /// face and the road at its foot out of it; range noise moves a vertical surface's returns
 /// sideways, which the 45-degree margin absorbs for the first metres and which the rise
 /// of a few rings outgrows farther out.
-pub fn vertical_points(returns: &[Return], rise_m: f64) -> Vec<bool> {
+///
+/// Only returns for which `judge` holds are judged (the others stay false): the caller
+/// skips those that could never be ground, which saves most of the work on real scans.
+pub fn vertical_points(
+    returns: &[Return],
+    rise_m: f64,
+    judge: impl Fn(&Return) -> bool,
+) -> Vec<bool> {
+    let horiz: Vec<f32> = returns.iter().map(|r| r.x.hypot(r.y)).collect();
+    vertical_points_with(returns, &horiz, rise_m, |i| judge(&returns[i]))
+}
+
+/// [`vertical_points`] with the horizontal distances given and `judge` taking indices.
+fn vertical_points_with(
+    returns: &[Return],
+    horiz: &[f32],
+    rise_m: f64,
+    judge: impl Fn(usize) -> bool,
+) -> Vec<bool> {
     let n = returns.len();
     let mut out = vec![false; n];
     let bins = (360.0 / COLUMN_DEG).round() as usize;
@@ -513,9 +554,9 @@ pub fn vertical_points(returns: &[Return], rise_m: f64) -> Vec<bool> {
     if rings < 2 || rise_m <= 0.0 {
         return out;
     }
-    let bin_of = |r: &Return| -> usize {
-        ((r.azimuth.rem_euclid(360.0) / COLUMN_DEG) as usize).min(bins - 1)
-    };
+    // Decoded azimuths lie in [0, 360); the clamp only guards hand-made input.
+    let bin_of =
+        |r: &Return| -> usize { ((r.azimuth / COLUMN_DEG).max(0.0) as usize).min(bins - 1) };
     // Counting sort by (ring, azimuth bin).
     let mut start = vec![0u32; rings * bins + 1];
     let mut cell = Vec::with_capacity(n);
@@ -528,30 +569,41 @@ pub fn vertical_points(returns: &[Return], rise_m: f64) -> Vec<bool> {
         start[k] += start[k - 1];
     }
     let mut sorted = vec![0u32; n];
+    // Azimuths in the same order, so the search reads one contiguous array.
+    let mut sorted_az = vec![0f32; n];
     {
         let mut next = start.clone();
         for (i, &c) in cell.iter().enumerate() {
             sorted[next[c as usize] as usize] = i as u32;
+            sorted_az[next[c as usize] as usize] = returns[i].azimuth;
             next[c as usize] += 1;
         }
     }
-    let horiz: Vec<f32> = returns.iter().map(|r| r.x.hypot(r.y)).collect();
     let rise_m = rise_m as f32;
     for (i, r) in returns.iter().enumerate() {
-        if !(r.z.is_finite() && horiz[i].is_finite()) {
+        if !(r.z.is_finite() && horiz[i].is_finite()) || !judge(i) {
             continue;
         }
         let b = cell[i] as usize % bins;
         'rings: for up in (r.ring as usize + 1)..(r.ring as usize + 1 + COLUMN_RINGS).min(rings) {
             let mut best: Option<(f32, usize)> = None;
-            for db in [bins - 1, 0, 1] {
+            // Matches lie within half a bin, so the point's own bin and the neighbour on
+            // the side it is nearer to hold them all.
+            let side = if r.azimuth - b as f32 * COLUMN_DEG < 0.5 * COLUMN_DEG {
+                bins - 1
+            } else {
+                1
+            };
+            for db in [0, side] {
                 let c = up * bins + (b + db) % bins;
-                for &j in &sorted[start[c] as usize..start[c + 1] as usize] {
-                    let da = ((returns[j as usize].azimuth - r.azimuth + 540.0).rem_euclid(360.0)
-                        - 180.0)
-                        .abs();
-                    if da <= COLUMN_DEG && best.is_none_or(|(d, _)| da < d) {
-                        best = Some((da, j as usize));
+                let cells = start[c] as usize..start[c + 1] as usize;
+                for (k, &az) in cells.clone().zip(&sorted_az[cells]) {
+                    let mut da = (az - r.azimuth).abs();
+                    if da > 180.0 {
+                        da = 360.0 - da;
+                    }
+                    if da <= 0.5 * COLUMN_DEG && best.is_none_or(|(d, _)| da < d) {
+                        best = Some((da, sorted[k] as usize));
                     }
                 }
             }

@@ -530,13 +530,21 @@ mod tests {
             let hit = c.cast_world(ray(5.5, top)).unwrap();
             assert_eq!(hit.label, 0);
             let want = (5.5f64.powi(2) + (top - 2.0).powi(2)).sqrt();
-            assert!((hit.range - want).abs() < 1e-6, "{slope}: {} {want}", hit.range);
+            assert!(
+                (hit.range - want).abs() < 1e-6,
+                "{slope}: {} {want}",
+                hit.range
+            );
             // Onto the face at x = 4, halfway up.
             let mid = g.z_at(4.0, 0.0) + 0.07;
             let hit = c.cast_world(ray(4.0, mid)).unwrap();
             assert_eq!(hit.label, 0);
             let want = (16.0 + (mid - 2.0).powi(2)).sqrt();
-            assert!((hit.range - want).abs() < 1e-6, "{slope}: {} {want}", hit.range);
+            assert!(
+                (hit.range - want).abs() < 1e-6,
+                "{slope}: {} {want}",
+                hit.range
+            );
             assert!(hit.cos_incidence > 0.8);
         }
     }

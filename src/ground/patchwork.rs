@@ -221,6 +221,8 @@ impl Zones {
 }
 
 /// PCA plane through `pts`; None with fewer than 3 points or a degenerate spread.
+// Matrix index loops read as the formulas they implement.
+#[allow(clippy::needless_range_loop)]
 fn fit_plane(pts: &[DVec3]) -> Option<Fit> {
     if pts.len() < 3 {
         return None;
@@ -253,6 +255,7 @@ fn fit_plane(pts: &[DVec3]) -> Option<Fit> {
 }
 
 /// Smallest eigenvalue and its unit eigenvector of a symmetric 3x3 matrix (cyclic Jacobi).
+#[allow(clippy::needless_range_loop)]
 fn smallest_eigen(mut a: [[f64; 3]; 3]) -> Option<(f64, DVec3)> {
     let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     for _ in 0..16 {
@@ -581,7 +584,7 @@ fn vertical_points_with(
     }
     let rise_m = rise_m as f32;
     for (i, r) in returns.iter().enumerate() {
-        if !(r.z.is_finite() && horiz[i].is_finite()) || !judge(i) {
+        if !(r.z.is_finite() && horiz[i].is_finite() && judge(i)) {
             continue;
         }
         let b = cell[i] as usize % bins;

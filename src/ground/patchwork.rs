@@ -15,15 +15,18 @@
 //!    `sensor_height + rnr_depth` below the sensor and weaker than the intensity limit is
 //!    a reflection (a beam that bounced off a wet road or a window and came back late),
 //!    not a surface: it is not ground and takes no part in any fit.
-//! 3. **Region-wise vertical plane fitting (R-VPF).** In every region the lowest points
-//!    (within `vpf_seed_m` of the lowest) are fitted by PCA; while that plane is steeper
+//! 3. **Region-wise vertical plane fitting (R-VPF).** In every region of the two inner
+//!    zones (where vertical surfaces are sampled densely enough to bias a plane) the
+//!    lowest points (within `vpf_seed_m + vpf_distance_m` of the lowest) are fitted by
+//!    PCA; while that plane is steeper
 //!    than the uprightness limit, its inliers (within `vpf_distance_m`) are a wall or an
 //!    object's side, are removed and the fit repeats (at most [`VPF_ROUNDS`] times), so
 //!    vertical structure does not drag the ground plane up.
 //! 4. **Region-wise ground plane fitting (R-GPF).** The lowest-point representative (LPR)
 //!    is the mean height of the [`NUM_LPR`] lowest remaining points; seeds are the points
-//!    within `seed_m` above it; the plane is refitted [`NUM_ITER`] times by PCA to the
-//!    points within `distance_m` of the previous plane.
+//!    within `seed_m` above it; the plane is refitted up to [`NUM_ITER`] times by PCA to
+//!    the points within `distance_m` of the previous plane (stopping once the number of
+//!    inliers stops changing).
 //! 5. **Ground likelihood estimation (GLE).** A region's plane is ground when it is
 //!    upright (normal within `uprightness_deg` of vertical), and, in the two inner zones,
 //!    not elevated (mean height at most `elevation_m` above the expected road height)
@@ -171,6 +174,8 @@ impl Fit {
 struct Zones {
     edges: [f64; 5],
     first: [usize; 5],
+    /// Rings per metre of each zone (inverse ring width).
+    rings_per_m: [f64; 4],
 }
 
 impl Zones {
@@ -185,7 +190,15 @@ impl Zones {
         for k in 0..4 {
             first[k + 1] = first[k] + ZONE_RINGS[k] * ZONE_SECTORS[k];
         }
-        Zones { edges, first }
+        let mut rings_per_m = [0.0; 4];
+        for k in 0..4 {
+            rings_per_m[k] = ZONE_RINGS[k] as f64 / (edges[k + 1] - edges[k]);
+        }
+        Zones {
+            edges,
+            first,
+            rings_per_m,
+        }
     }
 
     fn regions(&self) -> usize {
@@ -198,11 +211,14 @@ impl Zones {
             return None;
         }
         let k = (1..4).find(|&k| r < self.edges[k]).map_or(3, |k| k - 1);
-        let width = (self.edges[k + 1] - self.edges[k]) / ZONE_RINGS[k] as f64;
-        let ring = (((r - self.edges[k]) / width) as usize).min(ZONE_RINGS[k] - 1);
-        // `azimuth` is in degrees, [0, 360) for decoded returns.
-        let t = azimuth_deg.rem_euclid(360.0) / 360.0;
-        let sector = ((t * ZONE_SECTORS[k] as f64) as usize).min(ZONE_SECTORS[k] - 1);
+        let ring = (((r - self.edges[k]) * self.rings_per_m[k]) as usize).min(ZONE_RINGS[k] - 1);
+        // `azimuth` is in degrees, [0, 360) for decoded returns (the wrap guards others).
+        let a = if (0.0..360.0).contains(&azimuth_deg) {
+            azimuth_deg
+        } else {
+            azimuth_deg.rem_euclid(360.0)
+        };
+        let sector = ((a * (ZONE_SECTORS[k] as f64 / 360.0)) as usize).min(ZONE_SECTORS[k] - 1);
         Some((k, self.first[k] + ring * ZONE_SECTORS[k] + sector))
     }
 
@@ -221,37 +237,13 @@ impl Zones {
 }
 
 /// PCA plane through `pts`; None with fewer than 3 points or a degenerate spread.
-// Matrix index loops read as the formulas they implement.
-#[allow(clippy::needless_range_loop)]
+#[cfg(test)]
 fn fit_plane(pts: &[DVec3]) -> Option<Fit> {
-    if pts.len() < 3 {
-        return None;
-    }
-    let n = pts.len() as f64;
-    let mean = pts.iter().copied().sum::<DVec3>() / n;
-    let mut c = [[0.0f64; 3]; 3];
+    let mut acc = Acc::default();
     for p in pts {
-        let q = *p - mean;
-        let v = [q.x, q.y, q.z];
-        for i in 0..3 {
-            for j in i..3 {
-                c[i][j] += v[i] * v[j];
-            }
-        }
+        acc.add(*p);
     }
-    for i in 0..3 {
-        for j in i..3 {
-            c[i][j] /= n;
-            c[j][i] = c[i][j];
-        }
-    }
-    let (value, vector) = smallest_eigen(c)?;
-    let normal = if vector.z < 0.0 { -vector } else { vector };
-    Some(Fit {
-        normal,
-        mean,
-        flatness: value.max(0.0),
-    })
+    acc.fit()
 }
 
 /// Smallest eigenvalue and its unit eigenvector of a symmetric 3x3 matrix (cyclic Jacobi).
@@ -346,8 +338,10 @@ pub fn segment(returns: &[Return], p: &Params) -> Vec<bool> {
     let upright = p.uprightness_deg.to_radians().cos();
     let mut pts: Vec<DVec3> = Vec::new();
     let mut idx: Vec<u32> = Vec::new();
-    let mut by_z: Vec<(f32, u32)> = Vec::new();
-    let mut work: Vec<DVec3> = Vec::new();
+    let mut work: Vec<f64> = Vec::new();
+    let mut low_pts: Vec<DVec3> = Vec::new();
+    let mut low_keep: Vec<bool> = Vec::new();
+    let mut low_idx: Vec<usize> = Vec::new();
     let mut keep: Vec<bool> = Vec::new();
     let mut vpf: Vec<bool> = Vec::new();
     // Last accepted ground plane per azimuth bin, walking outwards.
@@ -357,11 +351,8 @@ pub fn segment(returns: &[Return], p: &Params) -> Vec<bool> {
         if slice.len() < MIN_REGION_POINTS {
             continue;
         }
-        by_z.clear();
-        by_z.extend(slice.iter().map(|&i| (returns[i as usize].z, i)));
-        by_z.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         idx.clear();
-        idx.extend(by_z.iter().map(|&(_, i)| i));
+        idx.extend_from_slice(slice);
         pts.clear();
         pts.extend(idx.iter().map(|&i| {
             let r = &returns[i as usize];
@@ -376,15 +367,26 @@ pub fn segment(returns: &[Return], p: &Params) -> Vec<bool> {
         // R-VPF: peel off vertical planes among the lowest points (the band within
         // vpf_seed_m + vpf_distance_m of the lowest returns; higher parts of a wall lie
         // above any ground seed anyway).
-        let low = {
-            let top = pts[0].z + p.vpf_seed_m + p.vpf_distance_m;
-            pts.partition_point(|q| q.z < top)
-                .max(NUM_LPR.min(pts.len()))
+        let top =
+            pts.iter().map(|q| q.z).fold(f64::INFINITY, f64::min) + p.vpf_seed_m + p.vpf_distance_m;
+        low_idx.clear();
+        low_idx.extend((0..pts.len()).filter(|&k| pts[k].z < top));
+        low_pts.clear();
+        low_pts.extend(low_idx.iter().map(|&k| pts[k]));
+        low_keep.clear();
+        low_keep.extend(low_idx.iter().map(|&k| keep[k]));
+        // R-VPF runs in the two inner zones (within about 27 m), where walls and
+        // vehicle sides are sampled densely enough to bias a plane; farther out the
+        // column test and the height band deal with them.
+        let vpf_rounds = if zones.zone_of(region) < 2 {
+            VPF_ROUNDS
+        } else {
+            0
         };
-        for _ in 0..VPF_ROUNDS {
+        for _ in 0..vpf_rounds {
             let Some(fit) = iterate_fit(
-                &pts[..low],
-                &keep[..low],
+                &low_pts,
+                &low_keep,
                 p.vpf_seed_m,
                 p.vpf_distance_m,
                 &mut work,
@@ -395,8 +397,9 @@ pub fn segment(returns: &[Return], p: &Params) -> Vec<bool> {
                 break;
             }
             let mut removed = 0;
-            for (k, q) in pts[..low].iter().enumerate() {
-                if keep[k] && fit.signed(*q).abs() < p.vpf_distance_m {
+            for (l, &k) in low_idx.iter().enumerate() {
+                if low_keep[l] && fit.signed(pts[k]).abs() < p.vpf_distance_m {
+                    low_keep[l] = false;
                     keep[k] = false;
                     vpf[k] = true;
                     removed += 1;
@@ -479,40 +482,111 @@ fn iterate_fit(
     keep: &[bool],
     seed_m: f64,
     distance_m: f64,
-    work: &mut Vec<DVec3>,
+    zs: &mut Vec<f64>,
 ) -> Option<Fit> {
-    let mut lowest = 0.0;
-    let mut count = 0usize;
-    for (q, _) in pts.iter().zip(keep).filter(|(_, &k)| k).take(NUM_LPR) {
-        lowest += q.z;
-        count += 1;
-    }
-    if count < 3 {
+    zs.clear();
+    zs.extend(pts.iter().zip(keep).filter(|(_, &k)| k).map(|(q, _)| q.z));
+    if zs.len() < 3 {
         return None;
     }
-    let lpr = lowest / count as f64;
-    work.clear();
-    work.extend(
-        pts.iter()
+    let m = NUM_LPR.min(zs.len());
+    if m < zs.len() {
+        zs.select_nth_unstable_by(m - 1, f64::total_cmp);
+    }
+    let lpr = zs[..m].iter().sum::<f64>() / m as f64;
+    let mut acc = Acc::default();
+    for (q, _) in pts
+        .iter()
+        .zip(keep)
+        .filter(|(q, &k)| k && q.z < lpr + seed_m)
+    {
+        acc.add(*q);
+    }
+    let mut fit = acc.fit()?;
+    let mut last_n = acc.n;
+    for round in 0..NUM_ITER {
+        let mut acc = Acc::default();
+        for (q, _) in pts
+            .iter()
             .zip(keep)
-            .filter(|(q, &k)| k && q.z < lpr + seed_m)
-            .map(|(q, _)| *q),
-    );
-    let mut fit = fit_plane(work)?;
-    for _ in 0..NUM_ITER {
-        work.clear();
-        work.extend(
-            pts.iter()
-                .zip(keep)
-                .filter(|(q, &k)| k && fit.signed(**q).abs() < distance_m)
-                .map(|(q, _)| *q),
-        );
-        match fit_plane(work) {
+            .filter(|(q, &k)| k && fit.signed(**q).abs() < distance_m)
+        {
+            acc.add(*q);
+        }
+        // An unchanged inlier count after the first refit means the same inliers (the
+        // band only moves with the plane), so the plane would not change either.
+        let same = round > 0 && acc.n == last_n;
+        match acc.fit() {
             Some(f) => fit = f,
             None => break,
         }
+        if same {
+            break;
+        }
+        last_n = acc.n;
     }
     Some(fit)
+}
+
+/// One-pass accumulation of a point set's mean and covariance, centred on its first
+/// point for conditioning (regions span metres, sums stay well within f64 precision).
+#[derive(Default)]
+struct Acc {
+    n: usize,
+    origin: DVec3,
+    s1: DVec3,
+    s2: [f64; 6],
+}
+
+impl Acc {
+    fn add(&mut self, p: DVec3) {
+        if self.n == 0 {
+            self.origin = p;
+        }
+        let q = p - self.origin;
+        self.n += 1;
+        self.s1 += q;
+        self.s2[0] += q.x * q.x;
+        self.s2[1] += q.x * q.y;
+        self.s2[2] += q.x * q.z;
+        self.s2[3] += q.y * q.y;
+        self.s2[4] += q.y * q.z;
+        self.s2[5] += q.z * q.z;
+    }
+
+    /// The PCA plane of the points added; None below 3 points or for a degenerate spread.
+    fn fit(&self) -> Option<Fit> {
+        if self.n < 3 {
+            return None;
+        }
+        let n = self.n as f64;
+        let m = self.s1 / n;
+        let s = &self.s2;
+        let c = [
+            [
+                s[0] / n - m.x * m.x,
+                s[1] / n - m.x * m.y,
+                s[2] / n - m.x * m.z,
+            ],
+            [
+                s[1] / n - m.x * m.y,
+                s[3] / n - m.y * m.y,
+                s[4] / n - m.y * m.z,
+            ],
+            [
+                s[2] / n - m.x * m.z,
+                s[4] / n - m.y * m.z,
+                s[5] / n - m.z * m.z,
+            ],
+        ];
+        let (value, vector) = smallest_eigen(c)?;
+        let normal = if vector.z < 0.0 { -vector } else { vector };
+        Some(Fit {
+            normal,
+            mean: self.origin + m,
+            flatness: value.max(0.0),
+        })
+    }
 }
 
 /// Returns that lie on a vertical structure, judged along the scan's columns.
@@ -541,6 +615,76 @@ pub fn vertical_points(
 
 /// [`vertical_points`] with the horizontal distances given and `judge` taking indices.
 fn vertical_points_with(
+    returns: &[Return],
+    horiz: &[f32],
+    rise_m: f64,
+    judge: impl Fn(usize) -> bool,
+) -> Vec<bool> {
+    if rise_m <= 0.0 {
+        return vec![false; returns.len()];
+    }
+    by_firing(returns, horiz, rise_m as f32, &judge)
+        .unwrap_or_else(|| by_azimuth(returns, horiz, rise_m, judge))
+}
+
+/// True when `rise` over the horizontal step `dd` is steep enough to be a vertical surface.
+fn steep(rise: f32, dd: f32, rise_m: f32) -> bool {
+    rise > rise_m && dd.abs() < rise
+}
+
+/// The column test with the sensor's own columns: the returns of one firing (consecutive
+/// returns of one packet block) share an azimuth up to the lasers' firing offsets, so the
+/// next rings up of a return are the firing's returns of those rings. None when the
+/// input does not identify firings (a firing would hold a ring twice), e.g. points read
+/// from a file without packet and block numbers.
+fn by_firing(
+    returns: &[Return],
+    horiz: &[f32],
+    rise_m: f32,
+    judge: &impl Fn(usize) -> bool,
+) -> Option<Vec<bool>> {
+    const NONE: u32 = u32::MAX;
+    let mut out = vec![false; returns.len()];
+    let mut slot = [NONE; 256];
+    let mut start = 0;
+    while start < returns.len() {
+        let key = |r: &Return| (r.packet, r.block, r.kind);
+        let k0 = key(&returns[start]);
+        let mut end = start;
+        while end < returns.len() && key(&returns[end]) == k0 {
+            let ring = returns[end].ring as usize;
+            if slot[ring] != NONE {
+                return None;
+            }
+            slot[ring] = end as u32;
+            end += 1;
+        }
+        for i in start..end {
+            let r = &returns[i];
+            if !(r.z.is_finite() && horiz[i].is_finite() && judge(i)) {
+                continue;
+            }
+            let ring = r.ring as usize;
+            for &j in slot.iter().skip(ring + 1).take(COLUMN_RINGS) {
+                if j != NONE {
+                    let j = j as usize;
+                    if steep(returns[j].z - r.z, horiz[j] - horiz[i], rise_m) {
+                        out[i] = true;
+                        break;
+                    }
+                }
+            }
+        }
+        for r in &returns[start..end] {
+            slot[r.ring as usize] = NONE;
+        }
+        start = end;
+    }
+    Some(out)
+}
+
+/// The column test with azimuth bins, for input without firing numbers.
+fn by_azimuth(
     returns: &[Return],
     horiz: &[f32],
     rise_m: f64,
@@ -611,8 +755,7 @@ fn vertical_points_with(
                 }
             }
             if let Some((_, j)) = best {
-                let rise = returns[j].z - r.z;
-                if rise > rise_m && (horiz[j] - horiz[i]).abs() < rise {
+                if steep(returns[j].z - r.z, horiz[j] - horiz[i], rise_m) {
                     out[i] = true;
                     break 'rings;
                 }

@@ -1,4 +1,6 @@
-//! Speed of ground segmentation on a synthetic full HDL-32E frame (32 x 1800 returns).
+//! Speed of ground segmentation on a synthetic full HDL-32E frame (32 x 1800 returns),
+//! and of every method on a real frame (monterey frame 1, about 50k returns) when the
+//! shared data is present.
 
 #[path = "../tests/ground_scene/mod.rs"]
 mod ground_scene;
@@ -6,6 +8,7 @@ mod ground_scene;
 use criterion::{criterion_group, criterion_main, Criterion};
 use ground_scene::Scene;
 use lidar_noise::ground::{segment, GroundMethod, GroundOptions};
+use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::hint::black_box;
@@ -19,7 +22,10 @@ fn bench_ground(c: &mut Criterion) {
     let (street, _) = Scene::street(0.0).frame(0.2, &[]);
 
     let mut group = c.benchmark_group("ground");
-    let range_image = GroundOptions::default();
+    let range_image = GroundOptions {
+        method: GroundMethod::RangeImage,
+        ..Default::default()
+    };
     group.bench_function("range-image 57600", |b| {
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         b.iter(|| segment(black_box(&returns), &range_image, &mut rng))
@@ -36,6 +42,38 @@ fn bench_ground(c: &mut Criterion) {
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         b.iter(|| segment(black_box(&returns), &ransac, &mut rng))
     });
+    let patchwork = GroundOptions {
+        method: GroundMethod::Patchwork,
+        ..Default::default()
+    };
+    group.bench_function("patchwork 57600", |b| {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        b.iter(|| segment(black_box(&returns), &patchwork, &mut rng))
+    });
+    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/hdl32e/monterey.pcap");
+    if path.exists() {
+        // Frame 1: the first full rotation (frame 0 is the partial first sweep).
+        let frame = FrameReader::open(&path, &DecoderOptions::default())
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap();
+        let real = frame.returns;
+        for (name, opts) in [
+            ("patchwork", &patchwork),
+            ("range-image", &range_image),
+            ("ransac", &ransac),
+        ] {
+            group.bench_function(format!("{name} monterey frame {}", frame.index), |b| {
+                let mut rng = ChaCha8Rng::seed_from_u64(1);
+                b.iter(|| segment(black_box(&real), opts, &mut rng))
+            });
+        }
+        eprintln!("monterey frame {}: {} returns", frame.index, real.len());
+    } else {
+        eprintln!("SKIPPED: {} is absent", path.display());
+    }
     group.finish();
 }
 

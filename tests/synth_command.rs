@@ -9,6 +9,7 @@ fn args(dir: &std::path::Path) -> SynthArgs {
     SynthArgs {
         scene: None,
         preset: Some("crossroad".into()),
+        random: None,
         output: dir.to_path_buf(),
         frames: Some(1),
         seed: Some(3),

@@ -1,5 +1,6 @@
 //! `lidar-noise synth`: writes a synthetic HDL-32E capture with ground-truth labels.
 
+use crate::synth::scene::random_scene;
 use crate::synth::{labels, objects_json, write_capture, Scene, SynthOptions};
 use crate::writers::atomic::temp_file_for;
 use anyhow::{bail, Context};
@@ -9,16 +10,20 @@ use std::path::{Path, PathBuf};
 /// Arguments of `lidar-noise synth`.
 #[derive(Debug, clap::Args)]
 pub struct SynthArgs {
-    /// Scene description (TOML); omit when using --preset.
+    /// Scene description (TOML); omit when using --preset or --random.
     #[arg(
         value_name = "SCENE.toml",
-        conflicts_with = "preset",
-        required_unless_present = "preset"
+        conflicts_with_all = ["preset", "random"],
+        required_unless_present_any = ["preset", "random"]
     )]
     pub scene: Option<PathBuf>,
     /// Built-in scene: crossroad, parking or empty.
-    #[arg(long, value_name = "NAME")]
+    #[arg(long, value_name = "NAME", conflicts_with = "random")]
     pub preset: Option<String>,
+    /// A randomized street scene (slope, curbs, objects) drawn from SEED; named
+    /// random-SEED, one rotation unless --frames says otherwise.
+    #[arg(long, value_name = "SEED")]
+    pub random: Option<u64>,
     /// Output folder (created if missing).
     #[arg(short = 'o', long = "output", value_name = "DIR")]
     pub output: PathBuf,
@@ -38,10 +43,11 @@ pub struct SynthArgs {
 /// Runs `lidar-noise synth`: writes DIR/<name>.pcap, DIR/<name>.labels.csv.gz and
 /// DIR/<name>.objects.json, each through a temporary file renamed into place.
 pub fn run(args: SynthArgs, global: crate::cli::Global) -> anyhow::Result<()> {
-    let mut scene = match (&args.scene, &args.preset) {
-        (Some(path), None) => Scene::from_file(path)?,
-        (None, Some(name)) => Scene::preset(name)?,
-        _ => bail!("give either a scene file or --preset NAME"),
+    let mut scene = match (&args.scene, &args.preset, args.random) {
+        (Some(path), None, None) => Scene::from_file(path)?,
+        (None, Some(name), None) => Scene::preset(name)?,
+        (None, None, Some(seed)) => random_scene(seed),
+        _ => bail!("give one of a scene file, --preset NAME or --random SEED"),
     };
     if let Some(frames) = args.frames {
         if !(1..=100_000).contains(&frames) {

@@ -9,9 +9,13 @@
 //! `sensor.intensity = "reflectivity"`, `power.model = "lidar-equation"`,
 //! `power.reference_reflectance = 0.10`, `power.reference_range_m = 100`,
 //! `power.reflectance_floor = 0.005`, no noise stages, `detection.min_power = 0.001`,
-//! `detection.min_range_m = 0.9`, `ground.method = "range-image"` with
-//! `max_angle_delta_deg = 5`, `initial_angle_deg = 30`, `cluster.cut = "distance"` with
-//! `cutoff_m = 0.5`, `cutoff_per_m = 0`, `min_points = 10`, `max_edge_m = 2`.
+//! `detection.min_range_m = 0.9`, `ground.method = "patchwork"` (its `patchwork_*`
+//! settings are listed in `crate::ground::patchwork::Params`; the range-image keys
+//! `max_angle_delta_deg = 5`, `initial_angle_deg = 30` and the RANSAC keys keep their
+//! defaults too), `cluster.cut = "distance"` with `cutoff_m = 0.5`, `cutoff_per_m = 0`,
+//! `min_points = 10`, `max_edge_m = 2`. The built-in configuration
+//! (`configs/paper.toml`) sets `ground.method = "range-image"`, the reference study's
+//! method.
 
 pub mod overrides;
 pub mod reader;
@@ -320,11 +324,12 @@ fn read_ground(root: &Section<'_>) -> Result<GroundOptions> {
     let Some(t) = root.table("ground")? else {
         return Ok(g);
     };
-    if let Some(m) = t.choice("method", &["range-image", "ransac", "none"])? {
+    if let Some(m) = t.choice("method", &["patchwork", "range-image", "ransac", "none"])? {
         g.method = match m {
+            "range-image" => GroundMethod::RangeImage,
             "ransac" => GroundMethod::Ransac,
             "none" => GroundMethod::None,
-            _ => GroundMethod::RangeImage,
+            _ => GroundMethod::Patchwork,
         };
     }
     let angle = |key: &str, into: &mut f64| -> Result<()> {
@@ -353,6 +358,55 @@ fn read_ground(root: &Section<'_>) -> Result<GroundOptions> {
             return Err(t.error("ransac_iterations", format!("{v} is outside 1..=1000000")));
         }
         g.ransac_iterations = v as u32;
+    }
+    let keys: Vec<&str> = g.patchwork_f64().iter().map(|(k, _)| *k).collect();
+    for key in keys {
+        if let Some(v) = t.f64(key)? {
+            GroundOptions::check_patchwork(key, v).map_err(|m| t.error(key, m))?;
+            let slot = match key {
+                "patchwork_sensor_height_m" => &mut g.patchwork_sensor_height_m,
+                "patchwork_min_range_m" => &mut g.patchwork_min_range_m,
+                "patchwork_max_range_m" => &mut g.patchwork_max_range_m,
+                "patchwork_seed_m" => &mut g.patchwork_seed_m,
+                "patchwork_distance_m" => &mut g.patchwork_distance_m,
+                "patchwork_uprightness_deg" => &mut g.patchwork_uprightness_deg,
+                "patchwork_elevation_m" => &mut g.patchwork_elevation_m,
+                "patchwork_flatness_m2" => &mut g.patchwork_flatness_m2,
+                "patchwork_max_slope_deg" => &mut g.patchwork_max_slope_deg,
+                "patchwork_rnr_depth_m" => &mut g.patchwork_rnr_depth_m,
+                "patchwork_vpf_seed_m" => &mut g.patchwork_vpf_seed_m,
+                "patchwork_vpf_distance_m" => &mut g.patchwork_vpf_distance_m,
+                "patchwork_height_sigmas" => &mut g.patchwork_height_sigmas,
+                "patchwork_height_min_m" => &mut g.patchwork_height_min_m,
+                "patchwork_below_m" => &mut g.patchwork_below_m,
+                "patchwork_foot_rise_m" => &mut g.patchwork_foot_rise_m,
+                _ => &mut g.patchwork_continuity_m,
+            };
+            *slot = v;
+        }
+    }
+    if let Some(v) = t.i64("patchwork_rnr_max_intensity")? {
+        if !(0..=255).contains(&v) {
+            return Err(t.error(
+                "patchwork_rnr_max_intensity",
+                format!("{v} is outside 0..=255 (an intensity byte)"),
+            ));
+        }
+        g.patchwork_rnr_max_intensity = v as u8;
+    }
+    if g.patchwork_max_range_m <= g.patchwork_min_range_m {
+        let key = if t.has("patchwork_max_range_m") {
+            "patchwork_max_range_m"
+        } else {
+            "patchwork_min_range_m"
+        };
+        return Err(t.error(
+            key,
+            format!(
+                "patchwork_max_range_m ({}) must exceed patchwork_min_range_m ({})",
+                g.patchwork_max_range_m, g.patchwork_min_range_m
+            ),
+        ));
     }
     t.finish()?;
     Ok(g)

@@ -1,7 +1,11 @@
-//! Ray casting of HDL-32E beams against a [`Scene`]: ground plane, oriented boxes and
-//! vertical cylinders.
+//! Ray casting of HDL-32E beams against a [`Scene`]: ground plane, oriented boxes,
+//! vertical cylinders and curbs (raised sidewalks that follow the ground's slope).
+//!
+//! A curb's returns are labelled 0, ground: the sidewalk top and the curb face are
+//! surfaces a ground segmentation should keep out of the objects (SemanticKITTI counts
+//! sidewalks among its ground classes), and the face is only 0.1-0.2 m high.
 
-use super::scene::{Scene, Shape};
+use super::scene::{Scene, Shape, CURB};
 use crate::calibration::{Calibration, LASERS};
 
 /// Farthest return the synthesizer reports, metres.
@@ -40,6 +44,18 @@ enum Prim {
         z0: f64,
         z1: f64,
         r: f64,
+    },
+    /// A raised slab on the ground: an oriented rectangle in xy (half sizes `half`)
+    /// between the ground plane `n . p = d0` and the parallel plane `n . p = d1`.
+    Curb {
+        cx: f64,
+        cy: f64,
+        cos: f64,
+        sin: f64,
+        half: [f64; 2],
+        n: [f64; 3],
+        d0: f64,
+        d1: f64,
     },
 }
 
@@ -151,7 +167,7 @@ impl Caster {
                         width_m,
                         height_m,
                         yaw_deg,
-                    } => {
+                    } if o.kind != CURB => {
                         let (sin, cos) = yaw_deg.to_radians().sin_cos();
                         Prim::Box {
                             cx: o.x,
@@ -160,6 +176,26 @@ impl Caster {
                             cos,
                             sin,
                             half: [length_m / 2.0, width_m / 2.0, height_m / 2.0],
+                        }
+                    }
+                    Shape::Box {
+                        length_m,
+                        width_m,
+                        height_m,
+                        yaw_deg,
+                    } => {
+                        let (sin, cos) = yaw_deg.to_radians().sin_cos();
+                        // The slab's top lies height_m above the ground, measured
+                        // vertically: ground_n[2] * height_m along the normal.
+                        Prim::Curb {
+                            cx: o.x,
+                            cy: o.y,
+                            cos,
+                            sin,
+                            half: [length_m / 2.0, width_m / 2.0],
+                            n: ground_n,
+                            d0: ground_d,
+                            d1: ground_d + ground_n[2] * height_m,
                         }
                     }
                     Shape::Cylinder { radius_m, height_m } => Prim::Cylinder {
@@ -176,7 +212,8 @@ impl Caster {
                     cx: o.x,
                     cy: o.y,
                     r2: r * r,
-                    label: o.id,
+                    // Curbs are ground (see the module notes).
+                    label: if o.kind == CURB { 0 } else { o.id },
                     reflectance: o.reflectance,
                     retro: o.retro,
                 }
@@ -279,9 +316,62 @@ impl Caster {
     }
 }
 
+/// Narrows `[t_near, t_far]` to where `a + b t` lies in `[lo, hi]`; records in `axis`
+/// the slab (`which`) the ray enters last. False when the interval becomes empty.
+fn clip(a: f64, b: f64, lo: f64, hi: f64, which: usize, t: &mut (f64, f64, usize)) -> bool {
+    if b.abs() < 1e-15 {
+        return a >= lo && a <= hi;
+    }
+    let mut t0 = (lo - a) / b;
+    let mut t1 = (hi - a) / b;
+    if t0 > t1 {
+        std::mem::swap(&mut t0, &mut t1);
+    }
+    if t0 > t.0 {
+        t.0 = t0;
+        t.2 = which;
+    }
+    t.1 = t.1.min(t1);
+    t.0 <= t.1
+}
+
 /// Nearest positive intersection of a ray with a primitive: (range, cos incidence).
 fn intersect(prim: &Prim, o: [f64; 3], d: [f64; 3]) -> Option<(f64, f64)> {
     match *prim {
+        Prim::Curb {
+            cx,
+            cy,
+            cos,
+            sin,
+            half,
+            n,
+            d0,
+            d1,
+        } => {
+            let (px, py) = (o[0] - cx, o[1] - cy);
+            let pu = cos * px + sin * py;
+            let pv = -sin * px + cos * py;
+            let qu = cos * d[0] + sin * d[1];
+            let qv = -sin * d[0] + cos * d[1];
+            let pn = n[0] * o[0] + n[1] * o[1] + n[2] * o[2];
+            let qn = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
+            let mut t = (f64::NEG_INFINITY, f64::INFINITY, 0usize);
+            if !(clip(pu, qu, -half[0], half[0], 0, &mut t)
+                && clip(pv, qv, -half[1], half[1], 1, &mut t)
+                && clip(pn, qn, d0, d1, 2, &mut t))
+            {
+                return None;
+            }
+            if t.0 <= 0.0 {
+                return None;
+            }
+            let cos_inc = match t.2 {
+                0 => qu.abs(),
+                1 => qv.abs(),
+                _ => qn.abs(),
+            };
+            Some((t.0, cos_inc))
+        }
         Prim::Box {
             cx,
             cy,
@@ -421,6 +511,42 @@ mod tests {
         };
         let hit = c.cast_world(d).unwrap();
         assert_eq!(hit.label, 1);
+    }
+
+    #[test]
+    fn curb_top_and_face_are_ground_and_follow_the_slope() {
+        for slope in [0.0, 4.0] {
+            let s = scene(&format!(
+                "[sensor]\nheight_m = 2.0\n[ground]\nslope_deg = {slope}\n[[objects]]\nkind = \"curb\"\nx = 5.0\ny = 0.0\nlength_m = 2.0\nwidth_m = 4.0\nheight_m = 0.15\nreflectance = 0.3\n"
+            ));
+            let c = Caster::new(&s, &Calibration::builtin());
+            let g = &s.ground;
+            let ray = |x: f64, z: f64| {
+                let n = (x * x + (z - 2.0) * (z - 2.0)).sqrt();
+                [x / n, 0.0, (z - 2.0) / n]
+            };
+            // Onto the top at x = 5.5: it lies 0.15 m above the (sloped) ground there.
+            let top = g.z_at(5.5, 0.0) + 0.15;
+            let hit = c.cast_world(ray(5.5, top)).unwrap();
+            assert_eq!(hit.label, 0);
+            let want = (5.5f64.powi(2) + (top - 2.0).powi(2)).sqrt();
+            assert!(
+                (hit.range - want).abs() < 1e-6,
+                "{slope}: {} {want}",
+                hit.range
+            );
+            // Onto the face at x = 4, halfway up.
+            let mid = g.z_at(4.0, 0.0) + 0.07;
+            let hit = c.cast_world(ray(4.0, mid)).unwrap();
+            assert_eq!(hit.label, 0);
+            let want = (16.0 + (mid - 2.0).powi(2)).sqrt();
+            assert!(
+                (hit.range - want).abs() < 1e-6,
+                "{slope}: {} {want}",
+                hit.range
+            );
+            assert!(hit.cos_incidence > 0.8);
+        }
     }
 
     #[test]

@@ -17,7 +17,7 @@ cp "$out/crossroad/aggregate.csv" docs/figures/crossroad_aggregate.csv
 if [ -e ../shared/data/hdl32e/monterey.pcap ]; then
   sweep ../shared/data/hdl32e/monterey.pcap "$out/monterey"
   cp "$out/monterey/plots/birdseye_monterey_frame1.png" docs/figures/
-  cp "$out/monterey/plots/monterey/object_survival.png" docs/figures/monterey_object_survival.png
+
   cp "$out/monterey/aggregate.csv" docs/figures/monterey_aggregate.csv
 fi
 ls -la docs/figures

@@ -21,7 +21,7 @@ pub struct SynthArgs {
     #[arg(long, value_name = "NAME", conflicts_with = "random")]
     pub preset: Option<String>,
     /// A randomized street scene (slope, curbs, objects) drawn from SEED; named
-    /// random-SEED, one rotation unless --frames says otherwise.
+    /// random-SEED, one rotation unless --rotations says otherwise.
     #[arg(long, value_name = "SEED")]
     pub random: Option<u64>,
     /// Output folder (created if missing).

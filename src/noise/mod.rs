@@ -8,7 +8,7 @@
 //!
 //! # Adding a stage
 //! Write one file with a type implementing [`NoiseStage`] and a `build` function reading
-//! its options from a [`Section`], then add one [`StageKind`] line to [`REGISTRY`]. A
+//! its options from a `Section`, then add one [`StageKind`] line to [`REGISTRY`]. A
 //! stage sees only its own options, the frame being processed and its own random stream.
 //!
 //! # Random streams
@@ -22,14 +22,15 @@
 //! frames can be processed in any order on any number of threads with identical results.
 
 pub mod detection;
-pub mod occlusion;
 pub mod power;
-pub mod rain;
+pub mod registry;
 pub mod summary;
+pub mod world;
 
-use crate::config::reader::Section;
+pub use registry::{build_stage, StageKind, REGISTRY};
+pub use world::{occlusion, rain};
+
 use crate::config::Config;
-use crate::error::Result;
 use crate::frame::{Frame, Return};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -165,46 +166,6 @@ pub trait NoiseStage: Send + Sync + std::fmt::Debug {
     fn apply(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng);
 }
 
-/// A stage type that `[[noise]]` entries can name.
-pub struct StageKind {
-    /// The `type` string.
-    pub name: &'static str,
-    /// Reads and validates the stage's options (all keys except `type`).
-    pub build: fn(&Section<'_>) -> Result<Arc<dyn NoiseStage>>,
-}
-
-/// Every stage type, by `type` name. Adding a stage adds one line here.
-pub const REGISTRY: &[StageKind] = &[
-    StageKind {
-        name: occlusion::NAME,
-        build: occlusion::build,
-    },
-    StageKind {
-        name: rain::NAME,
-        build: rain::build,
-    },
-];
-
-/// Builds the stage of one `[[noise]]` entry by its `type`.
-pub fn build_stage(entry: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
-    let Some(kind) = entry.str("type")? else {
-        return Err(entry.missing("type"));
-    };
-    match REGISTRY.iter().find(|k| k.name == kind) {
-        Some(k) => (k.build)(entry),
-        None => {
-            let names: Vec<&str> = REGISTRY.iter().map(|k| k.name).collect();
-            Err(entry.error(
-                "type",
-                format!(
-                    "unknown noise stage \"{kind}\" (known: {})",
-                    names.join(", ")
-                ),
-            ))
-        }
-    }
-}
-
 /// 16-bit FNV-1a of a stage type name: a stable number for the stream derivation.
 fn fnv1a16(name: &str) -> u64 {
     let mut h: u32 = 0x811c_9dc5;
@@ -251,7 +212,7 @@ impl NoiseChain {
         NoiseChain {
             seed: config.seed,
             power: IdealPower::new(&config.power, &config.sensor, &config.detection),
-            stages: config.noise.clone(),
+            stages: registry::build_all(&config.noise),
             tags: stage_tags(&kinds),
             detection: config.detection.clone(),
         }

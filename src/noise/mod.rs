@@ -24,6 +24,7 @@
 pub mod detection;
 pub mod power;
 pub mod registry;
+pub mod sensor;
 pub mod summary;
 pub mod world;
 
@@ -87,6 +88,45 @@ pub struct NoisyFrame {
     pub power: Vec<f64>,
     /// Current fate; stages and filters only change `Kept` entries.
     pub fate: Vec<Fate>,
+    /// The detection threshold (fraction of emitted power) the filters will apply, for
+    /// stages that raise it (receiver noise floor, ambient light).
+    pub threshold: f64,
+    /// Per-return state that only sensor stages change; `None` until one does, so that a
+    /// chain without them (or with them at zero magnitude) writes the same bytes.
+    pub moved: Moved,
+}
+
+/// Per-return angle, pose, time and intensity state of a [`NoisyFrame`]; each vector is
+/// allocated (one entry per return) by the first stage that changes it.
+#[derive(Clone, Debug, Default)]
+pub struct Moved {
+    /// Reported azimuth change in degrees (encoder, laser pointing): the point is reported
+    /// along the changed direction at its (noisy) range.
+    pub azimuth_deg: Option<Vec<f32>>,
+    /// Elevation change in degrees, like `azimuth_deg`.
+    pub elevation_deg: Option<Vec<f32>>,
+    /// Rigid motion applied to the reported point last (mounting, ego-motion, vibration).
+    pub pose: Option<Vec<sensor::Pose>>,
+    /// Reported firing time (seconds, as `Return::time`).
+    pub time: Option<Vec<f64>>,
+    /// Reported intensity byte.
+    pub intensity: Option<Vec<u8>>,
+}
+
+impl Moved {
+    /// The azimuth changes, allocated as zeros on first use.
+    pub fn azimuth_mut(&mut self, n: usize) -> &mut Vec<f32> {
+        self.azimuth_deg.get_or_insert_with(|| vec![0.0; n])
+    }
+    /// The elevation changes, allocated as zeros on first use.
+    pub fn elevation_mut(&mut self, n: usize) -> &mut Vec<f32> {
+        self.elevation_deg.get_or_insert_with(|| vec![0.0; n])
+    }
+    /// The poses, allocated as identities on first use.
+    pub fn pose_mut(&mut self, n: usize) -> &mut Vec<sensor::Pose> {
+        self.pose
+            .get_or_insert_with(|| vec![sensor::Pose::IDENTITY; n])
+    }
 }
 
 impl NoisyFrame {
@@ -104,6 +144,8 @@ impl NoisyFrame {
             range,
             power,
             fate,
+            threshold: crate::config::DetectionConfig::default().min_power,
+            moved: Moved::default(),
         }
     }
 
@@ -126,25 +168,64 @@ impl NoisyFrame {
 
     /// The surviving returns with the noisy range; x, y, z are scaled by R_n / R_i so the
     /// point moves along its beam. Pairs with [`NoisyFrame::kept_indices`].
+    ///
+    /// Sensor stages may also have changed the reported angles (the point is then placed
+    /// along the changed direction), time and intensity, and moved the point rigidly
+    /// (`moved.pose`, applied last; range and angles stay as the sensor reports them).
     pub fn survivors(&self) -> Vec<Return> {
-        self.clean
-            .iter()
-            .zip(&self.range)
-            .zip(&self.fate)
-            .filter(|(_, &f)| f == Fate::Kept)
-            .map(|((r, &rn), _)| {
-                let mut out = *r;
-                // A zero clean range has no direction to scale along; keep the point.
-                if r.range > 0.0 {
-                    let s = rn / r.range;
-                    out.x *= s;
-                    out.y *= s;
-                    out.z *= s;
-                }
-                out.range = rn;
-                out
-            })
-            .collect()
+        let mut out = Vec::with_capacity(self.len());
+        for i in 0..self.len() {
+            if self.fate[i] == Fate::Kept {
+                out.push(self.noisy_return(i));
+            }
+        }
+        out
+    }
+
+    /// The noisy version of return `i` (whatever its fate).
+    pub fn noisy_return(&self, i: usize) -> Return {
+        let r = &self.clean[i];
+        let rn = self.range[i];
+        let mut out = *r;
+        // A zero clean range has no direction to scale along; keep the point.
+        if r.range > 0.0 {
+            let s = rn / r.range;
+            out.x *= s;
+            out.y *= s;
+            out.z *= s;
+        }
+        out.range = rn;
+        let m = &self.moved;
+        let da = m.azimuth_deg.as_ref().map_or(0.0, |v| v[i]);
+        let de = m.elevation_deg.as_ref().map_or(0.0, |v| v[i]);
+        if (da != 0.0 || de != 0.0) && r.range > 0.0 {
+            // The actual direction of the clean point (whatever the calibration's
+            // azimuth offsets), turned by the changes; azimuth is clockwise from above.
+            let (x, y, z) = (f64::from(out.x), f64::from(out.y), f64::from(out.z));
+            let rr = (x * x + y * y + z * z).sqrt();
+            let az = (-y).atan2(x) + f64::from(da).to_radians();
+            let el = (z / rr).clamp(-1.0, 1.0).asin() + f64::from(de).to_radians();
+            let (se, ce) = el.sin_cos();
+            let (sa, ca) = az.sin_cos();
+            out.x = (rr * ce * ca) as f32;
+            out.y = (-rr * ce * sa) as f32;
+            out.z = (rr * se) as f32;
+            out.azimuth = (f64::from(r.azimuth) + f64::from(da)).rem_euclid(360.0) as f32;
+            out.elevation = r.elevation + de;
+        }
+        if let Some(p) = &m.pose {
+            let [x, y, z] = p[i].apply([out.x, out.y, out.z]);
+            out.x = x;
+            out.y = y;
+            out.z = z;
+        }
+        if let Some(t) = &m.time {
+            out.time = t[i];
+        }
+        if let Some(v) = &m.intensity {
+            out.intensity = v[i];
+        }
+        out
     }
 
     /// Counts and range statistics of this frame.
@@ -164,7 +245,18 @@ pub trait NoiseStage: Send + Sync + std::fmt::Debug {
     /// Applies the stage to the frame, drawing only from `rng` (this stage's stream for
     /// this frame). Only returns whose fate is still `Kept` may be changed.
     fn apply(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng);
+    /// The stage with its per-unit draws made (values fixed for a run and seed, such as
+    /// per-laser offsets), from `rng`, the stage's unit stream (frame key
+    /// [`UNIT_FRAME`]); `None` when the stage has none.
+    fn with_unit_draws(&self, _rng: &mut ChaCha8Rng) -> Option<Arc<dyn NoiseStage>> {
+        None
+    }
 }
+
+/// Frame index reserved for per-unit draws: the unit stream of a stage is
+/// `stage_rng(seed, UNIT_FRAME, tag)`, which no frame uses and which does not depend on
+/// the frame, so per-unit values are the same in every frame and every thread.
+pub const UNIT_FRAME: u32 = u32::MAX;
 
 /// 16-bit FNV-1a of a stage type name: a stable number for the stream derivation.
 fn fnv1a16(name: &str) -> u64 {
@@ -209,11 +301,20 @@ impl NoiseChain {
     /// Builds the chain of a configuration.
     pub fn new(config: &Config) -> Self {
         let kinds: Vec<&str> = config.noise.iter().map(|s| s.kind()).collect();
+        let tags = stage_tags(&kinds);
+        let stages = registry::build_all(&config.noise)
+            .into_iter()
+            .zip(&tags)
+            .map(|(stage, &tag)| {
+                let mut unit = stage_rng(config.seed, UNIT_FRAME, tag);
+                stage.with_unit_draws(&mut unit).unwrap_or(stage)
+            })
+            .collect();
         NoiseChain {
             seed: config.seed,
             power: IdealPower::new(&config.power, &config.sensor, &config.detection),
-            stages: registry::build_all(&config.noise),
-            tags: stage_tags(&kinds),
+            stages,
+            tags,
             detection: config.detection.clone(),
         }
     }
@@ -241,6 +342,7 @@ impl NoiseChain {
     /// Runs the chain on returns of the frame with capture index `index`.
     pub fn process_returns(&self, index: u32, returns: Vec<Return>) -> NoisyFrame {
         let mut noisy = NoisyFrame::new(index, returns, &self.power);
+        noisy.threshold = self.detection.min_power;
         for (stage, &tag) in self.stages.iter().zip(&self.tags) {
             let mut rng = stage_rng(self.seed, index, tag);
             stage.apply(&mut noisy, &mut rng);

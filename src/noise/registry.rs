@@ -2,7 +2,7 @@
 //! configuration ([`StageSpec`]), with errors naming key and line, and lists every
 //! type with its options for `lidar-noise stages`.
 
-use super::{world, NoiseStage};
+use super::{sensor, world, NoiseStage};
 use crate::config::reader::{ReadContext, Section};
 use crate::config::StageSpec;
 use crate::error::Result;
@@ -40,7 +40,18 @@ pub struct StageKind {
 
 /// Every stage type, by `type` name. Adding a stage adds one line here (and its name
 /// to `config::STAGE_TYPES`).
-pub const REGISTRY: &[StageKind] = &[world::occlusion::KIND, world::rain::KIND];
+pub const REGISTRY: &[StageKind] = &[
+    world::occlusion::KIND,
+    world::rain::KIND,
+    sensor::laser_diode::KIND,
+    sensor::mounting::KIND,
+    sensor::emitter::KIND,
+    sensor::mechanics::KIND,
+    sensor::receiver::KIND,
+    sensor::motion::KIND,
+    sensor::clock::KIND,
+    sensor::ambient::KIND,
+];
 
 /// Builds the stage of one `[[noise]]` entry read through `entry`.
 pub fn build_stage(entry: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {

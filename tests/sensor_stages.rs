@@ -609,3 +609,51 @@ fn zero_magnitude_chain_writes_the_same_ply_and_bad_options_write_nothing() {
                 .is_none()
     );
 }
+
+#[test]
+fn stages_lists_every_registered_type_with_its_options() {
+    let o = Command::cargo_bin("lidar-noise")
+        .unwrap()
+        .arg("stages")
+        .assert()
+        .success();
+    let text = String::from_utf8_lossy(&o.get_output().stdout).to_string();
+    for k in lidar_noise::noise::REGISTRY {
+        assert!(
+            text.contains(&format!("{} (p-diagram", k.name)),
+            "{}",
+            k.name
+        );
+        for opt in k.options {
+            assert!(text.contains(opt.name), "{}.{}", k.name, opt.name);
+        }
+    }
+    let help = Command::cargo_bin("lidar-noise")
+        .unwrap()
+        .args(["stages", "--help"])
+        .assert()
+        .success();
+    assert!(String::from_utf8_lossy(&help.get_output().stdout).contains("Examples:"));
+}
+
+#[test]
+fn every_sensor_stage_is_sweepable_and_toggleable() {
+    // The --vary shorthand and on/off resolve for every stage type.
+    use lidar_noise::sweep::plan::Vary;
+    for (k, key) in [
+        ("clock", "bias_ns"),
+        ("mounting", "yaw_deg"),
+        ("receiver", "noise_floor"),
+        ("laser_diode", "sigma_power"),
+        ("emitter", "power_factor"),
+        ("motion", "speed_mps"),
+        ("mechanics", "jitter_deg"),
+        ("ambient", "irradiance"),
+    ] {
+        assert!(Vary::parse(&format!("{k}.{key}=0,1")).is_ok(), "{k}.{key}");
+        assert!(Vary::parse(&format!("{k}=on,off")).is_ok(), "{k}");
+        let (c, _) =
+            Config::from_toml_str("", Path::new("x"), &[format!("{k}.{key}=1")], None).unwrap();
+        assert_eq!(c.noise[0].kind(), k);
+    }
+}

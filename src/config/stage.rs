@@ -9,7 +9,18 @@ use toml::{Table, Value};
 /// Every stage `type` the registry builds, in registry order. Plain data so that the
 /// `--set`/`--vary` shorthand can recognise stage names without importing `noise`; a
 /// test in `noise::registry` checks it equals the registry's names.
-pub const STAGE_TYPES: &[&str] = &["occlusion", "rain"];
+pub const STAGE_TYPES: &[&str] = &[
+    "occlusion",
+    "rain",
+    "laser_diode",
+    "mounting",
+    "emitter",
+    "mechanics",
+    "receiver",
+    "motion",
+    "clock",
+    "ambient",
+];
 
 /// One `[[noise]]` entry, not yet built into a stage.
 #[derive(Clone, Debug)]

@@ -129,3 +129,43 @@ mod tests {
         assert_eq!(names, crate::config::STAGE_TYPES);
     }
 }
+
+#[cfg(test)]
+mod listing_tests {
+    use super::*;
+
+    /// Every option a stage reports in its settings is declared in its option specs
+    /// (and the other way round), so `lidar-noise stages` lists what the code reads.
+    #[test]
+    fn option_specs_match_the_settings_of_each_stage() {
+        let spec_for = |kind: &str| -> &str {
+            match kind {
+                "occlusion" => "lasers = [1]",
+                "rain" => "rate_mm_h = 1.0",
+                _ => "",
+            }
+        };
+        for k in REGISTRY {
+            let text = format!("[[noise]]\ntype = \"{}\"\n{}\n", k.name, spec_for(k.name));
+            let (config, _) =
+                crate::config::Config::from_toml_str(&text, std::path::Path::new("t"), &[], None)
+                    .unwrap();
+            let declared: Vec<&str> = k.options.iter().map(|o| o.name).collect();
+            for (name, _) in &config.noise[0].settings {
+                assert!(
+                    declared.contains(&name.as_str()),
+                    "{}: {name} undeclared",
+                    k.name
+                );
+            }
+            if !matches!(k.name, "occlusion" | "laser_diode") {
+                let set: Vec<&str> = config.noise[0]
+                    .settings
+                    .iter()
+                    .map(|(n, _)| n.as_str())
+                    .collect();
+                assert_eq!(set, declared, "{}", k.name);
+            }
+        }
+    }
+}

@@ -199,17 +199,18 @@ impl NoisyFrame {
         let da = m.azimuth_deg.as_ref().map_or(0.0, |v| v[i]);
         let de = m.elevation_deg.as_ref().map_or(0.0, |v| v[i]);
         if (da != 0.0 || de != 0.0) && r.range > 0.0 {
-            // The actual direction of the clean point (whatever the calibration's
-            // azimuth offsets), turned by the changes; azimuth is clockwise from above.
+            // Turn the actual direction of the point (whatever the calibration's azimuth
+            // offsets): elevation in the vertical plane of the beam, then azimuth about
+            // z, clockwise seen from above like the sensor's azimuth.
             let (x, y, z) = (f64::from(out.x), f64::from(out.y), f64::from(out.z));
-            let rr = (x * x + y * y + z * z).sqrt();
-            let az = (-y).atan2(x) + f64::from(da).to_radians();
-            let el = (z / rr).clamp(-1.0, 1.0).asin() + f64::from(de).to_radians();
-            let (se, ce) = el.sin_cos();
-            let (sa, ca) = az.sin_cos();
-            out.x = (rr * ce * ca) as f32;
-            out.y = (-rr * ce * sa) as f32;
-            out.z = (rr * se) as f32;
+            let h = x.hypot(y);
+            let (se, ce) = f64::from(de).to_radians().sin_cos();
+            let (h2, z2) = (h * ce - z * se, h * se + z * ce);
+            let (x1, y1) = if h > 0.0 { (x * h2 / h, y * h2 / h) } else { (h2, 0.0) };
+            let (sa, ca) = f64::from(da).to_radians().sin_cos();
+            out.x = (x1 * ca + y1 * sa) as f32;
+            out.y = (y1 * ca - x1 * sa) as f32;
+            out.z = z2 as f32;
             out.azimuth = (f64::from(r.azimuth) + f64::from(da)).rem_euclid(360.0) as f32;
             out.elevation = r.elevation + de;
         }

@@ -84,24 +84,31 @@ impl NoiseStage for Mechanics {
             let a_start = frame.clean.first().map_or(0.0, |r| f64::from(r.azimuth));
             let clean = &frame.clean;
             let da = frame.moved.azimuth_deg.get_or_insert_with(|| vec![0.0; n]);
+            let mut last_jitter = 0.0;
             let mut firing = None;
-            let mut jitter = 0.0;
+            let mut shift = 0.0f32;
             for (i, r) in clean.iter().enumerate() {
-                let key = (r.packet, r.block);
+                // The 32 returns of a firing share its azimuth: one evaluation each.
+                let key = (r.packet, r.block, r.azimuth.to_bits());
                 if firing != Some(key) {
+                    let new_firing = firing.is_none_or(|(p, b, _)| (p, b) != (key.0, key.1));
                     firing = Some(key);
-                    jitter = if self.jitter_deg > 0.0 {
+                    let jitter = if new_firing && self.jitter_deg > 0.0 {
                         self.jitter_deg * normal(rng)
-                    } else {
+                    } else if new_firing {
                         0.0
+                    } else {
+                        last_jitter
                     };
+                    last_jitter = jitter;
+                    let a = f64::from(r.azimuth);
+                    let swept = (a - a_start).rem_euclid(360.0);
+                    shift = (self.azimuth_offset_deg
+                        + self.eccentricity_deg * (a.to_radians() + self.phases[0]).sin()
+                        + jitter
+                        + spin * swept) as f32;
                 }
-                let a = f64::from(r.azimuth);
-                let swept = (a - a_start).rem_euclid(360.0);
-                da[i] += (self.azimuth_offset_deg
-                    + self.eccentricity_deg * (a.to_radians() + self.phases[0]).sin()
-                    + jitter
-                    + spin * swept) as f32;
+                da[i] += shift;
             }
         }
         if self.wobble_deg != 0.0 {
@@ -110,9 +117,13 @@ impl NoiseStage for Mechanics {
                 .moved
                 .elevation_deg
                 .get_or_insert_with(|| vec![0.0; n]);
+            let mut last = (f32::NAN, 0.0f32);
             for (d, r) in de.iter_mut().zip(clean) {
-                let a = f64::from(r.azimuth).to_radians();
-                *d += (self.wobble_deg * (a + self.phases[1]).sin()) as f32;
+                if r.azimuth.to_bits() != last.0.to_bits() {
+                    let a = f64::from(r.azimuth).to_radians();
+                    last = (r.azimuth, (self.wobble_deg * (a + self.phases[1]).sin()) as f32);
+                }
+                *d += last.1;
             }
         }
     }

@@ -203,11 +203,16 @@ impl NoisyFrame {
             // offsets): elevation in the vertical plane of the beam, then azimuth about
             // z, clockwise seen from above like the sensor's azimuth.
             let (x, y, z) = (f64::from(out.x), f64::from(out.y), f64::from(out.z));
-            let h = x.hypot(y);
-            let (se, ce) = f64::from(de).to_radians().sin_cos();
+            let h = (x * x + y * y).sqrt();
+            let (se, ce) = small_sin_cos(f64::from(de).to_radians());
             let (h2, z2) = (h * ce - z * se, h * se + z * ce);
-            let (x1, y1) = if h > 0.0 { (x * h2 / h, y * h2 / h) } else { (h2, 0.0) };
-            let (sa, ca) = f64::from(da).to_radians().sin_cos();
+            let (x1, y1) = if h > 0.0 {
+                let k = h2 / h;
+                (x * k, y * k)
+            } else {
+                (h2, 0.0)
+            };
+            let (sa, ca) = small_sin_cos(f64::from(da).to_radians());
             out.x = (x1 * ca + y1 * sa) as f32;
             out.y = (y1 * ca - x1 * sa) as f32;
             out.z = z2 as f32;
@@ -232,6 +237,21 @@ impl NoisyFrame {
     /// Counts and range statistics of this frame.
     pub fn summary(&self) -> NoiseSummary {
         NoiseSummary::from_frame(self)
+    }
+}
+
+/// sin and cos of `t` radians; a Taylor series for the small angles sensor stages use
+/// (|t| < 0.01: truncation error below 1e-13, far under f32 precision), which is several
+/// times faster than `sin_cos` in the per-return loop of [`NoisyFrame::survivors`].
+fn small_sin_cos(t: f64) -> (f64, f64) {
+    if t.abs() < 0.01 {
+        let t2 = t * t;
+        (
+            t * (1.0 - t2 / 6.0 * (1.0 - t2 / 20.0)),
+            1.0 - t2 / 2.0 * (1.0 - t2 / 12.0),
+        )
+    } else {
+        t.sin_cos()
     }
 }
 
@@ -365,6 +385,19 @@ impl NoiseChain {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn small_sin_cos_agrees_with_sin_cos() {
+        for i in -300..=300 {
+            let t = f64::from(i) * 1e-4;
+            let (s, c) = small_sin_cos(t);
+            assert!(
+                (s - t.sin()).abs() < 1e-14 && (c - t.cos()).abs() < 1e-14,
+                "{t}"
+            );
+        }
+        assert_eq!(small_sin_cos(0.5), 0.5f64.sin_cos());
+    }
 
     #[test]
     fn stage_tags_count_occurrences_per_type() {

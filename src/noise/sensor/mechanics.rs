@@ -121,7 +121,10 @@ impl NoiseStage for Mechanics {
             for (d, r) in de.iter_mut().zip(clean) {
                 if r.azimuth.to_bits() != last.0.to_bits() {
                     let a = f64::from(r.azimuth).to_radians();
-                    last = (r.azimuth, (self.wobble_deg * (a + self.phases[1]).sin()) as f32);
+                    last = (
+                        r.azimuth,
+                        (self.wobble_deg * (a + self.phases[1]).sin()) as f32,
+                    );
                 }
                 *d += last.1;
             }

@@ -59,6 +59,20 @@ fn bench_chain(c: &mut Criterion) {
     c.bench_function("frame summary, 50k returns", |b| {
         b.iter(|| black_box(black_box(&out).summary()))
     });
+    // The p-diagram part 1 chain (configs/pdiagram-sensor.toml) alone and after the
+    // paper chain: the difference with "paper chain + filters" is what the sensor
+    // stages add (target: at most 1 ms per 50k-return frame).
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/pdiagram-sensor.toml");
+    let (sensor, _) = Config::load(Some(&path), &[], None).expect("pdiagram-sensor.toml");
+    let sensor_chain = NoiseChain::new(&sensor);
+    c.bench_function("pdiagram-sensor chain + filters, 50k returns", |b| {
+        b.iter(|| black_box(sensor_chain.process(black_box(&frame))))
+    });
+    let out = sensor_chain.process(&frame);
+    c.bench_function("survivors after the sensor chain, 50k returns", |b| {
+        b.iter(|| black_box(black_box(&out).survivors()))
+    });
 }
 
 criterion_group!(benches, bench_chain);

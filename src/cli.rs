@@ -53,6 +53,11 @@ pub enum Command {
   lidar-noise validate -c configs/paper.toml --set rain.rate_mm_h=1 --seed 3
   lidar-noise validate -c configs/paper.toml --set rain.rate_mm_h=1 --print > my.toml")]
     Validate(commands::validate::Args),
+    /// List every noise stage type with its options, units, defaults and sources.
+    #[command(after_help = "Examples:
+  lidar-noise stages
+  lidar-noise stages --markdown > docs/stages.md")]
+    Stages(commands::stages::Args),
     /// Ray-cast a scene into a synthetic HDL-32E capture with ground-truth labels.
     #[command(after_help = "Examples:
   lidar-noise synth --preset crossroad -o scenes
@@ -128,6 +133,7 @@ pub fn main() -> i32 {
         Command::Info(args) => commands::info::run(args, global),
         Command::Convert(args) => commands::convert::run(args, global),
         Command::Validate(args) => commands::validate::run(args, global),
+        Command::Stages(args) => commands::stages::run(args),
         Command::Synth(args) => commands::synth::run(args, global),
         Command::Sweep(args) => commands::sweep::run(args, global),
         // compare has three outcomes (same, different, unusable), not two.

@@ -16,6 +16,7 @@ pub mod error;
 pub mod frame;
 pub mod ground;
 pub mod hdl32e;
+pub mod loader;
 pub mod noise;
 pub mod options;
 pub mod pipeline;

@@ -4,6 +4,7 @@ pub mod compare;
 pub mod convert;
 pub mod info;
 pub mod run;
+pub mod stages;
 pub mod sweep;
 pub mod synth;
 pub mod validate;

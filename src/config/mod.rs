@@ -19,14 +19,15 @@
 
 pub mod overrides;
 pub mod reader;
+pub mod stage;
 
 use crate::cluster::{ClusterOptions, CutRule, ObjectRule};
 use crate::error::{Error, Result};
 use crate::ground::{GroundMethod, GroundOptions};
-use crate::noise::{self, NoiseStage};
 use reader::{Locator, ReadContext, Section};
 use serde::ser::SerializeMap;
 use serde::{Serialize, Serializer};
+pub use stage::{StageSpec, STAGE_TYPES};
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -126,8 +127,8 @@ pub struct Config {
     pub sensor: SensorConfig,
     /// `[power]`.
     pub power: PowerConfig,
-    /// `[[noise]]` stages in file order, built and validated.
-    pub noise: Vec<Arc<dyn NoiseStage>>,
+    /// `[[noise]]` stages in file order, as validated plain data (see [`StageSpec`]).
+    pub noise: Vec<StageSpec>,
     /// `[detection]`.
     pub detection: DetectionConfig,
     /// `[ground]`.
@@ -145,9 +146,9 @@ pub struct Config {
 
 impl Config {
     /// Loads `path` (or the built-in `configs/paper.toml`), applies `--set key=value`
-    /// overrides in order and `--seed`, validates, and returns the configuration with
-    /// its warnings (for the caller to print).
-    pub fn load(
+    /// overrides in order and `--seed`, validates everything but the `[[noise]]` options
+    /// (see `crate::loader` for [`Config::load`], which also builds the stages).
+    pub fn parse_file(
         path: Option<&Path>,
         sets: &[String],
         seed: Option<u64>,
@@ -159,11 +160,11 @@ impl Config {
             ),
             None => (DEFAULT_TOML.to_string(), PathBuf::from(DEFAULT_LABEL)),
         };
-        Self::from_toml_str(&text, &file, sets, seed)
+        Self::parse_str(&text, &file, sets, seed)
     }
 
-    /// Same as [`Config::load`] on text already read; `file` names it in errors.
-    pub fn from_toml_str(
+    /// Same as [`Config::parse_file`] on text already read; `file` names it in errors.
+    pub fn parse_str(
         text: &str,
         file: &Path,
         sets: &[String],
@@ -199,6 +200,10 @@ impl Config {
             warnings: RefCell::new(Vec::new()),
         };
         let mut config = read_config(&Section::new(&root, "", &ctx), file)?;
+        let locator = Arc::new(ctx.locator);
+        for spec in &mut config.noise {
+            spec.locator = locator.clone();
+        }
         if let Some(s) = seed {
             config.seed = s;
         }
@@ -261,7 +266,7 @@ impl Config {
                 .iter()
                 .map(|s| StageSettings {
                     kind: s.kind(),
-                    options: s.settings(),
+                    options: &s.settings,
                 })
                 .collect(),
             detection: &self.detection,
@@ -277,7 +282,7 @@ pub struct EffectiveConfig<'a> {
     seed: u64,
     sensor: &'a SensorConfig,
     power: &'a PowerConfig,
-    noise: Vec<StageSettings>,
+    noise: Vec<StageSettings<'a>>,
     detection: &'a DetectionConfig,
     ground: &'a GroundOptions,
     cluster: ClusterSettings,
@@ -529,16 +534,16 @@ fn read_cluster(root: &Section<'_>) -> Result<(ClusterOptions, ObjectRule)> {
 }
 
 /// A stage's `type` followed by its options in their documented order.
-pub struct StageSettings {
-    kind: &'static str,
-    options: Vec<(&'static str, toml::Value)>,
+pub struct StageSettings<'a> {
+    kind: &'a str,
+    options: &'a [(String, toml::Value)],
 }
 
-impl Serialize for StageSettings {
+impl Serialize for StageSettings<'_> {
     fn serialize<S: Serializer>(&self, serializer: S) -> std::result::Result<S::Ok, S::Error> {
         let mut map = serializer.serialize_map(Some(self.options.len() + 1))?;
         map.serialize_entry("type", self.kind)?;
-        for (k, v) in &self.options {
+        for (k, v) in self.options {
             map.serialize_entry(k, v)?;
         }
         map.end()
@@ -591,10 +596,17 @@ fn read_config(root: &Section<'_>, file: &Path) -> Result<Config> {
         p.finish()?;
     }
 
-    let mut stages: Vec<Arc<dyn NoiseStage>> = Vec::new();
+    // Stage options are validated by the noise registry (crate::loader); here they are
+    // only recorded as data.
+    let mut stages: Vec<StageSpec> = Vec::new();
     for entry in root.table_array("noise")? {
-        stages.push(noise::build_stage(&entry)?);
-        entry.finish()?;
+        stages.push(StageSpec {
+            path: entry.path().to_string(),
+            options: entry.raw().clone(),
+            locator: Arc::default(),
+            settings: Vec::new(),
+            description: String::new(),
+        });
     }
 
     let mut detection = DetectionConfig::default();

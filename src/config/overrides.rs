@@ -130,7 +130,7 @@ fn parse_value(text: &str) -> Value {
 /// `--set` and `sweep --vary` share it.
 pub fn stage_shorthand(root: &mut Table, key: &str) -> Option<String> {
     let (stage, option) = key.split_once('.')?;
-    let is_stage = crate::noise::REGISTRY.iter().any(|k| k.name == stage);
+    let is_stage = super::STAGE_TYPES.contains(&stage);
     if !is_stage || option.is_empty() || option.contains(['.', '[']) {
         return None;
     }

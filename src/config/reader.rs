@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use toml::{Table, Value};
 
 /// Where each key of the document came from: used to point errors at a line or a `--set`.
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct Locator {
     /// The file name used in errors (a path, or a label for the built-in default).
     pub(crate) file: PathBuf,
@@ -101,6 +101,11 @@ impl<'a> Section<'a> {
             ctx,
             seen: RefCell::new(BTreeSet::new()),
         }
+    }
+
+    /// The table being read, as written.
+    pub fn raw(&self) -> &'a Table {
+        self.table
     }
 
     /// The dotted path of this table.

@@ -8,7 +8,7 @@
 //!
 //! # Adding a stage
 //! Write one file with a type implementing [`NoiseStage`] and a `build` function reading
-//! its options from a [`Section`], then add one [`StageKind`] line to [`REGISTRY`]. A
+//! its options from a `Section`, then add one [`StageKind`] line to [`REGISTRY`]. A
 //! stage sees only its own options, the frame being processed and its own random stream.
 //!
 //! # Random streams
@@ -22,14 +22,16 @@
 //! frames can be processed in any order on any number of threads with identical results.
 
 pub mod detection;
-pub mod occlusion;
 pub mod power;
-pub mod rain;
+pub mod registry;
+pub mod sensor;
 pub mod summary;
+pub mod world;
 
-use crate::config::reader::Section;
+pub use registry::{build_stage, StageKind, REGISTRY};
+pub use world::{occlusion, rain};
+
 use crate::config::Config;
-use crate::error::Result;
 use crate::frame::{Frame, Return};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -86,6 +88,45 @@ pub struct NoisyFrame {
     pub power: Vec<f64>,
     /// Current fate; stages and filters only change `Kept` entries.
     pub fate: Vec<Fate>,
+    /// The detection threshold (fraction of emitted power) the filters will apply, for
+    /// stages that raise it (receiver noise floor, ambient light).
+    pub threshold: f64,
+    /// Per-return state that only sensor stages change; `None` until one does, so that a
+    /// chain without them (or with them at zero magnitude) writes the same bytes.
+    pub moved: Moved,
+}
+
+/// Per-return angle, pose, time and intensity state of a [`NoisyFrame`]; each vector is
+/// allocated (one entry per return) by the first stage that changes it.
+#[derive(Clone, Debug, Default)]
+pub struct Moved {
+    /// Reported azimuth change in degrees (encoder, laser pointing): the point is reported
+    /// along the changed direction at its (noisy) range.
+    pub azimuth_deg: Option<Vec<f32>>,
+    /// Elevation change in degrees, like `azimuth_deg`.
+    pub elevation_deg: Option<Vec<f32>>,
+    /// Rigid motion applied to the reported point last (mounting, ego-motion, vibration).
+    pub pose: Option<Vec<sensor::Pose>>,
+    /// Reported firing time (seconds, as `Return::time`).
+    pub time: Option<Vec<f64>>,
+    /// Reported intensity byte.
+    pub intensity: Option<Vec<u8>>,
+}
+
+impl Moved {
+    /// The azimuth changes, allocated as zeros on first use.
+    pub fn azimuth_mut(&mut self, n: usize) -> &mut Vec<f32> {
+        self.azimuth_deg.get_or_insert_with(|| vec![0.0; n])
+    }
+    /// The elevation changes, allocated as zeros on first use.
+    pub fn elevation_mut(&mut self, n: usize) -> &mut Vec<f32> {
+        self.elevation_deg.get_or_insert_with(|| vec![0.0; n])
+    }
+    /// The poses, allocated as identities on first use.
+    pub fn pose_mut(&mut self, n: usize) -> &mut Vec<sensor::Pose> {
+        self.pose
+            .get_or_insert_with(|| vec![sensor::Pose::IDENTITY; n])
+    }
 }
 
 impl NoisyFrame {
@@ -103,6 +144,8 @@ impl NoisyFrame {
             range,
             power,
             fate,
+            threshold: crate::config::DetectionConfig::default().min_power,
+            moved: Moved::default(),
         }
     }
 
@@ -125,30 +168,90 @@ impl NoisyFrame {
 
     /// The surviving returns with the noisy range; x, y, z are scaled by R_n / R_i so the
     /// point moves along its beam. Pairs with [`NoisyFrame::kept_indices`].
+    ///
+    /// Sensor stages may also have changed the reported angles (the point is then placed
+    /// along the changed direction), time and intensity, and moved the point rigidly
+    /// (`moved.pose`, applied last; range and angles stay as the sensor reports them).
     pub fn survivors(&self) -> Vec<Return> {
-        self.clean
-            .iter()
-            .zip(&self.range)
-            .zip(&self.fate)
-            .filter(|(_, &f)| f == Fate::Kept)
-            .map(|((r, &rn), _)| {
-                let mut out = *r;
-                // A zero clean range has no direction to scale along; keep the point.
-                if r.range > 0.0 {
-                    let s = rn / r.range;
-                    out.x *= s;
-                    out.y *= s;
-                    out.z *= s;
-                }
-                out.range = rn;
-                out
-            })
-            .collect()
+        let mut out = Vec::with_capacity(self.len());
+        for i in 0..self.len() {
+            if self.fate[i] == Fate::Kept {
+                out.push(self.noisy_return(i));
+            }
+        }
+        out
+    }
+
+    /// The noisy version of return `i` (whatever its fate).
+    pub fn noisy_return(&self, i: usize) -> Return {
+        let r = &self.clean[i];
+        let rn = self.range[i];
+        let mut out = *r;
+        // A zero clean range has no direction to scale along; keep the point.
+        if r.range > 0.0 {
+            let s = rn / r.range;
+            out.x *= s;
+            out.y *= s;
+            out.z *= s;
+        }
+        out.range = rn;
+        let m = &self.moved;
+        let da = m.azimuth_deg.as_ref().map_or(0.0, |v| v[i]);
+        let de = m.elevation_deg.as_ref().map_or(0.0, |v| v[i]);
+        if (da != 0.0 || de != 0.0) && r.range > 0.0 {
+            // Turn the actual direction of the point (whatever the calibration's azimuth
+            // offsets): elevation in the vertical plane of the beam, then azimuth about
+            // z, clockwise seen from above like the sensor's azimuth.
+            let (x, y, z) = (f64::from(out.x), f64::from(out.y), f64::from(out.z));
+            let h = (x * x + y * y).sqrt();
+            let (se, ce) = small_sin_cos(f64::from(de).to_radians());
+            let (h2, z2) = (h * ce - z * se, h * se + z * ce);
+            let (x1, y1) = if h > 0.0 {
+                let k = h2 / h;
+                (x * k, y * k)
+            } else {
+                (h2, 0.0)
+            };
+            let (sa, ca) = small_sin_cos(f64::from(da).to_radians());
+            out.x = (x1 * ca + y1 * sa) as f32;
+            out.y = (y1 * ca - x1 * sa) as f32;
+            out.z = z2 as f32;
+            out.azimuth = (f64::from(r.azimuth) + f64::from(da)).rem_euclid(360.0) as f32;
+            out.elevation = r.elevation + de;
+        }
+        if let Some(p) = &m.pose {
+            let [x, y, z] = p[i].apply([out.x, out.y, out.z]);
+            out.x = x;
+            out.y = y;
+            out.z = z;
+        }
+        if let Some(t) = &m.time {
+            out.time = t[i];
+        }
+        if let Some(v) = &m.intensity {
+            out.intensity = v[i];
+        }
+        out
     }
 
     /// Counts and range statistics of this frame.
     pub fn summary(&self) -> NoiseSummary {
         NoiseSummary::from_frame(self)
+    }
+}
+
+/// sin and cos of `t` radians; a Taylor series for the small angles sensor stages use
+/// (|t| < 0.01: truncation error below 1e-13, far under f32 precision), which is several
+/// times faster than `sin_cos` in the per-return loop of [`NoisyFrame::survivors`].
+fn small_sin_cos(t: f64) -> (f64, f64) {
+    if t.abs() < 0.01 {
+        let t2 = t * t;
+        (
+            t * (1.0 - t2 / 6.0 * (1.0 - t2 / 20.0)),
+            1.0 - t2 / 2.0 * (1.0 - t2 / 12.0),
+        )
+    } else {
+        t.sin_cos()
     }
 }
 
@@ -163,47 +266,18 @@ pub trait NoiseStage: Send + Sync + std::fmt::Debug {
     /// Applies the stage to the frame, drawing only from `rng` (this stage's stream for
     /// this frame). Only returns whose fate is still `Kept` may be changed.
     fn apply(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng);
-}
-
-/// A stage type that `[[noise]]` entries can name.
-pub struct StageKind {
-    /// The `type` string.
-    pub name: &'static str,
-    /// Reads and validates the stage's options (all keys except `type`).
-    pub build: fn(&Section<'_>) -> Result<Arc<dyn NoiseStage>>,
-}
-
-/// Every stage type, by `type` name. Adding a stage adds one line here.
-pub const REGISTRY: &[StageKind] = &[
-    StageKind {
-        name: occlusion::NAME,
-        build: occlusion::build,
-    },
-    StageKind {
-        name: rain::NAME,
-        build: rain::build,
-    },
-];
-
-/// Builds the stage of one `[[noise]]` entry by its `type`.
-pub fn build_stage(entry: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
-    let Some(kind) = entry.str("type")? else {
-        return Err(entry.missing("type"));
-    };
-    match REGISTRY.iter().find(|k| k.name == kind) {
-        Some(k) => (k.build)(entry),
-        None => {
-            let names: Vec<&str> = REGISTRY.iter().map(|k| k.name).collect();
-            Err(entry.error(
-                "type",
-                format!(
-                    "unknown noise stage \"{kind}\" (known: {})",
-                    names.join(", ")
-                ),
-            ))
-        }
+    /// The stage with its per-unit draws made (values fixed for a run and seed, such as
+    /// per-laser offsets), from `rng`, the stage's unit stream (frame key
+    /// [`UNIT_FRAME`]); `None` when the stage has none.
+    fn with_unit_draws(&self, _rng: &mut ChaCha8Rng) -> Option<Arc<dyn NoiseStage>> {
+        None
     }
 }
+
+/// Frame index reserved for per-unit draws: the unit stream of a stage is
+/// `stage_rng(seed, UNIT_FRAME, tag)`, which no frame uses and which does not depend on
+/// the frame, so per-unit values are the same in every frame and every thread.
+pub const UNIT_FRAME: u32 = u32::MAX;
 
 /// 16-bit FNV-1a of a stage type name: a stable number for the stream derivation.
 fn fnv1a16(name: &str) -> u64 {
@@ -248,11 +322,20 @@ impl NoiseChain {
     /// Builds the chain of a configuration.
     pub fn new(config: &Config) -> Self {
         let kinds: Vec<&str> = config.noise.iter().map(|s| s.kind()).collect();
+        let tags = stage_tags(&kinds);
+        let stages = registry::build_all(&config.noise)
+            .into_iter()
+            .zip(&tags)
+            .map(|(stage, &tag)| {
+                let mut unit = stage_rng(config.seed, UNIT_FRAME, tag);
+                stage.with_unit_draws(&mut unit).unwrap_or(stage)
+            })
+            .collect();
         NoiseChain {
             seed: config.seed,
             power: IdealPower::new(&config.power, &config.sensor, &config.detection),
-            stages: config.noise.clone(),
-            tags: stage_tags(&kinds),
+            stages,
+            tags,
             detection: config.detection.clone(),
         }
     }
@@ -280,6 +363,7 @@ impl NoiseChain {
     /// Runs the chain on returns of the frame with capture index `index`.
     pub fn process_returns(&self, index: u32, returns: Vec<Return>) -> NoisyFrame {
         let mut noisy = NoisyFrame::new(index, returns, &self.power);
+        noisy.threshold = self.detection.min_power;
         for (stage, &tag) in self.stages.iter().zip(&self.tags) {
             let mut rng = stage_rng(self.seed, index, tag);
             stage.apply(&mut noisy, &mut rng);
@@ -301,6 +385,19 @@ impl NoiseChain {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn small_sin_cos_agrees_with_sin_cos() {
+        for i in -300..=300 {
+            let t = f64::from(i) * 1e-4;
+            let (s, c) = small_sin_cos(t);
+            assert!(
+                (s - t.sin()).abs() < 1e-14 && (c - t.cos()).abs() < 1e-14,
+                "{t}"
+            );
+        }
+        assert_eq!(small_sin_cos(0.5), 0.5f64.sin_cos());
+    }
 
     #[test]
     fn stage_tags_count_occurrences_per_type() {

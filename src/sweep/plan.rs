@@ -3,9 +3,9 @@
 
 use crate::config::overrides::apply_set;
 use crate::config::reader::Locator;
+use crate::config::STAGE_TYPES;
 use crate::config::{Config, DEFAULT_LABEL, DEFAULT_TOML};
 use crate::error::{Error, Result};
-use crate::noise::REGISTRY;
 use std::path::{Path, PathBuf};
 use toml::{Table, Value};
 
@@ -56,7 +56,7 @@ impl Vary {
         if let Some(dup) = values.iter().find(|v| !seen.insert(v.as_str())) {
             return Err(bad(&format!("value {dup} is given twice")));
         }
-        let is_stage = |s: &str| REGISTRY.iter().any(|k| k.name == s);
+        let is_stage = |s: &str| STAGE_TYPES.contains(&s);
         let kind = if is_stage(&key) {
             if let Some(v) = values.iter().find(|v| *v != "on" && *v != "off") {
                 return Err(bad(&format!("a stage type takes on or off, not {v}")));

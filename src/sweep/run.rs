@@ -741,7 +741,7 @@ pub struct Panel {
 /// Runs one frame through the clean configuration, each stage type of the base alone, and
 /// all of them (the reference study's figure 3 for occlusion and rain).
 pub fn birdseye_panels(base: &BaseConfig, seed: u64, frame: &Frame) -> Result<Vec<Panel>> {
-    let mut types: Vec<&'static str> = Vec::new();
+    let mut types: Vec<&str> = Vec::new();
     for s in &base.config.noise {
         if !types.contains(&s.kind()) {
             types.push(s.kind());

@@ -219,3 +219,19 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
     }
     Ok(Arc::new(Occlusion::new(selection, azimuth, transmission)))
 }
+
+/// The registry entry of this stage.
+pub const KIND: crate::noise::StageKind = crate::noise::StageKind {
+    name: NAME,
+    factor: "12 obstruction (lens occlusion)",
+    model: "beams of the selected lasers (optionally in an azimuth sector) are blocked, or their power multiplied by the transmission",
+    source: "the reference study (five occluded lasers); noise-models.md",
+    options: &[
+        crate::noise::registry::OptionSpec { name: "lasers", unit: "laser id", default: "one of lasers/rings/elevation_deg required", doc: "occluded lasers (0-31, firing order)" },
+        crate::noise::registry::OptionSpec { name: "rings", unit: "ring", default: "-", doc: "occluded rings (0 = lowest)" },
+        crate::noise::registry::OptionSpec { name: "elevation_deg", unit: "deg", default: "-", doc: "occluded elevation interval [lo, hi]" },
+        crate::noise::registry::OptionSpec { name: "azimuth_deg", unit: "deg", default: "all", doc: "sector [from, to), clockwise, may wrap" },
+        crate::noise::registry::OptionSpec { name: "transmission", unit: "-", default: "0", doc: "0 blocks the beam, 0 < t < 1 scales power" },
+    ],
+    build,
+};

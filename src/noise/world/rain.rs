@@ -157,3 +157,16 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
     };
     Ok(Arc::new(Rain::new(rate, range_noise)))
 }
+
+/// The registry entry of this stage.
+pub const KIND: crate::noise::StageKind = crate::noise::StageKind {
+    name: NAME,
+    factor: "11 weather (rain)",
+    model: "two-way extinction exp(-2 alpha R) on power and Gaussian range noise (Goodin Eq. 9) or MAVS uniform noise",
+    source: "Goodin et al., Electronics 2019; noise-models.md",
+    options: &[
+        crate::noise::registry::OptionSpec { name: "rate_mm_h", unit: "mm/h", default: "required", doc: "rain rate" },
+        crate::noise::registry::OptionSpec { name: "range_noise", unit: "-", default: "\"goodin\"", doc: "\"goodin\" (Eq. 9 Gaussian) or \"mavs\" (uniform +-1.5 cm)" },
+    ],
+    build,
+};

@@ -1,0 +1,147 @@
+//! Stages of the sensor's own noise factors (p-diagram 01-06, 08, 09, 13): one file per
+//! stage, models and defaults from `pdiagram-models.md`. Shared here: the rigid
+//! [`Pose`] and option readers that reject NaN, infinities and out-of-range values with
+//! the key and its line.
+
+pub mod ambient;
+pub mod clock;
+pub mod emitter;
+pub mod laser_diode;
+pub mod mechanics;
+pub mod motion;
+pub mod mounting;
+pub mod receiver;
+
+use crate::config::reader::Section;
+use crate::error::Result;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+/// Speed of light in m/s.
+pub const C_M_PER_S: f64 = 299_792_458.0;
+
+/// A rigid motion p -> r p + t (rotation matrix rows, translation in metres).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose {
+    /// Rotation matrix, row major.
+    pub r: [[f64; 3]; 3],
+    /// Translation in metres.
+    pub t: [f64; 3],
+}
+
+impl Pose {
+    /// No motion.
+    pub const IDENTITY: Pose = Pose {
+        r: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        t: [0.0; 3],
+    };
+
+    /// Rotation Rz(yaw) Ry(pitch) Rx(roll) (radians, right-handed, yaw about +z turns
+    /// +x towards +y) followed by translation `t`.
+    pub fn from_rpy(roll: f64, pitch: f64, yaw: f64, t: [f64; 3]) -> Pose {
+        let (sr, cr) = roll.sin_cos();
+        let (sp, cp) = pitch.sin_cos();
+        let (sy, cy) = yaw.sin_cos();
+        Pose {
+            r: [
+                [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                [-sp, cp * sr, cp * cr],
+            ],
+            t,
+        }
+    }
+
+    /// `self` after `first`: p -> self(first(p)).
+    pub fn then_after(&self, first: &Pose) -> Pose {
+        let mut r = [[0.0; 3]; 3];
+        for (i, row) in r.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = (0..3).map(|k| self.r[i][k] * first.r[k][j]).sum();
+            }
+        }
+        let mut t = self.t;
+        for (i, ti) in t.iter_mut().enumerate() {
+            *ti += (0..3).map(|k| self.r[i][k] * first.t[k]).sum::<f64>();
+        }
+        Pose { r, t }
+    }
+
+    /// Applies the motion to a point.
+    pub fn apply(&self, p: [f32; 3]) -> [f32; 3] {
+        let p = p.map(f64::from);
+        let mut out = [0.0f32; 3];
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = (self.r[i][0] * p[0] + self.r[i][1] * p[1] + self.r[i][2] * p[2] + self.t[i])
+                as f32;
+        }
+        out
+    }
+}
+
+/// One standard normal draw.
+pub fn normal(rng: &mut ChaCha8Rng) -> f64 {
+    rng.sample::<f64, _>(StandardNormal)
+}
+
+/// A finite number at `key` in `[lo, hi]`, or `default`.
+pub fn number(opts: &Section<'_>, key: &str, default: f64, lo: f64, hi: f64) -> Result<f64> {
+    match opts.f64(key)? {
+        None => Ok(default),
+        Some(v) if !v.is_finite() => Err(opts.error(key, format!("{v} is not a finite number"))),
+        Some(v) if v < lo || v > hi => Err(opts.error(key, format!("{v} is outside [{lo}, {hi}]"))),
+        Some(v) => Ok(v),
+    }
+}
+
+/// A standard deviation at `key` (finite, not negative, at most `hi`), or `default`.
+pub fn sigma(opts: &Section<'_>, key: &str, default: f64, hi: f64) -> Result<f64> {
+    match opts.f64(key)? {
+        Some(v) if v < 0.0 => {
+            Err(opts.error(key, format!("{v} is negative (a standard deviation)")))
+        }
+        _ => number(opts, key, default, 0.0, hi),
+    }
+}
+
+/// A list of 32 finite numbers in `[lo, hi]` at `key` (one per laser id), if given.
+pub fn per_laser(opts: &Section<'_>, key: &str, lo: f64, hi: f64) -> Result<Option<Vec<f64>>> {
+    let Some(v) = opts.value(key) else {
+        return Ok(None);
+    };
+    let bad = || {
+        opts.error(
+            key,
+            format!("must be a list of 32 numbers in [{lo}, {hi}], one per laser id"),
+        )
+    };
+    let toml::Value::Array(items) = v else {
+        return Err(bad());
+    };
+    if items.len() != 32 {
+        return Err(opts.error(
+            key,
+            format!("has {} entries; the HDL-32E has 32 lasers", items.len()),
+        ));
+    }
+    items
+        .iter()
+        .map(|x| match x {
+            toml::Value::Float(f) if f.is_finite() && (lo..=hi).contains(f) => Ok(*f),
+            toml::Value::Integer(i) if (lo..=hi).contains(&(*i as f64)) => Ok(*i as f64),
+            _ => Err(bad()),
+        })
+        .collect::<Result<Vec<f64>>>()
+        .map(Some)
+}
+
+/// A TOML float.
+pub fn float(v: f64) -> toml::Value {
+    toml::Value::Float(v)
+}
+
+/// The clean firing time of the frame's first return (reference for per-frame times).
+pub fn frame_start(frame: &super::NoisyFrame) -> f64 {
+    frame.clean.first().map_or(0.0, |r| r.time)
+}

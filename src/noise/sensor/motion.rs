@@ -1,0 +1,149 @@
+//! Motion (p-diagram 08): the vehicle moves during the 0.1 s sweep (rolling shutter) and
+//! vibrates.
+//!
+//! Model (pdiagram-models.md, 08): constant twist over the frame, forward speed v along
+//! +x and yaw rate omega; dt = t_i - t_ref with t_ref the frame's first firing time
+//! (`t_ref = "start"`, default) or the middle of its first and last (`"middle"`). A true
+//! point p is reported as p' = Rz(omega dt)^T (p - v dt x) (read as if taken at t_ref).
+//! Vibration: roll and pitch d(t) = A sin(2 pi f dt + phi), phases uniform per frame
+//! (frame stream, two draws), applied as a rotation after the ego motion. The rotation
+//! is evaluated once per firing (the doc's "one pose per firing"; within a firing times
+//! differ by at most 36 us), the translation per return from its own time. Points move
+//! in the sensor frame before any mounting error (`mounting` acts last in either chain
+//! order). Range, azimuth and time fields stay as reported. Source: Zhang and Singh,
+//! LOAM, RSS 2014; vibration values engineering assumption.
+
+use super::{float, number, Pose};
+use crate::config::reader::Section;
+use crate::error::Result;
+use crate::noise::registry::OptionSpec;
+use crate::noise::{NoiseStage, NoisyFrame, StageKind};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use std::sync::Arc;
+use toml::Value;
+
+/// The `type` name of this stage.
+pub const NAME: &str = "motion";
+
+/// The motion stage.
+#[derive(Clone, Debug)]
+pub struct Motion {
+    /// Forward speed, m/s.
+    pub speed_mps: f64,
+    /// Yaw rate, deg/s.
+    pub yaw_rate_deg_s: f64,
+    /// Reference time at the middle of the frame instead of its start.
+    pub t_ref_middle: bool,
+    /// Vibration amplitude (roll and pitch), degrees.
+    pub vibration_deg: f64,
+    /// Vibration frequency, Hz.
+    pub vibration_hz: f64,
+}
+
+impl NoiseStage for Motion {
+    fn kind(&self) -> &'static str {
+        NAME
+    }
+    fn describe(&self) -> String {
+        format!(
+            "ego speed {} m/s, yaw rate {} deg/s (t_ref = frame {}), vibration {} deg at {} Hz",
+            self.speed_mps,
+            self.yaw_rate_deg_s,
+            if self.t_ref_middle { "middle" } else { "start" },
+            self.vibration_deg,
+            self.vibration_hz
+        )
+    }
+    fn settings(&self) -> Vec<(&'static str, Value)> {
+        vec![
+            ("speed_mps", float(self.speed_mps)),
+            ("yaw_rate_deg_s", float(self.yaw_rate_deg_s)),
+            (
+                "t_ref",
+                Value::String(if self.t_ref_middle { "middle" } else { "start" }.into()),
+            ),
+            ("vibration_deg", float(self.vibration_deg)),
+            ("vibration_hz", float(self.vibration_hz)),
+        ]
+    }
+    fn apply(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
+        // Phases first and always, so the stream does not depend on the magnitudes.
+        let phi = [
+            rng.random::<f64>() * std::f64::consts::TAU,
+            rng.random::<f64>() * std::f64::consts::TAU,
+        ];
+        let vib = self.vibration_deg.to_radians();
+        if self.speed_mps == 0.0 && self.yaw_rate_deg_s == 0.0 && vib == 0.0 {
+            return;
+        }
+        let n = frame.len();
+        let first = frame.clean.first().map_or(0.0, |r| r.time);
+        let last = frame.clean.last().map_or(0.0, |r| r.time);
+        let t_ref = if self.t_ref_middle {
+            0.5 * (first + last)
+        } else {
+            first
+        };
+        let omega = self.yaw_rate_deg_s.to_radians();
+        let w = std::f64::consts::TAU * self.vibration_hz;
+        let mut firing = None;
+        let mut rot = Pose::IDENTITY;
+        let mut poses = Vec::with_capacity(n);
+        for r in &frame.clean {
+            let key = (r.packet, r.block);
+            if firing != Some(key) {
+                firing = Some(key);
+                let dt = r.time - t_ref;
+                let roll = vib * (w * dt + phi[0]).sin();
+                let pitch = vib * (w * dt + phi[1]).sin();
+                let ego = Pose::from_rpy(0.0, 0.0, -omega * dt, [0.0; 3]);
+                rot = Pose::from_rpy(roll, pitch, 0.0, [0.0; 3]).then_after(&ego);
+            }
+            let dt = r.time - t_ref;
+            let mut p = rot;
+            // p' = R (p - v dt x): the translation is -v dt times R's first column.
+            for k in 0..3 {
+                p.t[k] = -self.speed_mps * dt * rot.r[k][0];
+            }
+            poses.push(p);
+        }
+        match frame.moved.pose.take() {
+            None => frame.moved.pose = Some(poses),
+            Some(mut existing) => {
+                for (e, p) in existing.iter_mut().zip(&poses) {
+                    *e = e.then_after(p);
+                }
+                frame.moved.pose = Some(existing);
+            }
+        }
+    }
+}
+
+/// Reads the options of a `motion` entry.
+pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
+    let t_ref_middle = matches!(opts.choice("t_ref", &["start", "middle"])?, Some("middle"));
+    Ok(Arc::new(Motion {
+        speed_mps: number(opts, "speed_mps", 0.0, -100.0, 100.0)?,
+        yaw_rate_deg_s: number(opts, "yaw_rate_deg_s", 0.0, -360.0, 360.0)?,
+        t_ref_middle,
+        vibration_deg: number(opts, "vibration_deg", 0.05, 0.0, 10.0)?,
+        vibration_hz: number(opts, "vibration_hz", 20.0, 0.0, 1000.0)?,
+    }))
+}
+
+/// The registry entry of this stage.
+pub const KIND: StageKind = StageKind {
+    name: NAME,
+    factor: "08 motion (rolling shutter, vibration)",
+    model: "p' = Rz(omega dt)^T (p - v dt x), dt = t - t_ref; vibration roll/pitch A sin(2 pi f dt + phi)",
+    source: "Zhang and Singh, LOAM, RSS 2014; vibration engineering assumption (pdiagram-models.md 08)",
+    options: &[
+        OptionSpec { name: "speed_mps", unit: "m/s", default: "0", doc: "forward (+x) ego speed" },
+        OptionSpec { name: "yaw_rate_deg_s", unit: "deg/s", default: "0", doc: "ego yaw rate" },
+        OptionSpec { name: "t_ref", unit: "-", default: "\"start\"", doc: "reference time: \"start\" or \"middle\" of the frame" },
+        OptionSpec { name: "vibration_deg", unit: "deg", default: "0.05", doc: "roll/pitch vibration amplitude" },
+        OptionSpec { name: "vibration_hz", unit: "Hz", default: "20", doc: "vibration frequency" },
+    ],
+    build,
+};

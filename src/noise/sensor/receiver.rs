@@ -1,0 +1,156 @@
+//! Receiver and circuits (p-diagram 05/06): responsivity and per-laser gain scale the
+//! power, a gain error scales the reported intensity, and an additive noise floor raises
+//! the effective detection threshold; range noise follows the SNR.
+//!
+//! Model (pdiagram-models.md, 05/06): P' = responsivity * G_l * P with
+//! G_l = exp(N(0, sigma_gain^2)) per laser, drawn once per seed (unit stream). Detection:
+//! the return is dropped (`below_power`) when P' + n < p_th * (1 + noise_floor), with
+//! n ~ N(0, (sigma_noise * p_th)^2). The doc's soft threshold is P' + n > p_th; the
+//! `noise_floor` term (a multiple k of p_th) is this tool's stand-in for a raised
+//! background level, so that "a floor of k times the threshold" drops exactly the
+//! returns with P' < (1 + k) p_th when `sigma_noise = 0`. Range noise:
+//! R' = R + N(0, s_R^2), s_R = range_noise_m / sqrt(2 * SNR), SNR = P'/p_th (LISA).
+//! Intensity: I' = clamp(round(gain_error * I), 0, 255). Saturation and walk are not
+//! modelled. Source: LISA (velatkilic/LISA, dR = 0.09 m); gains and floor: engineering
+//! assumption. Frame stream: two normal draws per return when the corresponding sigma
+//! is non-zero.
+
+use super::{float, normal, number, sigma};
+use crate::config::reader::Section;
+use crate::error::Result;
+use crate::noise::registry::OptionSpec;
+use crate::noise::{Fate, NoiseStage, NoisyFrame, StageKind};
+use rand_chacha::ChaCha8Rng;
+use std::sync::Arc;
+use toml::Value;
+
+/// The `type` name of this stage.
+pub const NAME: &str = "receiver";
+
+/// The receiver stage.
+#[derive(Clone, Debug)]
+pub struct Receiver {
+    /// Common responsivity factor on power.
+    pub responsivity: f64,
+    /// SD of the per-laser log gain.
+    pub sigma_gain: f64,
+    /// Factor on the reported intensity.
+    pub gain_error: f64,
+    /// Additive floor in units of the detection threshold.
+    pub noise_floor: f64,
+    /// SD of the additive noise in units of the detection threshold.
+    pub sigma_noise: f64,
+    /// LISA's dR in metres.
+    pub range_noise_m: f64,
+    /// Per-laser gains in use (all 1 until the unit draws are made).
+    pub gains: [f64; 32],
+}
+
+impl NoiseStage for Receiver {
+    fn kind(&self) -> &'static str {
+        NAME
+    }
+    fn describe(&self) -> String {
+        format!(
+            "responsivity {}, per-laser gain SD {}, intensity gain {}, noise floor {} x p_th (SD {} x p_th), range noise {} m / sqrt(2 SNR)",
+            self.responsivity, self.sigma_gain, self.gain_error, self.noise_floor, self.sigma_noise, self.range_noise_m
+        )
+    }
+    fn settings(&self) -> Vec<(&'static str, Value)> {
+        vec![
+            ("responsivity", float(self.responsivity)),
+            ("sigma_gain", float(self.sigma_gain)),
+            ("gain_error", float(self.gain_error)),
+            ("noise_floor", float(self.noise_floor)),
+            ("sigma_noise", float(self.sigma_noise)),
+            ("range_noise_m", float(self.range_noise_m)),
+        ]
+    }
+    fn with_unit_draws(&self, rng: &mut ChaCha8Rng) -> Option<Arc<dyn NoiseStage>> {
+        let mut s = self.clone();
+        for g in s.gains.iter_mut() {
+            *g = (self.sigma_gain * normal(rng)).exp();
+        }
+        Some(Arc::new(s))
+    }
+    fn apply(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
+        let p_th = frame.threshold;
+        let cut = p_th * (1.0 + self.noise_floor);
+        let scale_power = self.responsivity != 1.0 || self.sigma_gain != 0.0;
+        let any = scale_power
+            || self.noise_floor != 0.0
+            || self.sigma_noise != 0.0
+            || self.range_noise_m != 0.0;
+        if any {
+            for i in 0..frame.len() {
+                let n_det = if self.sigma_noise > 0.0 {
+                    normal(rng)
+                } else {
+                    0.0
+                };
+                let n_range = if self.range_noise_m > 0.0 {
+                    normal(rng)
+                } else {
+                    0.0
+                };
+                if frame.fate[i] != Fate::Kept {
+                    continue;
+                }
+                let laser = usize::from(frame.clean[i].laser) % 32;
+                if scale_power {
+                    frame.power[i] *= self.responsivity * self.gains[laser];
+                }
+                let p = frame.power[i];
+                if p + self.sigma_noise * p_th * n_det < cut {
+                    frame.fate[i] = Fate::BelowPower;
+                    continue;
+                }
+                if self.range_noise_m > 0.0 {
+                    let s_r = self.range_noise_m / (2.0 * p / p_th).sqrt();
+                    frame.range[i] = (f64::from(frame.range[i]) + s_r * n_range) as f32;
+                }
+            }
+        }
+        if self.gain_error != 1.0 {
+            let g = self.gain_error;
+            let clean = &frame.clean;
+            let v = frame
+                .moved
+                .intensity
+                .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect());
+            for x in v.iter_mut() {
+                *x = (f64::from(*x) * g).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+}
+
+/// Reads the options of a `receiver` entry.
+pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
+    Ok(Arc::new(Receiver {
+        responsivity: number(opts, "responsivity", 1.0, 0.0, 10.0)?,
+        sigma_gain: sigma(opts, "sigma_gain", 0.05, 2.0)?,
+        gain_error: number(opts, "gain_error", 1.0, 0.0, 10.0)?,
+        noise_floor: number(opts, "noise_floor", 0.0, 0.0, 1e6)?,
+        sigma_noise: sigma(opts, "sigma_noise", 0.3, 100.0)?,
+        range_noise_m: sigma(opts, "range_noise_m", 0.09, 10.0)?,
+        gains: [1.0; 32],
+    }))
+}
+
+/// The registry entry of this stage.
+pub const KIND: StageKind = StageKind {
+    name: NAME,
+    factor: "05 receiver, 06 circuits",
+    model: "P' = responsivity G_l P (G_l lognormal per laser, per seed); dropped if P' + N(0,(s_n p_th)^2) < (1+floor) p_th; R' = R + N(0, (dR/sqrt(2 P'/p_th))^2); I' = gain_error I",
+    source: "range-noise law and dR from LISA (velatkilic/LISA pylisa/lisa.py); gains, floor, soft threshold: engineering assumption (pdiagram-models.md 05/06)",
+    options: &[
+        OptionSpec { name: "responsivity", unit: "-", default: "1", doc: "factor on power (detector responsivity), in [0, 10]" },
+        OptionSpec { name: "sigma_gain", unit: "-", default: "0.05", doc: "SD of the per-laser log gain, drawn once per seed" },
+        OptionSpec { name: "gain_error", unit: "-", default: "1", doc: "factor on the reported intensity byte" },
+        OptionSpec { name: "noise_floor", unit: "x p_th", default: "0", doc: "additive floor: effective threshold (1 + k) p_th" },
+        OptionSpec { name: "sigma_noise", unit: "x p_th", default: "0.3", doc: "SD of the additive detection noise (soft threshold)" },
+        OptionSpec { name: "range_noise_m", unit: "m", default: "0.09", doc: "LISA dR: range SD is dR / sqrt(2 SNR)" },
+    ],
+    build,
+};

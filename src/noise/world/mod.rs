@@ -1,0 +1,5 @@
+//! Stages of the world's noise factors (p-diagram 11, 12, ...): what lies between the
+//! sensor and its targets.
+
+pub mod occlusion;
+pub mod rain;

@@ -149,6 +149,14 @@ fn bench(c: &mut Criterion) {
         c.bench_function("distance_cut_0.5m_monterey", |b| {
             b.iter(|| cluster(black_box(&real), &opts).expect("valid options"))
         });
+        // Range-adaptive cut (shell grids): 0.5 m + 2 cm per metre of range.
+        let adaptive_real = ClusterOptions {
+            cutoff_per_m: 0.02,
+            ..opts
+        };
+        c.bench_function("adaptive_cut_monterey", |b| {
+            b.iter(|| cluster(black_box(&real), &adaptive_real).expect("valid options"))
+        });
     }
     c.bench_function("linkage_bound_0.5m", |b| {
         b.iter(|| linkage(black_box(&pts), 0.5).expect("valid bound"))

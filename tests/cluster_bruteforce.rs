@@ -163,12 +163,21 @@ fn fixed_cutoff_tree_fallback_matches_brute_force_and_grid() {
 
 #[test]
 fn range_adaptive_cutoff_matches_brute_force() {
-    for seed in 0..20u64 {
+    // Seeds cover the shell grids (c0 > 0, small per_m), per_m beyond the shells' reach and
+    // c0 = 0 (k-d tree fallback), and clouds far out where shells are wide.
+    for seed in 0..120u64 {
         let mut rng = ChaCha8Rng::seed_from_u64(1000 + seed);
         let n = rng.random_range(2..1500);
-        let pts = cloud(&mut rng, n, 50.0);
-        let c0: f64 = rng.random_range(0.0..0.4);
-        let per_m: f64 = rng.random_range(0.002..0.05);
+        let extent = if seed % 3 == 0 { 120.0 } else { 50.0 };
+        let pts = cloud(&mut rng, n, extent);
+        let c0: f64 = match seed % 10 {
+            0 => 0.0,
+            _ => rng.random_range(0.01..0.6),
+        };
+        let per_m: f64 = match seed % 7 {
+            0 => rng.random_range(0.1..0.5),
+            _ => rng.random_range(0.0005..0.05),
+        };
         let range = |p: &[f32; 3]| dist(p, &[0.0; 3]);
         let expected = brute_force(&pts, |i, j| {
             dist(&pts[i], &pts[j]) <= c0 + per_m * range(&pts[i]).max(range(&pts[j]))

@@ -11,7 +11,7 @@
 //! exactly (same `f64` formula as [`super::point_distance`]) until the first link, with
 //! bounding-box lower bounds discarding pairs and points that cannot link.
 
-use super::FinitePoints;
+use super::{FinitePoints, UnionFind};
 
 /// Bits per radix-sort digit (a 2048-entry histogram stays in L1).
 const RADIX_BITS: u32 = 11;
@@ -63,34 +63,6 @@ fn cell_of_coord(v: f32, side: f64) -> Option<i64> {
     Some(if (t as f64) > f { t - 1 } else { t })
 }
 
-/// Disjoint-set forest over voxels with union by size and path halving.
-struct CellSets {
-    parent: Vec<u32>,
-    size: Vec<u32>,
-}
-
-impl CellSets {
-    #[inline(always)]
-    fn find(&mut self, mut x: u32) -> u32 {
-        while self.parent[x as usize] != x {
-            let grand = self.parent[self.parent[x as usize] as usize];
-            self.parent[x as usize] = grand;
-            x = grand;
-        }
-        x
-    }
-
-    /// Joins two distinct roots.
-    #[inline(always)]
-    fn join_roots(&mut self, mut ra: u32, mut rb: u32) {
-        if self.size[ra as usize] < self.size[rb as usize] {
-            std::mem::swap(&mut ra, &mut rb);
-        }
-        self.parent[rb as usize] = ra;
-        self.size[ra as usize] += self.size[rb as usize];
-    }
-}
-
 /// Stable LSD radix sort of `keys` (only the low `bits` bits set) carrying `vals` along.
 fn radix_sort(keys: &mut Vec<u64>, vals: &mut Vec<u32>, bits: u32) {
     let n = keys.len();
@@ -131,19 +103,77 @@ fn radix_sort(keys: &mut Vec<u64>, vals: &mut Vec<u32>, bits: u32) {
 /// the grid does not apply (zero or infinite cutoff, coordinates too far out for the packed
 /// keys); the caller then uses the k-d tree.
 pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec<u32>> {
+    if fp.points.is_empty() {
+        return Some((0..n as u32).collect());
+    }
+    let rule = Rule {
+        cutoff_m: cutoff,
+        per_m: 0.0,
+        ranges: None,
+        lo: cutoff,
+        hi: cutoff,
+    };
+    let (cell_of, mut sets) = link_cells(&fp.points, &rule)?;
+    // Labels in input order, numbered by each component's smallest input index.
+    let n_cells = sets.len();
+    let mut cell_of_input = vec![u32::MAX; n];
+    for (f, &i) in fp.index.iter().enumerate() {
+        cell_of_input[i as usize] = cell_of[f];
+    }
+    let mut root_label = vec![u32::MAX; n_cells];
+    let mut next = 0u32;
+    let labels = cell_of_input
+        .iter()
+        .map(|&c| {
+            if c == u32::MAX {
+                next += 1;
+                return next - 1;
+            }
+            let r = sets.find(c) as usize;
+            if root_label[r] == u32::MAX {
+                root_label[r] = next;
+                next += 1;
+            }
+            root_label[r]
+        })
+        .collect();
+    Some(labels)
+}
+
+/// Pair rule of one grid pass: a pair links when `d <= cutoff_m + per_m * max(range_i,
+/// range_j)` (`per_m` 0 and no ranges: the fixed cutoff). `lo` and `hi` bound every pair
+/// cutoff of the pass from below and above.
+pub(crate) struct Rule<'a> {
+    /// Fixed part of the cutoff, metres.
+    pub(crate) cutoff_m: f64,
+    /// Range-proportional part of the cutoff.
+    pub(crate) per_m: f64,
+    /// Range of each point of the pass (same order), when `per_m > 0`.
+    pub(crate) ranges: Option<&'a [f64]>,
+    /// Smallest pair cutoff of the pass.
+    pub(crate) lo: f64,
+    /// Largest pair cutoff of the pass.
+    pub(crate) hi: f64,
+}
+
+/// Voxel of each point and the union-find over voxels after linking, for the points of one
+/// pass. The voxel side is `rule.lo / sqrt(3)` (every same-voxel pair links); `None` when
+/// the grid does not apply (zero or infinite cutoff, `rule.hi` beyond two voxel sides,
+/// coordinates too far out for the packed keys).
+pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, UnionFind)> {
     // The 1e-6 shrink keeps same-voxel pairs below the cutoff despite rounding in the voxel
     // assignment and in the distance itself (both ~1e-16 relative).
-    let side = cutoff / 3f64.sqrt() * (1.0 - 1e-6);
-    if !(side > 0.0 && side.is_finite()) {
+    let side = rule.lo / 3f64.sqrt() * (1.0 - 1e-6);
+    if !(side > 0.0 && side.is_finite()) || rule.hi > 2.0 * side {
         return None;
     }
-    let m = fp.points.len();
+    let m = points.len();
     if m == 0 {
-        return Some((0..n as u32).collect());
+        return Some((Vec::new(), UnionFind::new(0)));
     }
     // Two cheap passes (bounds, then keys) instead of storing every voxel triple.
     let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
-    for p in &fp.points {
+    for p in points {
         for a in 0..3 {
             let c = cell_of_coord(p[a], side)?;
             lo[a] = lo[a].min(c);
@@ -162,8 +192,7 @@ pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec
     let field = |p: &[f32; 3], a: usize| {
         (cell_of_coord(p[a], side).expect("checked in the first pass") - lo[a] + 2) as u64
     };
-    let mut keys: Vec<u64> = fp
-        .points
+    let mut keys: Vec<u64> = points
         .iter()
         .map(|p| field(p, 0) << sx | field(p, 1) << sy | field(p, 2))
         .collect();
@@ -176,8 +205,13 @@ pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec
     let mut cell_box: Vec<[f64; 6]> = Vec::new();
     let mut sp: Vec<[f32; 3]> = Vec::with_capacity(m);
     let mut cell_of: Vec<u32> = vec![0; m];
+    // Range of each point in voxel order (adaptive passes only).
+    let mut sr: Vec<f64> = Vec::with_capacity(if rule.ranges.is_some() { m } else { 0 });
     for (k, (&key, &i)) in keys.iter().zip(order.iter()).enumerate() {
-        let pf = fp.points[i as usize];
+        let pf = points[i as usize];
+        if let Some(r) = rule.ranges {
+            sr.push(r[i as usize]);
+        }
         let p = pf.map(|c| c as f64);
         if k == 0 || keys[k - 1] != key {
             cell_key.push(key);
@@ -198,11 +232,12 @@ pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec
     cell_start.push(m as u32);
     // Sentinel above every neighbour key (keys use at most 62 bits): walks need no bounds test.
     cell_key.push(u64::MAX);
-    let mut sets = CellSets {
-        parent: (0..n_cells as u32).collect(),
-        size: vec![1; n_cells],
-    };
-    let t = squared_threshold(cutoff);
+    let mut sets = UnionFind::new(n_cells);
+    // Squared distances up to `t` link for sure; above `t_hi` never; in between (adaptive
+    // passes only) the exact pair rule decides.
+    let t = squared_threshold(rule.lo);
+    let t_hi = squared_threshold(rule.hi);
+    let adaptive = rule.ranges.is_some();
 
     // Forward neighbour columns (dx > 0, or dx == 0 and dy > 0), each as the key range of
     // dz in [-2, 2]; the voxel's own column above it (dz = 1, 2) is handled apart.
@@ -218,7 +253,7 @@ pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec
     let mut ptr = vec![0usize; columns.len()];
 
     // Tests one voxel pair and joins it when some point pair links.
-    let try_link = |sets: &mut CellSets, a: usize, b: usize| {
+    let try_link = |sets: &mut UnionFind, a: usize, b: usize| {
         let (ra, rb) = (sets.find(a as u32), sets.find(b as u32));
         if ra == rb {
             return;
@@ -229,24 +264,37 @@ pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec
             (bb[1] - ba[4]).max(ba[1] - bb[4]).max(0.0),
             (bb[2] - ba[5]).max(ba[2] - bb[5]).max(0.0),
         );
-        if g > t {
+        if g > t_hi {
             return;
         }
-        let pb = &sp[cell_start[b] as usize..cell_start[b + 1] as usize];
-        for p in &sp[cell_start[a] as usize..cell_start[a + 1] as usize] {
+        let (b0, b1) = (cell_start[b] as usize, cell_start[b + 1] as usize);
+        let pb = &sp[b0..b1];
+        for (ia, p) in sp[cell_start[a] as usize..cell_start[a + 1] as usize]
+            .iter()
+            .enumerate()
+        {
             let p = p.map(|c| c as f64);
             let g = sq3(
                 gap(bb[0], bb[3], p[0]),
                 gap(bb[1], bb[4], p[1]),
                 gap(bb[2], bb[5], p[2]),
             );
-            if g > t {
+            if g > t_hi {
                 continue;
             }
-            if pb
-                .iter()
-                .any(|q| sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64) <= t)
-            {
+            let linked = if adaptive {
+                let ra_range = sr[cell_start[a] as usize + ia];
+                pb.iter().enumerate().any(|(ib, q)| {
+                    let d2 = sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64);
+                    d2 <= t
+                        || (d2 <= t_hi
+                            && d2.sqrt() <= rule.cutoff_m + rule.per_m * ra_range.max(sr[b0 + ib]))
+                })
+            } else {
+                pb.iter()
+                    .any(|q| sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64) <= t)
+            };
+            if linked {
                 sets.join_roots(ra, rb);
                 return;
             }
@@ -274,29 +322,7 @@ pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec
         }
     }
 
-    // Labels in input order, numbered by each component's smallest input index.
-    let mut cell_of_input = vec![u32::MAX; n];
-    for (f, &i) in fp.index.iter().enumerate() {
-        cell_of_input[i as usize] = cell_of[f];
-    }
-    let mut root_label = vec![u32::MAX; n_cells];
-    let mut next = 0u32;
-    let labels = cell_of_input
-        .iter()
-        .map(|&c| {
-            if c == u32::MAX {
-                next += 1;
-                return next - 1;
-            }
-            let r = sets.find(c) as usize;
-            if root_label[r] == u32::MAX {
-                root_label[r] = next;
-                next += 1;
-            }
-            root_label[r]
-        })
-        .collect();
-    Some(labels)
+    Some((cell_of, sets))
 }
 
 #[cfg(test)]

@@ -124,16 +124,27 @@ impl UnionFind {
     /// Joins the sets of `a` and `b`; returns false when they already were one set.
     #[inline]
     pub(crate) fn union(&mut self, a: u32, b: u32) -> bool {
-        let (mut ra, mut rb) = (self.find(a), self.find(b));
+        let (ra, rb) = (self.find(a), self.find(b));
         if ra == rb {
             return false;
         }
+        self.join_roots(ra, rb);
+        true
+    }
+
+    /// Joins two distinct roots (union by size).
+    #[inline]
+    pub(crate) fn join_roots(&mut self, mut ra: u32, mut rb: u32) {
         if self.size[ra as usize] < self.size[rb as usize] {
             std::mem::swap(&mut ra, &mut rb);
         }
         self.parent[rb as usize] = ra;
         self.size[ra as usize] += self.size[rb as usize];
-        true
+    }
+
+    /// Number of elements.
+    pub(crate) fn len(&self) -> usize {
+        self.parent.len()
     }
 
     /// Component number per element, 0.. in order of each component's smallest element.
@@ -235,6 +246,8 @@ pub fn distance_components(
         if let Some(labels) = grid::components(&fp, points.len(), cutoff_m) {
             return Ok(labels);
         }
+    } else if let Some(labels) = adaptive_shells(&fp, points.len(), cutoff_m, cutoff_per_m) {
+        return Ok(labels);
     }
     let mut uf = UnionFind::new(points.len());
     if fp.points.len() > 1 {
@@ -287,6 +300,90 @@ pub fn distance_components(
         }
     }
     Ok(uf.component_labels().0)
+}
+
+/// Largest ratio of the largest to the smallest pair cutoff inside one grid pass: the voxel
+/// side is the smallest cutoff over sqrt(3) and linked points must lie within two voxels,
+/// so the ratio must stay below 2 / sqrt(3); the 1e-3 margin absorbs rounding.
+fn shell_ratio() -> f64 {
+    2.0 / 3f64.sqrt() * (1.0 - 1e-3)
+}
+
+/// Range-adaptive cut on voxel grids, one pass per range shell.
+///
+/// A pair owned by its farther point `i` (range in shell `[r_lo, r_hi)`) has cutoff
+/// `c(r_i) < c(r_hi)` and its other point lies at range `>= r_lo - c(r_hi)` (the distance
+/// bounds the range difference). So the pass of that shell takes every point with range in
+/// `[r_lo - c(r_hi), r_hi)`; all its pair cutoffs lie in `[c(r_lo - c(r_hi)), c(r_hi))`, and
+/// `r_hi` is chosen so that this interval's ratio stays below [`shell_ratio`], which lets the
+/// fixed cut's voxel grid ([`grid::link_cells`]) run with the exact pair rule. Every link a
+/// pass finds is a true link (same-voxel pairs are closer than the pass's smallest cutoff),
+/// and every true link is found by its farther point's pass, so the union of the passes is
+/// exactly the brute-force partition. `None` (the caller falls back to the k-d tree) when a
+/// shell cannot grow: `cutoff_m` 0, or `cutoff_per_m >= (ratio - 1) / ratio` (about 0.13).
+fn adaptive_shells(fp: &FinitePoints, n: usize, cutoff_m: f64, per_m: f64) -> Option<Vec<u32>> {
+    let q = shell_ratio();
+    let growth = q / (1.0 + q * per_m);
+    if !(cutoff_m > 0.0 && growth > 1.0 + 1e-3 && cutoff_m.is_finite() && per_m.is_finite()) {
+        return None;
+    }
+    let ranges: Vec<f64> = fp.points.iter().map(point_range).collect();
+    let r_max = ranges.iter().copied().fold(0.0f64, f64::max);
+    let cut = |r: f64| cutoff_m + per_m * r;
+    // Points sorted by range: each pass is a contiguous slice.
+    let mut order: Vec<u32> = (0..fp.points.len() as u32).collect();
+    order.sort_unstable_by(|&a, &b| ranges[a as usize].total_cmp(&ranges[b as usize]));
+    let sorted_r: Vec<f64> = order.iter().map(|&i| ranges[i as usize]).collect();
+    let mut uf = UnionFind::new(n);
+    let mut r_lo = 0.0f64;
+    let mut pts: Vec<[f32; 3]> = Vec::new();
+    let mut rs: Vec<f64> = Vec::new();
+    loop {
+        // Largest cutoff c_hi with c_hi <= q * c(r_lo - c_hi), i.e. c_hi (1 + q b) <= q c(r_lo).
+        let c_hi = cut(r_lo) * growth;
+        let r_hi = (c_hi - cutoff_m) / per_m;
+        let last = r_hi > r_max;
+        let from = sorted_r.partition_point(|&r| r < r_lo - c_hi);
+        let to = if last {
+            sorted_r.len()
+        } else {
+            sorted_r.partition_point(|&r| r < r_hi)
+        };
+        if to > from {
+            pts.clear();
+            rs.clear();
+            for &i in &order[from..to] {
+                pts.push(fp.points[i as usize]);
+                rs.push(ranges[i as usize]);
+            }
+            let lo = rs.iter().map(|&r| cut(r)).fold(f64::INFINITY, f64::min);
+            let hi = rs.iter().map(|&r| cut(r)).fold(0.0f64, f64::max);
+            let rule = grid::Rule {
+                cutoff_m,
+                per_m,
+                ranges: Some(&rs),
+                lo,
+                hi,
+            };
+            let (cell_of, mut sets) = grid::link_cells(&pts, &rule)?;
+            // Fold the pass's voxel sets into the point union-find.
+            let mut first = vec![u32::MAX; sets.len()];
+            for (k, &c) in cell_of.iter().enumerate() {
+                let g = fp.index[order[from + k] as usize];
+                let root = sets.find(c) as usize;
+                if first[root] == u32::MAX {
+                    first[root] = g;
+                } else {
+                    uf.union(first[root], g);
+                }
+            }
+        }
+        if last {
+            break;
+        }
+        r_lo = r_hi;
+    }
+    Some(uf.component_labels().0)
 }
 
 /// Turns a partition (component number per point) into labels, dropping small clusters.

@@ -11,6 +11,7 @@
 //! type + occurrence (see [`crate::noise`]), so cells differing only in a rain rate or in
 //! the presence of the occlusion reuse the same draws.
 
+pub mod interactions;
 pub mod metrics;
 pub mod outputs;
 pub mod plan;

@@ -459,25 +459,36 @@ fn labels_per_clean(r: &FrameResult) -> Vec<i32> {
     out
 }
 
-fn reference_of(r: &FrameResult) -> Reference {
-    let labels = labels_per_clean(r);
+/// `labels` (cluster id per clean return) with every cluster that is not an object set
+/// to -1.
+fn object_labels(r: &FrameResult, labels: &[i32]) -> Vec<i32> {
     // Cluster ids are 0..n in id order, so a dense lookup is enough.
-    let mut object = vec![
-        false;
-        r.clusters
-            .iter()
-            .map(|c| c.id + 1)
-            .max()
-            .unwrap_or(0)
-            .max(0) as usize
-    ];
+    let len = r
+        .clusters
+        .iter()
+        .map(|c| c.id + 1)
+        .max()
+        .unwrap_or(0)
+        .max(0) as usize;
+    let mut object = vec![false; len];
     for c in r.clusters.iter().filter(|c| c.object && c.id >= 0) {
         object[c.id as usize] = true;
     }
-    let objects = labels
+    labels
         .iter()
-        .map(|&l| if l >= 0 && object[l as usize] { l } else { -1 })
-        .collect();
+        .map(|&l| {
+            if l >= 0 && object.get(l as usize).copied().unwrap_or(false) {
+                l
+            } else {
+                -1
+            }
+        })
+        .collect()
+}
+
+fn reference_of(r: &FrameResult) -> Reference {
+    let labels = labels_per_clean(r);
+    let objects = object_labels(r, &labels);
     Reference {
         labels,
         objects,
@@ -513,24 +524,7 @@ fn frame_metrics(
     // IoU survival of the baseline's object clusters.
     let m = metrics::match_objects(&reference.objects, &noisy, rule);
     // Clutter: noisy object clusters that come from no baseline cluster at all.
-    let noisy_objects: Vec<i32> = {
-        let mut object = vec![
-            false;
-            r.clusters
-                .iter()
-                .map(|c| c.id + 1)
-                .max()
-                .unwrap_or(0)
-                .max(0) as usize
-        ];
-        for c in r.clusters.iter().filter(|c| c.object && c.id >= 0) {
-            object[c.id as usize] = true;
-        }
-        noisy
-            .iter()
-            .map(|&l| if l >= 0 && object[l as usize] { l } else { -1 })
-            .collect()
-    };
+    let noisy_objects = object_labels(r, &noisy);
     let clutter = metrics::match_objects(&reference.labels, &noisy_objects, rule);
     let farthest = |ids: &mut dyn Iterator<Item = i32>| {
         ids.filter_map(|id| reference.distance.get(&id).copied())

@@ -28,6 +28,10 @@ pub struct Args {
     /// noise[1].rate_mm_h=..., any --set path, or occlusion=on,off (repeatable).
     #[arg(long = "vary", value_name = "KEY=V1,V2,...")]
     pub varies: Vec<String>,
+    /// Run every noise stage of the configuration alone, every pair and all together, and
+    /// write the interaction table and heatmap (not with --vary).
+    #[arg(long, conflicts_with = "varies")]
+    pub interactions: bool,
     /// Seeds: N, A..B (both included) or a,b,c (default: the configuration's seed).
     #[arg(long, value_name = "SEEDS")]
     pub seeds: Option<String>,
@@ -124,6 +128,11 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         .iter()
         .map(|v| Vary::parse(v))
         .collect::<crate::error::Result<_>>()?;
+    let varies = if args.interactions {
+        vec![Vary::interactions(&base)?]
+    } else {
+        varies
+    };
     let mut seen = HashSet::new();
     if let Some(v) = varies.iter().find(|v| !seen.insert(v.key.clone())) {
         anyhow::bail!("--vary {}: the key is varied twice", v.key);

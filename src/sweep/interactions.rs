@@ -1,10 +1,15 @@
-//! Interaction verdicts between noise stages (issue 9, part B; pure logic only so far).
+//! Interaction verdicts between noise stages (`sweep --interactions`).
 //!
-//! Inputs are object counts per seed for one distance band: stage `a` alone, stage `b`
-//! alone and both together, each run with common random numbers. Each seed's frames are
-//! pooled first (detected share = detected / objects over the seed's frames: frames of one
-//! capture are not independent samples), then two per-seed differences are summarised by
-//! their mean and 95 % t interval over seeds ([`super::tables::interval`]):
+//! Inputs are object counts per seed for one distance band: no stage (the clean run),
+//! stage `a` alone, stage `b` alone and both together, each run with common random
+//! numbers. Each seed's frames are pooled first (detected share = detected / objects over
+//! the seed's frames: frames of one capture are not independent samples). Shares are then
+//! taken relative to the clean run's share, `a = share(a) / share(none)`: with labelled
+//! objects the clean pipeline itself misses some (e.g. far objects split ring by ring), and
+//! independence multiplies the chances of surviving each stage, not the clean misses
+//! twice. Seeds whose clean run detects nothing in the band are left out. Two per-seed
+//! differences are summarised by their mean and 95 % t interval over seeds
+//! ([`super::tables::interval`]):
 //!
 //! - `vs_independence = both - a * b` (the product is the independence prediction);
 //! - `vs_worse = both - min(a, b)` (the worse of the two alone).
@@ -20,8 +25,11 @@
 //! 4. **unclear** otherwise (e.g. better than independence but not better than the worse
 //!    stage alone).
 
-use super::tables::{interval, Interval};
+use super::plan::{Vary, VaryKind};
+use super::run::Row;
+use super::tables::{band_title, interval, Interval};
 use serde::Serialize;
+use std::collections::BTreeMap;
 
 /// Tolerance of the verdicts, in detected share (5 percentage points).
 pub const TOLERANCE: f64 = 0.05;
@@ -71,13 +79,15 @@ impl Verdict {
 /// Summary of one pair in one band over seeds.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PairResult {
-    /// Seeds with objects in all three runs.
+    /// Seeds with objects in all four runs and a clean detection.
     pub seeds: usize,
-    /// Mean detected share of stage `a` alone.
+    /// Mean detected share of the clean run (absolute).
+    pub clean: f64,
+    /// Mean detected share of stage `a` alone, relative to the clean run.
     pub a: f64,
-    /// Mean detected share of stage `b` alone.
+    /// Mean detected share of stage `b` alone, relative to the clean run.
     pub b: f64,
-    /// Mean detected share with both.
+    /// Mean detected share with both, relative to the clean run.
     pub both: f64,
     /// `both - a * b` over seeds.
     pub vs_independence: Interval,
@@ -87,17 +97,26 @@ pub struct PairResult {
     pub verdict: Verdict,
 }
 
-/// Verdict of one pair in one band from per-seed counts (same seed order in all three);
-/// `None` when no seed has objects in all three runs.
-pub fn pair_result(a: &[Counts], b: &[Counts], both: &[Counts]) -> Option<PairResult> {
+/// Verdict of one pair in one band from per-seed counts (same seed order in all four);
+/// `None` when no seed has objects in all four runs and a clean detection.
+pub fn pair_result(
+    clean: &[Counts],
+    a: &[Counts],
+    b: &[Counts],
+    both: &[Counts],
+) -> Option<PairResult> {
+    let mut sc = Vec::new();
     let mut sa = Vec::new();
     let mut sb = Vec::new();
     let mut sab = Vec::new();
-    for ((x, y), z) in a.iter().zip(b).zip(both) {
-        if let (Some(x), Some(y), Some(z)) = (x.share(), y.share(), z.share()) {
-            sa.push(x);
-            sb.push(y);
-            sab.push(z);
+    for (((c, x), y), z) in clean.iter().zip(a).zip(b).zip(both) {
+        if let (Some(c), Some(x), Some(y), Some(z)) = (c.share(), x.share(), y.share(), z.share()) {
+            if c > 0.0 {
+                sc.push(c);
+                sa.push(x / c);
+                sb.push(y / c);
+                sab.push(z / c);
+            }
         }
     }
     let indep: Vec<f64> = (0..sab.len()).map(|i| sab[i] - sa[i] * sb[i]).collect();
@@ -107,6 +126,7 @@ pub fn pair_result(a: &[Counts], b: &[Counts], both: &[Counts]) -> Option<PairRe
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     Some(PairResult {
         seeds: sab.len(),
+        clean: mean(&sc),
         a: mean(&sa),
         b: mean(&sb),
         both: mean(&sab),
@@ -134,6 +154,428 @@ pub fn verdict(vs_independence: &Interval, vs_worse: &Interval) -> Verdict {
     Verdict::Unclear
 }
 
+/// The stage pairs of an `--interactions` vary: (pair value, value of `a` alone, value of
+/// `b` alone), by index into the vary's values.
+fn pairs(vary: &Vary) -> Vec<(usize, usize, usize)> {
+    let VaryKind::Stages { subsets } = &vary.kind else {
+        return Vec::new();
+    };
+    let find = |set: &[usize]| subsets.iter().position(|s| s == set);
+    subsets
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.len() == 2)
+        .filter_map(|(k, s)| Some((k, find(&s[..1])?, find(&s[1..])?)))
+        .collect()
+}
+
+/// One row of the interaction table: a stage pair in one distance band of one capture.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InteractionRow {
+    /// Capture name.
+    pub capture: String,
+    /// Distance band (`[5, 10) m`) or `all distances`.
+    pub band: String,
+    /// First stage of the pair (its `--interactions` value).
+    pub a: String,
+    /// Second stage of the pair.
+    pub b: String,
+    /// Objects times frames in the band per seed (frames pooled), mean over seeds.
+    pub objects: f64,
+    /// The pair's summary; `None` when no seed has objects and a clean detection.
+    pub result: Option<PairResult>,
+}
+
+/// The name of the band row that pools every distance.
+pub const ALL_DISTANCES: &str = "all distances";
+
+/// The interaction table of an `--interactions` sweep: per capture, pair and band (the
+/// sweep's bands, then all distances pooled). Empty when `vary` is not `--interactions`.
+pub fn table(rows: &[Row], vary: &Vary, captures: &[String]) -> Vec<InteractionRow> {
+    let pairs = pairs(vary);
+    let mut out = Vec::new();
+    let Some(none) = vary.values.iter().position(|v| v == super::plan::NO_STAGES) else {
+        return out;
+    };
+    let bands: Vec<String> = rows
+        .first()
+        .map(|r| r.metrics.bands.iter().map(band_title).collect())
+        .unwrap_or_default();
+    for capture in captures {
+        // (value, seed) -> counts per band, then all distances last.
+        let mut counts: BTreeMap<(usize, u64), Vec<Counts>> = BTreeMap::new();
+        for r in rows.iter().filter(|r| &r.capture == capture) {
+            let Some(v) = r
+                .values
+                .first()
+                .and_then(|x| vary.values.iter().position(|y| y == x))
+            else {
+                continue;
+            };
+            let c = counts
+                .entry((v, r.seed))
+                .or_insert_with(|| vec![Counts::default(); bands.len() + 1]);
+            for (i, b) in r.metrics.bands.iter().enumerate().take(bands.len()) {
+                c[i].objects += b.objects;
+                c[i].detected += b.detected;
+            }
+            c[bands.len()].objects += r.metrics.objects;
+            c[bands.len()].detected += r.metrics.detected;
+        }
+        let mut seeds: Vec<u64> = counts.keys().map(|k| k.1).collect();
+        seeds.sort_unstable();
+        seeds.dedup();
+        let series = |v: usize, band: usize| -> Vec<Counts> {
+            seeds
+                .iter()
+                .map(|s| counts.get(&(v, *s)).map(|c| c[band]).unwrap_or_default())
+                .collect()
+        };
+        for &(both, a, b) in &pairs {
+            for (band, name) in bands
+                .iter()
+                .map(String::as_str)
+                .chain([ALL_DISTANCES])
+                .enumerate()
+            {
+                let clean = series(none, band);
+                let objects = if seeds.is_empty() {
+                    0.0
+                } else {
+                    clean.iter().map(|c| c.objects as f64).sum::<f64>() / seeds.len() as f64
+                };
+                out.push(InteractionRow {
+                    capture: capture.clone(),
+                    band: name.to_string(),
+                    a: vary.values[a].clone(),
+                    b: vary.values[b].clone(),
+                    objects,
+                    result: pair_result(
+                        &clean,
+                        &series(a, band),
+                        &series(b, band),
+                        &series(both, band),
+                    ),
+                });
+            }
+        }
+    }
+    out
+}
+
+/// Column names of the interaction CSV.
+pub const CSV_HEADER: [&str; 17] = [
+    "capture",
+    "band",
+    "stage_a",
+    "stage_b",
+    "seeds",
+    "object_frames",
+    "clean_detected_share",
+    "a_alone",
+    "b_alone",
+    "both",
+    "independence_product",
+    "both_minus_product",
+    "both_minus_product_lo",
+    "both_minus_product_hi",
+    "both_minus_worse",
+    "both_minus_worse_lo",
+    "both_minus_worse_hi",
+];
+
+fn fmt(v: Option<f64>) -> String {
+    // Six decimals keep the file stable and exact enough; "-0" never appears.
+    v.map_or_else(String::new, |v| {
+        let t = format!("{v:.6}");
+        if t.trim_start_matches('-')
+            .chars()
+            .all(|c| c == '0' || c == '.')
+        {
+            t.trim_start_matches('-').to_string()
+        } else {
+            t
+        }
+    })
+}
+
+/// The table as CSV: [`CSV_HEADER`] plus `verdict`; shares relative to the clean run.
+pub fn to_csv(rows: &[InteractionRow]) -> Vec<u8> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    let mut header: Vec<&str> = CSV_HEADER.to_vec();
+    header.push("verdict");
+    // Writing to a Vec cannot fail.
+    let _ = w.write_record(&header);
+    for r in rows {
+        let p = r.result.as_ref();
+        let _ = w.write_record([
+            r.capture.clone(),
+            r.band.clone(),
+            r.a.clone(),
+            r.b.clone(),
+            p.map_or(0, |p| p.seeds).to_string(),
+            fmt(Some(r.objects)),
+            fmt(p.map(|p| p.clean)),
+            fmt(p.map(|p| p.a)),
+            fmt(p.map(|p| p.b)),
+            fmt(p.map(|p| p.both)),
+            fmt(p.map(|p| p.a * p.b)),
+            fmt(p.map(|p| p.vs_independence.mean)),
+            fmt(p.and_then(|p| p.vs_independence.lo)),
+            fmt(p.and_then(|p| p.vs_independence.hi)),
+            fmt(p.map(|p| p.vs_worse.mean)),
+            fmt(p.and_then(|p| p.vs_worse.lo)),
+            fmt(p.and_then(|p| p.vs_worse.hi)),
+            p.map_or("no objects", |p| p.verdict.word()).to_string(),
+        ]);
+    }
+    w.into_inner().unwrap_or_default()
+}
+
+/// The table as JSON (the same fields as the CSV, numbers as numbers).
+pub fn to_json(rows: &[InteractionRow]) -> serde_json::Value {
+    let iv = |i: &Interval| serde_json::json!({"mean": i.mean, "lo": i.lo, "hi": i.hi});
+    let rows: Vec<serde_json::Value> = rows
+        .iter()
+        .map(|r| {
+            let p = r.result.as_ref();
+            serde_json::json!({
+                "capture": r.capture,
+                "band": r.band,
+                "stage_a": r.a,
+                "stage_b": r.b,
+                "seeds": p.map_or(0, |p| p.seeds),
+                "object_frames": r.objects,
+                "clean_detected_share": p.map(|p| p.clean),
+                "a_alone": p.map(|p| p.a),
+                "b_alone": p.map(|p| p.b),
+                "both": p.map(|p| p.both),
+                "independence_product": p.map(|p| p.a * p.b),
+                "both_minus_product": p.map(|p| iv(&p.vs_independence)),
+                "both_minus_worse": p.map(|p| iv(&p.vs_worse)),
+                "verdict": p.map_or("no objects", |p| p.verdict.word()),
+            })
+        })
+        .collect();
+    serde_json::json!({
+        "tool": format!("lidar-noise {}", env!("CARGO_PKG_VERSION")),
+        "tolerance": TOLERANCE,
+        "shares": "detected share relative to the run without noise stages, seeds' frames pooled",
+        "rows": rows,
+    })
+}
+
+/// The interaction CSV file.
+pub const INTERACTIONS_CSV: &str = "interactions.csv";
+/// The interaction JSON file.
+pub const INTERACTIONS_JSON: &str = "interactions.json";
+
+/// Colour of a verdict in the heatmap (and its key).
+fn verdict_color(v: Option<Verdict>) -> plotters::style::RGBColor {
+    use plotters::style::RGBColor;
+    match v {
+        Some(Verdict::Compounding) => RGBColor(239, 138, 98),
+        Some(Verdict::Independent) => RGBColor(224, 224, 224),
+        Some(Verdict::Masking) => RGBColor(103, 169, 207),
+        Some(Verdict::Unclear) => RGBColor(253, 219, 127),
+        None => RGBColor(255, 255, 255),
+    }
+}
+
+/// Writes the interaction table (CSV, JSON) and one heatmap per capture into `dir`;
+/// returns the files written and the page section. Nothing when `vary` is not the
+/// `--interactions` key.
+pub fn write_outputs(
+    dir: &std::path::Path,
+    vary: &Vary,
+    captures: &[String],
+    rows: &[Row],
+    protected: &[&std::path::Path],
+) -> crate::error::Result<Option<(Vec<std::path::PathBuf>, crate::writers::html::Section)>> {
+    use crate::writers::heatmap::{heatmap, HeatCell, Heatmap};
+    use crate::writers::html::{Figure, Section};
+    if !matches!(vary.kind, VaryKind::Stages { .. }) {
+        return Ok(None);
+    }
+    let table = table(rows, vary, captures);
+    let mut written = Vec::new();
+    let mut put = |name: &str, bytes: &[u8]| -> crate::error::Result<()> {
+        let path = dir.join(name);
+        crate::writers::atomic::write_atomically(&path, protected, |o| o.write_all(bytes))?;
+        written.push(path);
+        Ok(())
+    };
+    put(INTERACTIONS_CSV, &to_csv(&table))?;
+    let json = serde_json::to_vec_pretty(&to_json(&table))
+        .map_err(|e| crate::error::Error::Invalid(format!("{INTERACTIONS_JSON}: {e}")))?;
+    put(INTERACTIONS_JSON, &json)?;
+    let mut section = Section {
+        heading: "Interactions between noise stages".into(),
+        paragraphs: vec![
+            format!(
+                "Each stage of the configuration alone, each pair and all together, with \
+                 the same seeds (common random numbers). Detected shares are relative to \
+                 the run without noise stages. For each pair: both together against the \
+                 product of each alone (what independent stages would give) and against \
+                 the worse of the two alone. Verdicts (tolerance {TOLERANCE} in share, and \
+                 with two or more seeds the 95 % interval over seeds must exclude 0): \
+                 masking when the pair detects more than the worse stage alone; \
+                 compounding when it detects less than the product; independent when it \
+                 is within the tolerance of the product or its interval contains it; \
+                 unclear otherwise."
+            ),
+            format!("Files: {INTERACTIONS_CSV}, {INTERACTIONS_JSON}."),
+        ],
+        ..Section::default()
+    };
+    let share = |v: f64| format!("{v:.2}");
+    for capture in captures {
+        let rows: Vec<&InteractionRow> = table.iter().filter(|r| &r.capture == capture).collect();
+        let mut columns: Vec<String> = Vec::new();
+        let mut pair_names: Vec<String> = Vec::new();
+        for r in &rows {
+            if !columns.contains(&r.band) {
+                columns.push(r.band.clone());
+            }
+            let name = format!("{} + {}", r.a, r.b);
+            if !pair_names.contains(&name) {
+                pair_names.push(name);
+            }
+        }
+        if pair_names.is_empty() {
+            continue;
+        }
+        let cells = pair_names
+            .iter()
+            .map(|name| {
+                columns
+                    .iter()
+                    .map(|band| {
+                        let r = rows
+                            .iter()
+                            .find(|r| &r.band == band && &format!("{} + {}", r.a, r.b) == name);
+                        match r.and_then(|r| r.result.as_ref()) {
+                            Some(p) => HeatCell {
+                                color: verdict_color(Some(p.verdict)),
+                                lines: vec![
+                                    p.verdict.word().to_string(),
+                                    format!("both {} vs {}", share(p.both), share(p.a * p.b)),
+                                    format!("alone {} / {}", share(p.a), share(p.b)),
+                                ],
+                            },
+                            None => HeatCell {
+                                color: verdict_color(None),
+                                lines: vec!["no objects".into()],
+                            },
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        let map = Heatmap {
+            title: format!("{capture}: stage pairs by distance band (objects detected)"),
+            rows: pair_names,
+            columns,
+            cells,
+            key: [
+                Verdict::Compounding,
+                Verdict::Independent,
+                Verdict::Masking,
+                Verdict::Unclear,
+            ]
+            .iter()
+            .map(|v| (verdict_color(Some(*v)), v.word().to_string()))
+            .chain([(verdict_color(None), "no objects in the band".to_string())])
+            .collect(),
+            notes: vec![
+                "both X vs Y: detected share with both stages against the product of each \
+                 alone (independence)"
+                    .into(),
+                "alone A / B: each stage alone; shares relative to the run without noise, \
+                 mean over seeds"
+                    .into(),
+            ],
+        };
+        std::fs::create_dir_all(dir.join("plots")).map_err(|e| crate::error::Error::io(dir, e))?;
+        let rel = format!("plots/interactions_{}.png", safe(capture));
+        let path = dir.join(&rel);
+        heatmap(&map, &path, protected)?;
+        written.push(path);
+        section.figures.push(Figure {
+            src: rel,
+            caption: format!(
+                "{capture}: the verdict of each stage pair in each distance band; read a \
+                 row across to see where (at which distance) two stages interact"
+            ),
+        });
+    }
+    let header: Vec<String> = [
+        "capture",
+        "band",
+        "pair",
+        "seeds",
+        "object-frames",
+        "clean",
+        "a alone",
+        "b alone",
+        "both",
+        "a x b",
+        "both - a x b",
+        "both - worse",
+        "verdict",
+    ]
+    .map(String::from)
+    .to_vec();
+    let iv = |i: &Interval| match (i.lo, i.hi) {
+        (Some(lo), Some(hi)) => format!("{:.3} [{lo:.3}, {hi:.3}]", i.mean),
+        _ => format!("{:.3}", i.mean),
+    };
+    let body = table
+        .iter()
+        .map(|r| {
+            let mut v = vec![
+                r.capture.clone(),
+                r.band.clone(),
+                format!("{} + {}", r.a, r.b),
+            ];
+            match &r.result {
+                Some(p) => v.extend([
+                    p.seeds.to_string(),
+                    format!("{:.1}", r.objects),
+                    format!("{:.3}", p.clean),
+                    format!("{:.3}", p.a),
+                    format!("{:.3}", p.b),
+                    format!("{:.3}", p.both),
+                    format!("{:.3}", p.a * p.b),
+                    iv(&p.vs_independence),
+                    iv(&p.vs_worse),
+                    p.verdict.word().to_string(),
+                ]),
+                None => {
+                    v.extend(["0".to_string(), format!("{:.1}", r.objects)]);
+                    v.extend(std::iter::repeat_n(String::new(), 7));
+                    v.push("no objects".into());
+                }
+            }
+            v
+        })
+        .collect();
+    section.table = Some((header, body));
+    Ok(Some((written, section)))
+}
+
+fn safe(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "._-".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -142,13 +584,33 @@ mod tests {
         Counts { objects, detected }
     }
 
+    fn clean(n: usize) -> Vec<Counts> {
+        vec![c(10, 10); n]
+    }
+
+    #[test]
+    fn shares_are_relative_to_the_clean_run() {
+        // The clean run detects 8 of 10; each stage alone keeps 6 of those 8 (0.75), both
+        // keep 4.5 of 8 on average: exactly the product of the relative shares.
+        let clean = [c(10, 8), c(10, 8)];
+        let a = [c(10, 6), c(10, 6)];
+        let b = [c(10, 6), c(10, 6)];
+        let both = [c(10, 4), c(10, 5)];
+        let r = pair_result(&clean, &a, &b, &both).unwrap();
+        assert!((r.a - 0.75).abs() < 1e-12 && (r.clean - 0.8).abs() < 1e-12);
+        assert!((r.vs_independence.mean - (4.5 / 8.0 - 0.5625)).abs() < 1e-12);
+        assert_eq!(r.verdict, Verdict::Independent, "{r:?}");
+        // Taken absolutely, the product 0.36 against 0.45 would not read as independence.
+        assert!((0.45f64 - 0.36).abs() > TOLERANCE);
+    }
+
     #[test]
     fn each_alone_keeps_both_lose_is_compounding() {
         // Each stage alone keeps 9 of 10 objects, together only 2: product predicts 0.81.
         let a = [c(10, 9), c(10, 9), c(10, 8)];
         let b = [c(10, 9), c(10, 10), c(10, 9)];
         let both = [c(10, 2), c(10, 3), c(10, 2)];
-        let r = pair_result(&a, &b, &both).unwrap();
+        let r = pair_result(&clean(a.len()), &a, &b, &both).unwrap();
         assert_eq!(r.verdict, Verdict::Compounding, "{r:?}");
     }
 
@@ -158,7 +620,7 @@ mod tests {
         let a = [c(10, 9), c(10, 9), c(10, 9)];
         let b = [c(10, 3), c(10, 3), c(10, 4)];
         let both = [c(10, 8), c(10, 8), c(10, 8)];
-        let r = pair_result(&a, &b, &both).unwrap();
+        let r = pair_result(&clean(a.len()), &a, &b, &both).unwrap();
         assert_eq!(r.verdict, Verdict::Masking, "{r:?}");
     }
 
@@ -167,24 +629,33 @@ mod tests {
         let a = [c(10, 5), c(10, 5)];
         let b = [c(10, 8), c(10, 8)];
         let both = [c(10, 4), c(10, 4)];
-        let r = pair_result(&a, &b, &both).unwrap();
+        let r = pair_result(&clean(a.len()), &a, &b, &both).unwrap();
         assert!((r.vs_independence.mean).abs() < 1e-12);
         assert_eq!(r.verdict, Verdict::Independent, "{r:?}");
     }
 
     #[test]
     fn single_seed_uses_the_tolerance_only() {
-        let r = pair_result(&[c(4, 4)], &[c(4, 4)], &[c(4, 3)]).unwrap();
+        let r = pair_result(&[c(4, 4)], &[c(4, 4)], &[c(4, 4)], &[c(4, 3)]).unwrap();
         assert_eq!(r.vs_independence.lo, None);
         assert_eq!(r.verdict, Verdict::Compounding);
-        let r = pair_result(&[c(100, 100)], &[c(100, 100)], &[c(100, 96)]).unwrap();
+        let r = pair_result(
+            &[c(100, 100)],
+            &[c(100, 100)],
+            &[c(100, 100)],
+            &[c(100, 96)],
+        )
+        .unwrap();
         assert_eq!(r.verdict, Verdict::Independent);
     }
 
     #[test]
     fn seeds_without_objects_are_skipped() {
-        assert!(pair_result(&[c(0, 0)], &[c(3, 3)], &[c(3, 3)]).is_none());
+        assert!(pair_result(&[c(3, 3)], &[c(0, 0)], &[c(3, 3)], &[c(3, 3)]).is_none());
+        // A seed whose clean run detects nothing is left out as well.
+        assert!(pair_result(&[c(3, 0)], &[c(3, 3)], &[c(3, 3)], &[c(3, 3)]).is_none());
         let r = pair_result(
+            &[c(3, 3), c(2, 2)],
             &[c(0, 0), c(2, 2)],
             &[c(3, 3), c(2, 2)],
             &[c(3, 3), c(2, 2)],

@@ -313,6 +313,14 @@ pub fn write_outputs(
             });
         }
     }
+    if let [vary] = varies {
+        if let Some((files, section)) =
+            super::interactions::write_outputs(dir, vary, captures, rows, protected)?
+        {
+            written.extend(files);
+            page.sections.insert(1, section);
+        }
+    }
     let path = dir.join(INDEX_HTML);
     crate::writers::write_file(&page, &path, protected)?;
     written.push(path);

@@ -27,6 +27,12 @@ pub enum VaryKind {
     },
     /// Any other dotted path accepted by `--set`, e.g. `noise[1].rate_mm_h`.
     Path,
+    /// `sweep --interactions`: each value keeps a subset of the base configuration's
+    /// noise stages, by index in the `[[noise]]` list (`subsets[i]` for `values[i]`).
+    Stages {
+        /// Stage indexes kept by each value, ascending.
+        subsets: Vec<Vec<usize>>,
+    },
 }
 
 /// One `--vary KEY=v1,v2,...`.
@@ -76,11 +82,64 @@ impl Vary {
         Ok(Vary { key, values, kind })
     }
 
+    /// The `stages` key of `sweep --interactions` over the base configuration's noise
+    /// stages: no stage, each stage alone, each pair and (with three or more) all of them.
+    ///
+    /// Values name the stages by type (`occlusion`, `rain`, `occlusion+rain`); a type
+    /// that occurs twice is named with its index in the `[[noise]]` list (`occlusion[0]`).
+    pub fn interactions(base: &BaseConfig) -> Result<Vary> {
+        let kinds: Vec<&str> = base.config.noise.iter().map(|s| s.kind()).collect();
+        let n = kinds.len();
+        if n < 2 {
+            return Err(Error::Invalid(format!(
+                "--interactions: {} has {n} noise stage{}; it needs at least two \
+                 [[noise]] stages to pair",
+                base.source.display(),
+                if n == 1 { "" } else { "s" }
+            )));
+        }
+        let name = |i: usize| {
+            if kinds.iter().filter(|k| **k == kinds[i]).count() > 1 {
+                format!("{}[{i}]", kinds[i])
+            } else {
+                kinds[i].to_string()
+            }
+        };
+        let mut values = vec![NO_STAGES.to_string()];
+        let mut subsets = vec![Vec::new()];
+        for i in 0..n {
+            values.push(name(i));
+            subsets.push(vec![i]);
+        }
+        for i in 0..n {
+            for j in i + 1..n {
+                values.push(format!("{}+{}", name(i), name(j)));
+                subsets.push(vec![i, j]);
+            }
+        }
+        if n > 2 {
+            values.push(ALL_STAGES.to_string());
+            subsets.push((0..n).collect());
+        }
+        Ok(Vary {
+            key: STAGES_KEY.to_string(),
+            values,
+            kind: VaryKind::Stages { subsets },
+        })
+    }
+
     /// True when every value reads as a number (the key can be a plot axis).
     pub fn is_numeric(&self) -> bool {
         self.values.iter().all(|v| v.parse::<f64>().is_ok())
     }
 }
+
+/// The key of the `--interactions` sweep.
+pub const STAGES_KEY: &str = "stages";
+/// The `--interactions` value without any noise stage.
+pub const NO_STAGES: &str = "none";
+/// The `--interactions` value with every noise stage (three or more stages).
+pub const ALL_STAGES: &str = "all";
 
 /// Parses `--seeds`: `N`, `A..B` (both included) or `a,b,c`.
 pub fn parse_seeds(text: &str) -> Result<Vec<u64>> {
@@ -252,7 +311,7 @@ impl BaseConfig {
         for (v, value) in varies.iter().zip(&cell.values) {
             // `--set` resolves the `<stage type>.<option>` shorthand itself.
             let set = match &v.kind {
-                VaryKind::Toggle { .. } => continue,
+                VaryKind::Toggle { .. } | VaryKind::Stages { .. } => continue,
                 VaryKind::StageOption { .. } | VaryKind::Path => format!("{}={value}", v.key),
             };
             apply_set(&mut table, &set, &mut locator)
@@ -269,6 +328,17 @@ impl BaseConfig {
                 if value == "off" {
                     retain_stages(&mut table, |t| t != stage);
                 }
+            }
+        }
+        for (v, value) in varies.iter().zip(&cell.values) {
+            if let VaryKind::Stages { subsets } = &v.kind {
+                let keep = v
+                    .values
+                    .iter()
+                    .position(|x| x == value)
+                    .and_then(|i| subsets.get(i))
+                    .ok_or_else(|| fail(format!("{}: no stage subset {value}", v.key)))?;
+                retain_stage_indexes(&mut table, keep);
             }
         }
         config_of(&table, &label, cell.seed)
@@ -313,6 +383,19 @@ fn stage_index(table: &Table, stage: &str) -> Option<usize> {
 fn retain_stages(table: &mut Table, keep: impl Fn(&str) -> bool) {
     if let Some(Value::Array(list)) = table.get_mut("noise") {
         list.retain(|v| stage_type(v).is_none_or(&keep));
+        if list.is_empty() {
+            table.remove("noise");
+        }
+    }
+}
+
+fn retain_stage_indexes(table: &mut Table, keep: &[usize]) {
+    if let Some(Value::Array(list)) = table.get_mut("noise") {
+        let mut i = 0;
+        list.retain(|_| {
+            i += 1;
+            keep.contains(&(i - 1))
+        });
         if list.is_empty() {
             table.remove("noise");
         }

@@ -6,6 +6,7 @@
 
 pub mod atomic;
 pub mod csv;
+pub mod heatmap;
 pub mod html;
 pub mod json;
 pub mod las;

@@ -13,7 +13,7 @@ use std::sync::Once;
 /// The font compiled into the binary (DejaVu Sans, Bitstream Vera licence).
 pub const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
 /// Family name the font is registered under.
-const FAMILY: &str = "sans-serif";
+pub(crate) const FAMILY: &str = "sans-serif";
 
 /// Categorical colours for lines and clusters (Tableau 10 without its grey).
 pub const PALETTE: [RGBColor; 9] = [
@@ -28,7 +28,7 @@ pub const PALETTE: [RGBColor; 9] = [
     RGBColor(23, 190, 207),
 ];
 
-fn register_font() -> Result<()> {
+pub(crate) fn register_font() -> Result<()> {
     static ONCE: Once = Once::new();
     let mut ok = true;
     ONCE.call_once(|| {
@@ -43,12 +43,17 @@ fn register_font() -> Result<()> {
     }
 }
 
-fn draw_err<E: std::fmt::Display>(e: E) -> std::io::Error {
+pub(crate) fn draw_err<E: std::fmt::Display>(e: E) -> std::io::Error {
     std::io::Error::other(format!("drawing failed: {e}"))
 }
 
 /// Encodes an RGB buffer as PNG to `path`, atomically.
-fn write_png(path: &Path, protected: &[&Path], buf: &[u8], (w, h): (u32, u32)) -> Result<()> {
+pub(crate) fn write_png(
+    path: &Path,
+    protected: &[&Path],
+    buf: &[u8],
+    (w, h): (u32, u32),
+) -> Result<()> {
     super::atomic::write_atomically(path, protected, |out| {
         let mut enc = png::Encoder::new(out, w, h);
         enc.set_color(png::ColorType::Rgb);

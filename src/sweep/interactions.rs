@@ -186,11 +186,15 @@ pub struct InteractionRow {
     pub result: Option<PairResult>,
 }
 
+/// The capture name of the rows that pool every capture of the sweep.
+pub const ALL_CAPTURES: &str = "all captures";
+
 /// The name of the band row that pools every distance.
 pub const ALL_DISTANCES: &str = "all distances";
 
-/// The interaction table of an `--interactions` sweep: per capture, pair and band (the
-/// sweep's bands, then all distances pooled). Empty when `vary` is not `--interactions`.
+/// The interaction table of an `--interactions` sweep: per capture (then, with several,
+/// all captures pooled per seed), pair and band (the sweep's bands, then all distances
+/// pooled). Empty when `vary` is not `--interactions`.
 pub fn table(rows: &[Row], vary: &Vary, captures: &[String]) -> Vec<InteractionRow> {
     let pairs = pairs(vary);
     let mut out = Vec::new();
@@ -201,10 +205,16 @@ pub fn table(rows: &[Row], vary: &Vary, captures: &[String]) -> Vec<InteractionR
         .first()
         .map(|r| r.metrics.bands.iter().map(band_title).collect())
         .unwrap_or_default();
-    for capture in captures {
+    // Each capture, then (with several) all captures pooled per seed.
+    let mut groups: Vec<(String, Vec<&String>)> =
+        captures.iter().map(|c| (c.clone(), vec![c])).collect();
+    if captures.len() > 1 {
+        groups.push((ALL_CAPTURES.to_string(), captures.iter().collect()));
+    }
+    for (capture, members) in &groups {
         // (value, seed) -> counts per band, then all distances last.
         let mut counts: BTreeMap<(usize, u64), Vec<Counts>> = BTreeMap::new();
-        for r in rows.iter().filter(|r| &r.capture == capture) {
+        for r in rows.iter().filter(|r| members.contains(&&r.capture)) {
             let Some(v) = r
                 .values
                 .first()
@@ -429,7 +439,12 @@ pub fn write_outputs(
         ..Section::default()
     };
     let share = |v: f64| format!("{v:.2}");
-    for capture in captures {
+    let mut names: Vec<&String> = captures.iter().collect();
+    let pooled = ALL_CAPTURES.to_string();
+    if captures.len() > 1 {
+        names.push(&pooled);
+    }
+    for capture in names {
         let rows: Vec<&InteractionRow> = table.iter().filter(|r| &r.capture == capture).collect();
         let mut columns: Vec<String> = Vec::new();
         let mut pair_names: Vec<String> = Vec::new();

@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# The reference study's real question with `sweep --interactions`: occlusion of five lasers
+# and Goodin rain at 7 mm/h, each alone and together, object detection by distance band,
+# for every ground method, on the crossroad and parking fixtures, five randomized street
+# scenes pooled (seeds 7001-7005, as in make-study-tables.sh) and the shared real capture;
+# then the p-diagram sensor stages (configs/pdiagram-sensor.toml) on the same scenes with
+# the default ground method. Noise seeds 1..3.
+# Writes docs/figures/interactions_by_band.md (the README's tables). Run by hand; review
+# the diff.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cargo build --quiet --release --bin lidar-noise
+bin=target/release/lidar-noise
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+for seed in 7001 7002 7003 7004 7005; do
+  "$bin" --quiet synth --random "$seed" --rotations 2 -o "$out/scenes/random-$seed"
+done
+random=("$out"/scenes/random-*/*.pcap)
+real=()
+if [ -e ../shared/data/hdl32e/monterey.pcap ]; then
+  real=(../shared/data/hdl32e/monterey.pcap)
+else
+  echo "SKIPPED: ../shared/data is absent; the tables have no real-capture rows" >&2
+fi
+run() {
+  local dir=$1 config=$2
+  shift 2
+  "$bin" --quiet sweep "$@" --config "$config" --interactions --seeds 1..3 -o "$dir"
+}
+args=()
+for method in range-image ransac patchwork; do
+  run "$out/paper-$method" configs/paper.toml fixtures/crossroad.pcap fixtures/parking.pcap \
+    "${real[@]}" --set ground.method=$method
+  run "$out/paper-random-$method" configs/paper.toml "${random[@]}" --set ground.method=$method
+  args+=("paper:$method=$out/paper-$method" "paper:$method=$out/paper-random-$method")
+done
+run "$out/sensor" configs/pdiagram-sensor.toml fixtures/crossroad.pcap fixtures/parking.pcap \
+  "${real[@]}"
+run "$out/sensor-random" configs/pdiagram-sensor.toml "${random[@]}"
+args+=("sensor:patchwork=$out/sensor" "sensor:patchwork=$out/sensor-random")
+python3 scripts/interaction_table.py "${args[@]}" > docs/figures/interactions_by_band.md
+cat docs/figures/interactions_by_band.md

@@ -227,39 +227,45 @@ fn run_capture(
 ) -> Result<String> {
     let progress = super::progress(global, "frames");
     progress.set_message(source.to_string());
-    // Frames are processed in batches in parallel; results are written in frame order,
-    // and memory stays bounded by one batch whatever the capture's length.
+    // Frames are processed in batches in parallel, each frame's own files (PLY, linkage)
+    // written by the worker that processed it; the next batch is decoded while the current
+    // one is processed, and the reports are written in frame order. Memory stays bounded
+    // by two batches whatever the capture's length.
     let batch_size = 2 * rayon::current_num_threads().max(1);
     // Per-frame reports are streamed to spool files and joined at the end, so memory
     // does not grow with the capture's length.
     let mut spool = ReportSpool::new(dir)?;
-    loop {
-        let batch = reader.next_batch(batch_size, &plan.frames)?;
-        if batch.is_empty() {
-            break;
-        }
-        let results: Vec<crate::error::Result<FrameResult>> = batch
-            .into_par_iter()
-            .map(|f| plan.pipeline.process(f))
-            .collect();
-        for result in results {
-            let result = result?;
-            if plan.ply {
-                write_ply(plan, &result, source, dir, inputs)?;
-            }
-            if plan.linkage {
-                write_linkage(plan, &result, dir, inputs)?;
-            }
-            let index = result.noisy.index;
-            spool.add(
-                &FrameReport::of(&result),
-                &FrameClusters {
-                    index,
-                    clusters: result.clusters,
-                },
-            )?;
+    let mut batch = reader.next_batch(batch_size, &plan.frames)?;
+    while !batch.is_empty() {
+        let (next, results) = rayon::join(
+            || reader.next_batch(batch_size, &plan.frames),
+            || {
+                batch
+                    .into_par_iter()
+                    .map(|f| -> Result<SpoolEntry> {
+                        let result = plan.pipeline.process(f)?;
+                        if plan.ply {
+                            write_ply(plan, &result, source, dir, inputs)?;
+                        }
+                        if plan.linkage {
+                            write_linkage(plan, &result, dir, inputs)?;
+                        }
+                        let report = FrameReport::of(&result);
+                        let clusters = FrameClusters {
+                            index: result.noisy.index,
+                            clusters: result.clusters,
+                        };
+                        SpoolEntry::of(report, &clusters)
+                    })
+                    .collect::<Vec<Result<SpoolEntry>>>()
+            },
+        );
+        // Errors in frame order: this batch's before a decoding error in the next.
+        for entry in results {
+            spool.add(entry?)?;
             progress.inc(1);
         }
+        batch = next?;
     }
     progress.finish_and_clear();
     let capture_summary = reader.summary();
@@ -354,6 +360,33 @@ struct ReportSpool {
     frames: usize,
 }
 
+/// One frame's report pieces, serialised by the worker that processed the frame so that
+/// only the writing is left to the thread that keeps frame order.
+struct SpoolEntry {
+    report: FrameReport,
+    summary: Vec<u8>,
+    clusters: Vec<u8>,
+    csv: Vec<u8>,
+}
+
+impl SpoolEntry {
+    fn of(report: FrameReport, clusters: &FrameClusters) -> Result<Self> {
+        use crate::writers::Output;
+        let mut summary = Vec::new();
+        write_element(&mut summary, "", &report)?;
+        let mut cluster_bytes = Vec::new();
+        write_element(&mut cluster_bytes, "", clusters)?;
+        let mut csv = Vec::new();
+        cluster_table(std::slice::from_ref(clusters)).write_to(&mut csv)?;
+        Ok(SpoolEntry {
+            report,
+            summary,
+            clusters: cluster_bytes,
+            csv,
+        })
+    }
+}
+
 const SPOOL_SUMMARY: &str = ".summary-frames.part";
 const SPOOL_CLUSTERS: &str = ".clusters-frames.part";
 const SPOOL_CSV: &str = ".clusters-csv.part";
@@ -374,14 +407,15 @@ impl ReportSpool {
         })
     }
 
-    fn add(&mut self, report: &FrameReport, clusters: &FrameClusters) -> Result<()> {
-        use crate::writers::Output;
-        let sep = if self.frames == 0 { "" } else { ",\n" };
-        write_element(&mut self.summary_frames, sep, report)?;
-        write_element(&mut self.cluster_frames, sep, clusters)?;
-        let mut csv = Vec::new();
-        cluster_table(std::slice::from_ref(clusters)).write_to(&mut csv)?;
+    fn add(&mut self, entry: SpoolEntry) -> Result<()> {
+        use std::io::Write;
+        let sep: &[u8] = if self.frames == 0 { b"" } else { b",\n" };
+        self.summary_frames.write_all(sep)?;
+        self.summary_frames.write_all(&entry.summary)?;
+        self.cluster_frames.write_all(sep)?;
+        self.cluster_frames.write_all(&entry.clusters)?;
         // Every table starts with the header line; the final file has it once.
+        let csv = &entry.csv;
         let start = if self.frames == 0 {
             0
         } else {
@@ -389,8 +423,8 @@ impl ReportSpool {
                 .position(|&b| b == b'\n')
                 .map_or(csv.len(), |i| i + 1)
         };
-        std::io::Write::write_all(&mut self.csv_rows, &csv[start..])?;
-        self.totals.add(report);
+        self.csv_rows.write_all(&csv[start..])?;
+        self.totals.add(&entry.report);
         self.frames += 1;
         Ok(())
     }

@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# Whole-process speed on the shared capture (17 frames, 1.49 s of recording at 11.8 Hz),
+# the paper pipeline with PLY and reports written, against the Python pipeline a user
+# would assemble (scripts/python_peer.py: velodyne_decoder + numpy noise + Patchwork++ +
+# Open3D DBSCAN + plyfile), measured in the same run. Also `convert` against
+# velodyne_decoder + plyfile writing the same per-frame PLY. Not part of CI: it installs
+# Python packages (Open3D is large).
+#   bash benches/realtime.sh [RUNS]     # RUNS timed runs per setting (default 15)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+capture=../shared/data/hdl32e/monterey.pcap
+[ -e "$capture" ] || { echo "SKIPPED: $capture is absent"; exit 0; }
+runs=${1:-15}
+recording_s=1.49
+venv="${TMPDIR:-/tmp}/lidar-noise-peer-venv"
+[ -x "$venv/bin/python" ] || python3 -m venv "$venv"
+"$venv/bin/pip" install --quiet --disable-pip-version-check velodyne-decoder numpy plyfile \
+  pypatchworkpp open3d
+cargo build --quiet --release --bin lidar-noise
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+# Median and best wall time of RUNS runs of a command (fresh output folder each time).
+timeit() {
+  local label=$1
+  shift
+  python3 - "$runs" "$label" "$out" "$@" <<'PY'
+import shutil, statistics, subprocess, sys, time
+runs, label, out, cmd = int(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4:]
+times = []
+for _ in range(runs):
+    shutil.rmtree(f"{out}/o", ignore_errors=True)
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    times.append(time.perf_counter() - t0)
+med, best = statistics.median(times), min(times)
+print(f"{label}: median {med*1e3:.1f} ms, best {best*1e3:.1f} ms, "
+      f"{17/med:.1f} frames/s, {1.49/med:.1f}x real time (median of {runs})")
+PY
+}
+bin=target/release/lidar-noise
+for t in 1 2; do
+  RAYON_NUM_THREADS=$t timeit "lidar-noise run, paper config, $t thread(s)" \
+    "$bin" --quiet run -c configs/paper.toml -o "$out/o" "$capture"
+done
+RAYON_NUM_THREADS=2 timeit "lidar-noise convert, 2 threads" \
+  "$bin" --quiet convert -o "$out/o" "$capture"
+echo "== Python peer (same machine, same run)"
+for _ in 1 2 3; do
+  "$venv/bin/python" scripts/python_peer.py "$capture" "$out/peer" 2>/dev/null | grep peer
+done
+"$venv/bin/python" - "$capture" "$out/conv" <<'PY'
+import os, sys, time
+import numpy as np, plyfile, velodyne_decoder as vd
+capture, out = sys.argv[1], sys.argv[2]
+os.makedirs(out, exist_ok=True)
+best = float("inf")
+for _ in range(3):
+    t0 = time.perf_counter()
+    n = 0
+    for _s, pts in vd.read_pcap(capture, vd.Config(model=vd.Model.HDL32E)):
+        v = np.empty(len(pts), dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"),
+                                      ("intensity", "u1"), ("ring", "u1"), ("time", "f8")])
+        v["x"], v["y"], v["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
+        v["intensity"], v["ring"], v["time"] = pts[:, 3], pts[:, 6], pts[:, 4]
+        plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")]).write(f"{out}/f{n:05d}.ply")
+        n += 1
+    best = min(best, time.perf_counter() - t0)
+print(f"velodyne_decoder + plyfile convert: best {best*1e3:.1f} ms for {n} frames")
+PY

@@ -131,7 +131,10 @@ fn summarize(id: i32, members: &[&Return]) -> ClusterInfo {
     let mut min_range = f64::INFINITY;
     let mut range_sum = 0.0;
     let mut intensity_sum = 0.0;
-    let mut lasers = Vec::new();
+    // Lasers as a bit set (ids are below 64 for every supported sensor; larger ones are
+    // collected apart), read out in ascending order: sorted and unique as before.
+    let mut laser_bits = 0u64;
+    let mut other_lasers = Vec::new();
     let mut xy = Vec::with_capacity(members.len());
     for r in members {
         let p = [r.x as f64, r.y as f64, r.z as f64];
@@ -143,12 +146,18 @@ fn summarize(id: i32, members: &[&Return]) -> ClusterInfo {
         min_range = min_range.min(r.range as f64);
         range_sum += r.range as f64;
         intensity_sum += r.intensity as f64;
-        lasers.push(r.laser);
+        if r.laser < 64 {
+            laser_bits |= 1 << r.laser;
+        } else {
+            other_lasers.push(r.laser);
+        }
         xy.push([p[0], p[1]]);
     }
-    lasers.sort_unstable();
-    lasers.dedup();
-    let (center, length, width, yaw_deg) = min_area_rect(&convex_hull(xy));
+    let mut lasers: Vec<u8> = (0..64u8).filter(|l| laser_bits >> l & 1 == 1).collect();
+    other_lasers.sort_unstable();
+    other_lasers.dedup();
+    lasers.extend(other_lasers);
+    let (center, length, width, yaw_deg) = min_area_rect(&convex_hull(drop_interior(xy)));
     ClusterInfo {
         id,
         n_points: members.len(),
@@ -170,6 +179,29 @@ fn summarize(id: i32, members: &[&Return]) -> ClusterInfo {
         lasers,
         object: false,
     }
+}
+
+/// Removes the points strictly inside the quadrilateral of the leftmost, lowest,
+/// rightmost and highest points (Akl-Toussaint): they cannot be hull vertices, so the hull
+/// is unchanged, and large clusters (walls, vegetation) sort far fewer points.
+fn drop_interior(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
+    if pts.len() < 16 {
+        return pts;
+    }
+    let pick = |f: &dyn Fn(&[f64; 2], &[f64; 2]) -> std::cmp::Ordering| {
+        *pts.iter().min_by(|a, b| f(a, b)).expect("not empty")
+    };
+    // Counter-clockwise: left, bottom, right, top.
+    let quad = [
+        pick(&|a, b| a[0].total_cmp(&b[0])),
+        pick(&|a, b| a[1].total_cmp(&b[1])),
+        pick(&|a, b| b[0].total_cmp(&a[0])),
+        pick(&|a, b| b[1].total_cmp(&a[1])),
+    ];
+    // A repeated corner gives a zero cross product on its edge, so nothing is dropped
+    // against it: strict tests keep every point on or outside an edge.
+    pts.retain(|&p| !(0..4).all(|i| cross(quad[i], quad[(i + 1) % 4], p) > 0.0));
+    pts
 }
 
 fn cross(o: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
@@ -269,6 +301,26 @@ pub(crate) fn min_area_rect(hull: &[[f64; 2]]) -> ([f64; 2], f64, f64, f64) {
 mod tests {
     use super::*;
     use crate::frame::ReturnKind;
+
+    #[test]
+    fn dropping_interior_points_keeps_the_hull() {
+        let mut state = 7u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 40) % 200) as f64 * 0.05
+        };
+        for n in [16, 17, 40, 300, 2000] {
+            for _ in 0..50 {
+                // Coarse coordinates make ties, duplicates and collinear runs common.
+                let pts: Vec<[f64; 2]> = (0..n).map(|_| [next(), next() * 0.5]).collect();
+                let reduced = drop_interior(pts.clone());
+                assert!(reduced.len() <= pts.len());
+                assert_eq!(convex_hull(reduced), convex_hull(pts));
+            }
+        }
+    }
 
     fn ret(x: f32, y: f32, z: f32, intensity: u8, laser: u8) -> Return {
         Return {

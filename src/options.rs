@@ -198,9 +198,7 @@ mod tests {
         }
         for n in 1..=7u32 {
             for index in 0..50 {
-                let owners: Vec<u32> = (0..n)
-                    .filter(|&k| Shard { k, n }.owns(index))
-                    .collect();
+                let owners: Vec<u32> = (0..n).filter(|&k| Shard { k, n }.owns(index)).collect();
                 assert_eq!(owners.len(), 1, "item {index} of {n} shards: {owners:?}");
             }
         }

@@ -66,6 +66,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             }
         })
         .collect();
+    let inputs: Vec<&Path> = args.captures.iter().map(PathBuf::as_path).collect();
     let mut old = Vec::new();
     for (capture, (_, target)) in args.captures.iter().zip(&targets) {
         let settings = convert_settings(&args, capture, output);
@@ -75,6 +76,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             &settings,
             &is_convert_output,
             args.force,
+            &inputs,
         )?;
     }
     let folder = OutputFolder::lock(&args.output)?;

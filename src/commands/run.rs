@@ -192,6 +192,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             &run_settings(&plan, source),
             &is_run_output,
             args.force,
+            &inputs,
         )?;
     }
     // Shards of one batch write distinct capture folders side by side.
@@ -212,8 +213,8 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             }
         };
         let settings = run_settings(&plan, &source);
-        let result = run_capture(&plan, reader, &source, stage.path(), &inputs, global)
-            .and_then(|report| {
+        let result =
+            run_capture(&plan, reader, &source, stage.path(), &inputs, global).and_then(|report| {
                 let files = staging::result_files(stage.path());
                 staging::write_manifest(stage.path(), "run", &settings, files)?;
                 Ok(report)

@@ -5,8 +5,7 @@ use crate::options::{parse_range, DecoderArgs};
 use crate::sweep::outputs::{write_outputs, BirdsEye};
 use crate::sweep::plan::{parse_seeds, BaseConfig, Vary};
 use crate::sweep::run::{
-    birdseye_panels, read_frame, run_mode as run_sweep, CaptureInput, Mode, Observer,
-    SweepSettings,
+    birdseye_panels, read_frame, run_mode as run_sweep, CaptureInput, Mode, Observer, SweepSettings,
 };
 use crate::writers::staging;
 use anyhow::Result;
@@ -202,12 +201,19 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         staging::OutputFolder::lock(&args.output)?
     };
     let plan = plan_settings(&args, &settings, &captures)?;
+    let mut inputs: Vec<&Path> = Vec::new();
+    for c in &captures {
+        inputs.push(&c.path);
+        inputs.extend(c.labels.as_deref());
+    }
+    inputs.extend(args.config.as_deref());
     let old = staging::check_replace(
         &args.output,
         "sweep",
         &plan,
         &is_sweep_output,
         args.force,
+        &inputs,
     )?;
     let n_cells = crate::sweep::plan::cells(&settings.varies, &settings.seeds).len();
     if args.force && !old.is_empty() {
@@ -216,7 +222,11 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         let mut keep = HashSet::new();
         for c in &captures {
             for cell in &cells {
-                keep.insert(format!("cells/{}/{}", c.name, cell.file_name(&settings.varies)));
+                keep.insert(format!(
+                    "cells/{}/{}",
+                    c.name,
+                    cell.file_name(&settings.varies)
+                ));
             }
         }
         staging::remove_results(&args.output, &old, &|f| keep.contains(f));

@@ -328,10 +328,15 @@ pub fn check_replace(
     settings: &serde_json::Value,
     ours: &dyn Fn(&str) -> bool,
     force: bool,
-) -> std::result::Result<Vec<String>, Refused> {
+    inputs: &[&Path],
+) -> anyhow::Result<Vec<String>> {
     let files = result_files(target);
     if files.is_empty() {
         return Ok(files);
+    }
+    // An input kept among the results is never replaced (a plain error, as elsewhere).
+    for f in &files {
+        crate::writers::atomic::refuse_inputs(&target.join(f), inputs)?;
     }
     let manifest = read_manifest(target);
     let listed = |f: &String| manifest.as_ref().is_some_and(|m| m.files.contains(f));
@@ -341,14 +346,18 @@ pub fn check_replace(
         if foreign.len() > 5 {
             names.push(format!("and {} more", foreign.len() - 5));
         }
-        return Err(Refused(format!(
+        return Err(anyhow::Error::new(Refused(format!(
             "{}: holds {} that lidar-noise did not write ({}); refusing to write into it, \
              even with --force, so as not to mix results with them or delete them; move \
              them away or choose another output folder",
             target.display(),
-            if foreign.len() == 1 { "a file" } else { "files" },
+            if foreign.len() == 1 {
+                "a file"
+            } else {
+                "files"
+            },
             names.join(", ")
-        )));
+        ))));
     }
     let why = match &manifest {
         None => "results without a record of the run that wrote them".to_string(),
@@ -368,11 +377,11 @@ pub fn check_replace(
     if force {
         return Ok(files);
     }
-    Err(Refused(format!(
+    Err(anyhow::Error::new(Refused(format!(
         "{}: holds {why}; rerun with --force to replace them (the folder's results are \
          replaced as a whole), or choose another output folder",
         target.display()
-    )))
+    ))))
 }
 
 /// Dotted paths where `a` and `b` differ (objects by key, arrays by index).

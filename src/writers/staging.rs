@@ -486,4 +486,74 @@ mod tests {
             .collect();
         assert!(hidden.is_empty(), "{hidden:?}");
     }
+
+    fn refused(r: anyhow::Result<Vec<String>>) -> String {
+        let e = r.err().expect("accepted");
+        assert!(e.downcast_ref::<Refused>().is_some(), "{e}");
+        e.to_string()
+    }
+
+    #[test]
+    fn check_replace_tells_reruns_other_runs_and_foreign_files_apart() {
+        let dir = tempfile::tempdir().unwrap();
+        let t = dir.path().join("cap");
+        let ours = |f: &str| f.ends_with(".ply");
+        let a = serde_json::json!({"seed": 1, "frames": [0, 3]});
+        let b = serde_json::json!({"seed": 2, "frames": [0, 3]});
+        // Missing and empty folders take anything.
+        assert!(check_replace(&t, "run", &a, &ours, false, &[])
+            .unwrap()
+            .is_empty());
+        fs::create_dir_all(&t).unwrap();
+        fs::write(t.join("frame_00000.ply"), "x").unwrap();
+        fs::write(t.join("summary.json"), "{}").unwrap();
+        write_manifest(&t, "run", &a, vec!["summary.json".into()]).unwrap();
+        let files = check_replace(&t, "run", &a, &ours, false, &[]).unwrap();
+        assert_eq!(files, vec!["frame_00000.ply", "summary.json"]);
+        let e = refused(check_replace(&t, "run", &b, &ours, false, &[]));
+        assert!(e.contains("--force") && e.contains("different seed"), "{e}");
+        assert!(!e.contains("frames"), "{e}");
+        let e = refused(check_replace(&t, "convert", &a, &ours, false, &[]));
+        assert!(e.contains("lidar-noise run"), "{e}");
+        assert_eq!(
+            check_replace(&t, "run", &b, &ours, true, &[])
+                .unwrap()
+                .len(),
+            2
+        );
+        // Leftovers of killed runs are not foreign; a file of someone else is.
+        fs::write(t.join(".frame_00001.ply.x1.tmp"), "").unwrap();
+        check_replace(&t, "run", &a, &ours, false, &[]).unwrap();
+        fs::write(t.join("notes.txt"), "mine").unwrap();
+        let e = refused(check_replace(&t, "run", &a, &ours, true, &[]));
+        assert!(
+            e.contains("notes.txt") && e.contains("even with --force"),
+            "{e}"
+        );
+        // An input among the results is a plain error.
+        fs::remove_file(t.join("notes.txt")).unwrap();
+        let input = t.join("frame_00000.ply");
+        let e = check_replace(&t, "run", &a, &ours, true, &[&input]).unwrap_err();
+        assert!(e.downcast_ref::<Refused>().is_none(), "{e}");
+    }
+
+    #[test]
+    fn remove_results_keeps_what_is_asked_and_prunes_empty_folders() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        fs::create_dir_all(d.join("plots/a")).unwrap();
+        fs::create_dir_all(d.join("cells/a")).unwrap();
+        for f in [
+            "plots/a/x.png",
+            "cells/a/1.json",
+            "cells/a/2.json",
+            "sweep.csv",
+        ] {
+            fs::write(d.join(f), "").unwrap();
+        }
+        let files = result_files(d);
+        remove_results(d, &files, &|f| f == "cells/a/2.json");
+        assert_eq!(result_files(d), vec!["cells/a/2.json"]);
+        assert!(!d.join("plots").exists());
+    }
 }

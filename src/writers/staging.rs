@@ -488,7 +488,7 @@ mod tests {
     }
 
     fn refused(r: anyhow::Result<Vec<String>>) -> String {
-        let e = r.err().expect("accepted");
+        let e = r.expect_err("accepted");
         assert!(e.downcast_ref::<Refused>().is_some(), "{e}");
         e.to_string()
     }

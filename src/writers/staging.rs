@@ -347,9 +347,9 @@ pub fn check_replace(
             names.push(format!("and {} more", foreign.len() - 5));
         }
         return Err(anyhow::Error::new(Refused(format!(
-            "{}: holds {} that lidar-noise did not write ({}); refusing to write into it, \
-             even with --force, so as not to mix results with them or delete them; move \
-             them away or choose another output folder",
+            "{}: holds {} that `lidar-noise {command}` did not write ({}); refusing to \
+             write into it, even with --force, so as not to mix results with them or \
+             delete them; move them away or choose another output folder",
             target.display(),
             if foreign.len() == 1 {
                 "a file"

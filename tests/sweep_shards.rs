@@ -223,3 +223,76 @@ fn run_shards_split_captures_and_equal_the_single_run() {
     assert_eq!(by_shard(0), vec!["crossroad", "empty"]);
     assert_eq!(by_shard(1), vec!["parking"]);
 }
+
+/// A shard killed (SIGKILL) at several points: the merge then either finds every cell or
+/// refuses listing the missing ones, never trusting a half-written file; after the shard
+/// reruns, the merge equals the single run. The shared capture makes cells long enough to
+/// be caught mid-write; the fixtures stand in when it is absent.
+#[test]
+fn a_killed_shard_leaves_nothing_a_merge_trusts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = common::shared("hdl32e/monterey.pcap")
+        .unwrap_or_else(|| common::fixtures().join("crossroad.pcap"));
+    let args = |out: &Path| -> Vec<std::ffi::OsString> {
+        let mut a: Vec<std::ffi::OsString> = vec!["--quiet".into(), "sweep".into()];
+        a.push(capture.clone().into());
+        for s in [
+            "--vary",
+            "rain.rate_mm_h=0,3",
+            "--seeds",
+            "1..2",
+            "--frames",
+            "0..3",
+            "-o",
+        ] {
+            a.push(s.into());
+        }
+        a.push(out.into());
+        a
+    };
+    let single = tmp.path().join("single");
+    ok(bin().args(args(&single)).output().unwrap());
+    let expected = common::files(&single);
+    let exe = assert_cmd::cargo::cargo_bin("lidar-noise");
+    for (i, delay_ms) in [150u64, 400, 900].into_iter().enumerate() {
+        let out = tmp.path().join(format!("killed{i}"));
+        ok(bin()
+            .args(args(&out))
+            .args(["--shard", "1/2"])
+            .output()
+            .unwrap());
+        let mut child = std::process::Command::new(&exe)
+            .args(args(&out))
+            .args(["--shard", "0/2"])
+            .env("RAYON_NUM_THREADS", "2")
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        let _ = child.kill();
+        let _ = child.wait();
+        let merge = bin().args(args(&out)).arg("--merge").output().unwrap();
+        let complete = cells(&out).len() == cells(&single).len()
+            && cells(&out)
+                .iter()
+                .all(|c| std::fs::read(out.join(c)).unwrap() == expected[c]);
+        if merge.status.success() {
+            assert!(complete, "merge accepted an incomplete set of cells");
+            assert_eq!(common::files(&out), expected);
+        } else {
+            let err = String::from_utf8_lossy(&merge.stderr);
+            assert!(err.contains("missing"), "{err}");
+            assert!(!out.join("sweep.csv").exists());
+        }
+        ok(bin()
+            .args(args(&out))
+            .args(["--shard", "0/2"])
+            .output()
+            .unwrap());
+        ok(bin().args(args(&out)).arg("--merge").output().unwrap());
+        assert_eq!(
+            common::files(&out),
+            expected,
+            "after a kill at {delay_ms} ms"
+        );
+    }
+}

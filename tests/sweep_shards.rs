@@ -254,7 +254,7 @@ fn a_killed_shard_leaves_nothing_a_merge_trusts() {
     ok(bin().args(args(&single)).output().unwrap());
     let expected = common::files(&single);
     let exe = assert_cmd::cargo::cargo_bin("lidar-noise");
-    for (i, delay_ms) in [150u64, 400, 900].into_iter().enumerate() {
+    for (i, delay_ms) in [40u64, 120, 250].into_iter().enumerate() {
         let out = tmp.path().join(format!("killed{i}"));
         ok(bin()
             .args(args(&out))

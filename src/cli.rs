@@ -9,6 +9,9 @@ pub const EXIT_OK: i32 = 0;
 pub const EXIT_ERROR: i32 = 1;
 /// Exit code for a command-line usage error (clap's own).
 pub const EXIT_USAGE: i32 = 2;
+/// Exit code for an output folder that holds another run's results (rerun with `--force`)
+/// or files this tool did not write.
+pub const EXIT_REFUSED: i32 = 3;
 
 /// Shows what rain and a dirty lens do to an HDL-32E LiDAR.
 #[derive(Debug, Parser)]
@@ -155,6 +158,15 @@ pub fn main() -> i32 {
         Ok(()) => EXIT_OK,
         // A reader that closed our stdout (`info X | head -1`) wanted no more: not an error.
         Err(e) if is_broken_pipe(&e) => EXIT_OK,
+        Err(e)
+            if e.chain().any(|c| {
+                c.downcast_ref::<crate::writers::staging::Refused>()
+                    .is_some()
+            }) =>
+        {
+            eprintln!("lidar-noise: error: {}", message_of(&e));
+            EXIT_REFUSED
+        }
         Err(e) => {
             eprintln!("lidar-noise: error: {}", message_of(&e));
             EXIT_ERROR

@@ -99,6 +99,46 @@ impl FrameOutputArgs {
     }
 }
 
+/// Shard `k` of `n` (0-based, like Slurm's array task ids): the items whose index is `k`
+/// modulo `n` (a round-robin deal, so shards differ by at most one item).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    /// This shard, 0..n.
+    pub k: u32,
+    /// Number of shards.
+    pub n: u32,
+}
+
+impl Shard {
+    /// Parses `K/N` with 0 <= K < N.
+    pub fn parse(text: &str) -> std::result::Result<Shard, String> {
+        let bad = || {
+            format!(
+                "{text}: expected K/N with 0 <= K < N, e.g. 0/4 (K counts from 0, like \
+                 $SLURM_ARRAY_TASK_ID with --array=0-3)"
+            )
+        };
+        let (k, n) = text.split_once('/').ok_or_else(bad)?;
+        let k: u32 = k.trim().parse().map_err(|_| bad())?;
+        let n: u32 = n.trim().parse().map_err(|_| bad())?;
+        if n == 0 || k >= n {
+            return Err(bad());
+        }
+        Ok(Shard { k, n })
+    }
+
+    /// True when item `index` (in the batch's canonical order) falls to this shard.
+    pub fn owns(&self, index: usize) -> bool {
+        index % self.n as usize == self.k as usize
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.k, self.n)
+    }
+}
+
 /// Parses an inclusive index range: `N`, `A..B`, `A..` or `..B`.
 pub fn parse_range(flag: &str, text: &str) -> Result<RangeInclusive<u32>> {
     let bad = || {
@@ -148,5 +188,19 @@ mod tests {
         assert!(parse_range("--frames", "4..2").is_err());
         assert!(parse_range("--frames", "x").is_err());
         assert!(parse_range("--frames", "-1..2").is_err());
+    }
+
+    #[test]
+    fn shards_parse_and_deal_round_robin() {
+        assert_eq!(Shard::parse("2/5").unwrap(), Shard { k: 2, n: 5 });
+        for bad in ["5/5", "1/0", "x/2", "1", "-1/3", "1/2/3"] {
+            assert!(Shard::parse(bad).is_err(), "{bad}");
+        }
+        for n in 1..=7u32 {
+            for index in 0..50 {
+                let owners: Vec<u32> = (0..n).filter(|&k| Shard { k, n }.owns(index)).collect();
+                assert_eq!(owners.len(), 1, "item {index} of {n} shards: {owners:?}");
+            }
+        }
     }
 }

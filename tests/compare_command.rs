@@ -130,7 +130,9 @@ fn point_cloud_values_are_compared_and_usage_errors_exit_2() {
     bin()
         .args(["--quiet", "run"])
         .arg(&fixture)
-        .args(["--seed", "6", "--frames", "0", "--format", "las", "-o"])
+        .args([
+            "--seed", "6", "--frames", "0", "--format", "las", "--force", "-o",
+        ])
         .arg(&b)
         .assert()
         .success();

@@ -26,6 +26,10 @@ pub struct Args {
     /// Point-cloud format (PLY, LAS, LAZ) and PLY encoding.
     #[command(flatten)]
     pub output_format: FrameOutputArgs,
+    /// Replace the frames of another convert in the target folder (as a whole); files
+    /// lidar-noise did not write are never deleted (the command is refused instead).
+    #[arg(long)]
+    pub force: bool,
     /// Decoder settings shared by the commands that read captures.
     #[command(flatten)]
     pub decoder: DecoderArgs,
@@ -51,15 +55,34 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     };
     let several = args.captures.len() > 1;
     let names = super::output_names(&args.captures);
+    // One capture keeps the historical layout (frames directly in DIR).
+    let targets: Vec<(&str, PathBuf)> = names
+        .iter()
+        .map(|name| {
+            if several {
+                (name.as_str(), args.output.join(name))
+            } else {
+                ("convert", args.output.clone())
+            }
+        })
+        .collect();
+    let inputs: Vec<&Path> = args.captures.iter().map(PathBuf::as_path).collect();
+    let mut old = Vec::new();
+    for (capture, (_, target)) in args.captures.iter().zip(&targets) {
+        let settings = convert_settings(&args, capture, output);
+        old = staging::check_replace(
+            target,
+            "convert",
+            &settings,
+            &is_convert_output,
+            args.force,
+            &inputs,
+        )?;
+    }
     let folder = OutputFolder::lock(&args.output)?;
     let mut staged: Vec<(Staged, PathBuf, u32, &Path)> = Vec::new();
-    for (capture, name) in args.captures.iter().zip(&names) {
-        // One capture keeps the historical layout (frames directly in DIR).
-        let (stage_name, target) = if several {
-            (name.as_str(), args.output.join(name))
-        } else {
-            ("convert", args.output.clone())
-        };
+    for (capture, (stage_name, target)) in args.captures.iter().zip(targets) {
+        let settings = convert_settings(&args, capture, output);
         let result = folder
             .stage(stage_name)
             .map_err(anyhow::Error::from)
@@ -74,6 +97,8 @@ pub fn run(args: Args, global: Global) -> Result<()> {
                     &range,
                     global,
                 )?;
+                let files = staging::result_files(s.path());
+                staging::write_manifest(s.path(), "convert", &settings, files)?;
                 Ok((s, written))
             });
         match result {
@@ -94,7 +119,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         }
         staging::commit(stages)?;
     } else if let Some((s, target, written, capture)) = staged.pop() {
-        staging::commit_files(s, &args.output)?;
+        staging::commit_files(s, &args.output, &old)?;
         done.push((target, written, capture));
     }
     if !global.quiet {
@@ -108,6 +133,28 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// What decides a convert's frames (see `staging::check_replace`).
+fn convert_settings(args: &Args, capture: &Path, output: FrameOutput) -> serde_json::Value {
+    let d = &args.decoder;
+    serde_json::json!({
+        "capture": super::capture_label(capture),
+        "frames": args.frames,
+        "output": format!("{output:?}"),
+        "decoder": {
+            "calibration": d.calibration.as_ref().and_then(|p| p.file_name()).map(|n| n.to_string_lossy()),
+            "no_interpolate": d.no_interpolate,
+            "dual": format!("{:?}", d.dual),
+            "cut_angle_deg": d.cut_angle,
+            "keep_partial": d.keep_partial,
+        },
+    })
+}
+
+/// True for the frame files `convert` writes (for folders without a manifest).
+fn is_convert_output(name: &str) -> bool {
+    super::run::numbered(name, "frame_", &[".ply", ".las", ".laz"])
 }
 
 /// Writes the frames of `capture` in `range` into `dir` (the staging folder of `target`);

@@ -57,6 +57,14 @@ pub struct Args {
     /// Also write each frame's single-linkage merge tree (SciPy linkage layout, CSV).
     #[arg(long)]
     pub linkage_out: bool,
+    /// Replace the results of another run in a capture's folder (as a whole); files
+    /// lidar-noise did not write are never deleted (the run is refused instead).
+    #[arg(long)]
+    pub force: bool,
+    /// Run only the captures that fall to shard K of N (K from 0, round-robin over the
+    /// captures in the order given), e.g. --shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT.
+    #[arg(long, value_name = "K/N", value_parser = crate::options::Shard::parse)]
+    pub shard: Option<crate::options::Shard>,
     /// Decoder settings shared by the commands that read captures.
     #[command(flatten)]
     pub decoder: DecoderArgs,
@@ -156,10 +164,43 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         let reader = super::open_capture(path, &plan.decoder)?;
         jobs.push((reader, super::capture_label(path), name));
     }
-    for (_, _, name) in &jobs {
-        check_target(&args.output.join(name), &inputs)?;
+    if let Some(shard) = args.shard {
+        let total = jobs.len();
+        jobs = jobs
+            .into_iter()
+            .enumerate()
+            .filter(|(i, _)| shard.owns(*i))
+            .map(|(_, j)| j)
+            .collect();
+        if !global.quiet {
+            eprintln!(
+                "run --shard {shard}: {} of {total} capture{} fall to this shard",
+                jobs.len(),
+                if total == 1 { "" } else { "s" }
+            );
+        }
+        if jobs.is_empty() {
+            return Ok(());
+        }
     }
-    let folder = OutputFolder::lock(&args.output)?;
+    for (_, source, name) in &jobs {
+        let target = args.output.join(name);
+        check_target(&target, &inputs)?;
+        staging::check_replace(
+            &target,
+            "run",
+            &run_settings(&plan, source),
+            &is_run_output,
+            args.force,
+            &inputs,
+        )?;
+    }
+    // Shards of one batch write distinct capture folders side by side.
+    let folder = if args.shard.is_some() {
+        OutputFolder::lock_shared(&args.output)?
+    } else {
+        OutputFolder::lock(&args.output)?
+    };
     let mut staged = Vec::new();
     let mut reports = Vec::new();
     for (reader, source, name) in jobs {
@@ -171,7 +212,14 @@ pub fn run(args: Args, global: Global) -> Result<()> {
                 return Err(e.into());
             }
         };
-        match run_capture(&plan, reader, &source, stage.path(), &inputs, global) {
+        let settings = run_settings(&plan, &source);
+        let result =
+            run_capture(&plan, reader, &source, stage.path(), &inputs, global).and_then(|report| {
+                let files = staging::result_files(stage.path());
+                staging::write_manifest(stage.path(), "run", &settings, files)?;
+                Ok(report)
+            });
+        match result {
             Ok(report) => {
                 staged.push(stage);
                 reports.push(report);
@@ -193,6 +241,46 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// What decides a capture folder's results: a rerun with the same settings replaces it
+/// with the same bytes, other settings are another run (see `staging::check_replace`).
+fn run_settings(plan: &Plan, source: &str) -> serde_json::Value {
+    serde_json::json!({
+        "capture": source,
+        "config": plan.config.provenance(),
+        "effective": plan.config.to_json(),
+        "decoder": {
+            "calibration": plan.decoder.calibration.source,
+            "interpolate_azimuth": plan.decoder.interpolate_azimuth,
+            "dual": format!("{:?}", plan.decoder.dual),
+            "cut_angle_deg": plan.decoder.cut_angle_deg,
+            "keep_partial": plan.decoder.keep_partial,
+        },
+        "frames": [plan.frames.start(), plan.frames.end()],
+        "keep_dropped": plan.keep_dropped,
+        "ply": plan.ply,
+        "output": format!("{:?}", plan.output),
+        "linkage": plan.linkage,
+    })
+}
+
+/// True for the names `run` writes in a capture folder (for folders without a manifest).
+fn is_run_output(name: &str) -> bool {
+    matches!(name, "summary.json" | "clusters.json" | "clusters.csv")
+        || numbered(name, "frame_", &[".ply", ".las", ".laz"])
+        || numbered(name, "linkage_", &[".csv"])
+}
+
+/// True for `<prefix>NNNNN<ext>` with five or more digits and one of `exts`.
+pub(crate) fn numbered(name: &str, prefix: &str, exts: &[&str]) -> bool {
+    let Some(rest) = name.strip_prefix(prefix) else {
+        return false;
+    };
+    exts.iter().any(|ext| {
+        rest.strip_suffix(ext)
+            .is_some_and(|d| d.len() >= 5 && d.bytes().all(|b| b.is_ascii_digit()))
+    })
 }
 
 /// Refuses a target folder that is an input, holds an input or is a file.

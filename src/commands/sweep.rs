@@ -5,8 +5,9 @@ use crate::options::{parse_range, DecoderArgs};
 use crate::sweep::outputs::{write_outputs, BirdsEye};
 use crate::sweep::plan::{parse_seeds, BaseConfig, Vary};
 use crate::sweep::run::{
-    birdseye_panels, read_frame, run as run_sweep, CaptureInput, Observer, SweepSettings,
+    birdseye_panels, read_frame, run_mode as run_sweep, CaptureInput, Mode, Observer, SweepSettings,
 };
+use crate::writers::staging;
 use anyhow::Result;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::collections::HashSet;
@@ -55,6 +56,20 @@ pub struct Args {
     /// Half-width of the bird's-eye view in metres.
     #[arg(long, value_name = "M", default_value_t = 40.0)]
     pub figure_extent: f64,
+    /// Replace the results of another sweep (other captures, configuration, --vary,
+    /// seeds, frames, bands or figure) in the folder as a whole; cells of this sweep are
+    /// kept. Files lidar-noise did not write are never deleted (the sweep is refused).
+    #[arg(long, conflicts_with_all = ["shard", "merge"])]
+    pub force: bool,
+    /// Compute only the cells that fall to shard K of N (K from 0, round-robin over the
+    /// cells of every capture) into DIR/cells/; writes no tables, plots or page. Shards
+    /// may run at the same time, on other machines sharing DIR, in any order, repeatedly.
+    #[arg(long, value_name = "K/N", value_parser = crate::options::Shard::parse, conflicts_with = "merge")]
+    pub shard: Option<crate::options::Shard>,
+    /// Compute no cell: build the tables, plots and page from the cells the shards wrote,
+    /// or fail listing the cells that are missing.
+    #[arg(long)]
+    pub merge: bool,
     /// Decoder settings shared by the commands that read captures.
     #[command(flatten)]
     pub decoder: DecoderArgs,
@@ -187,13 +202,76 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     for cell in crate::sweep::plan::cells(&settings.varies, &settings.seeds) {
         settings.base.cell_config(&settings.varies, &cell)?;
     }
-    // One sweep per folder at a time; leftovers of killed sweeps are removed under the lock.
-    let _folder = crate::writers::staging::OutputFolder::lock(&args.output)?;
+    // One sweep per folder at a time (its shards excepted: they share the lock and write
+    // distinct cells); leftovers of killed sweeps are removed under the exclusive lock.
+    let _folder = if args.shard.is_some() {
+        staging::OutputFolder::lock_shared(&args.output)?
+    } else {
+        staging::OutputFolder::lock(&args.output)?
+    };
+    let plan = plan_settings(&args, &settings, &captures)?;
+    let mut inputs: Vec<&Path> = Vec::new();
+    for c in &captures {
+        inputs.push(&c.path);
+        inputs.extend(c.labels.as_deref());
+    }
+    inputs.extend(args.config.as_deref());
+    let old = staging::check_replace(
+        &args.output,
+        "sweep",
+        &plan,
+        &is_sweep_output,
+        args.force,
+        &inputs,
+    )?;
     let n_cells = crate::sweep::plan::cells(&settings.varies, &settings.seeds).len();
-    let bars = Bars::new(global, (n_cells * captures.len()) as u64);
-    let outcome = run_sweep(&settings, &captures, &bars)?;
+    if args.force && !old.is_empty() {
+        // Cells of this plan stay (they are recomputed when their settings differ).
+        let cells = crate::sweep::run::canonical_cells(&settings);
+        let mut keep = HashSet::new();
+        for c in &captures {
+            for cell in &cells {
+                keep.insert(format!(
+                    "cells/{}/{}",
+                    c.name,
+                    cell.file_name(&settings.varies)
+                ));
+            }
+        }
+        staging::remove_results(&args.output, &old, &|f| keep.contains(f));
+    }
+    if staging::read_manifest(&args.output)
+        .is_none_or(|m| m.command != "sweep" || m.settings != plan)
+    {
+        // Recorded before any cell, so that a later sweep of another plan is refused.
+        staging::write_manifest(&args.output, "sweep", &plan, Vec::new())?;
+    }
+    let mode = match (args.shard, args.merge) {
+        (Some(shard), _) => Mode::Shard(shard),
+        (None, true) => Mode::Merge,
+        (None, false) => Mode::All,
+    };
+    let total = n_cells * captures.len();
+    let own = match args.shard {
+        Some(shard) => (0..total).filter(|&i| shard.owns(i)).count(),
+        None => total,
+    };
+    let bars = Bars::new(global, own as u64);
+    let outcome = run_sweep(&settings, &captures, &bars, mode)?;
     bars.frames.finish_and_clear();
     bars.cells.finish_and_clear();
+    if let Some(shard) = args.shard {
+        if !global.quiet {
+            eprintln!(
+                "sweep --shard {shard}: {own} of {total} cells fall to this shard ({} computed, \
+                 {} already done); a shard writes no tables, plots or page: run \
+                 `lidar-noise sweep ... --merge` (or the same sweep without --shard) once \
+                 every shard is done",
+                outcome.computed, outcome.loaded
+            );
+        }
+        return Ok(());
+    }
 
     let first = &captures[0];
     let seed = settings.seeds[0];
@@ -231,7 +309,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         protected.push(c);
     }
     let names: Vec<String> = captures.iter().map(|c| c.name.clone()).collect();
-    write_outputs(
+    let written = write_outputs(
         &args.output,
         &settings.varies,
         &names,
@@ -239,6 +317,12 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         figure.as_ref(),
         &protected,
     )?;
+    let files = written
+        .iter()
+        .filter_map(|p| p.strip_prefix(&args.output).ok())
+        .map(|p| p.to_string_lossy().replace('\\', "/"))
+        .collect();
+    staging::write_manifest(&args.output, "sweep", &plan, files)?;
     if !global.quiet {
         eprintln!(
             "sweep: {} cells computed, {} loaded from earlier runs, {} rows; open {}",
@@ -249,4 +333,55 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// What decides a sweep folder's tables, plots and page: a sweep with other settings is
+/// another sweep (refused without --force); the same plan resumes (see
+/// `staging::check_replace`). Capture content is not in it: cells are keyed on it and
+/// recomputed when it changes, and the tables are always rebuilt whole.
+fn plan_settings(
+    args: &Args,
+    settings: &SweepSettings,
+    captures: &[CaptureInput],
+) -> Result<serde_json::Value> {
+    let d = &settings.decoder;
+    Ok(serde_json::json!({
+        "captures": captures.iter().map(|c| serde_json::json!({
+            "name": c.name,
+            "file": crate::commands::capture_label(&c.path),
+            "labels": c.labels.as_ref().map(|l| crate::commands::capture_label(l)),
+        })).collect::<Vec<_>>(),
+        "base": serde_json::to_value(&settings.base.table)?,
+        "varies": settings.varies.iter().map(|v| serde_json::json!({
+            "key": v.key,
+            "values": v.values,
+        })).collect::<Vec<_>>(),
+        "seeds": settings.seeds,
+        "frames": [settings.frames.start(), settings.frames.end()],
+        "bands": settings.bands,
+        "decoder": {
+            "calibration": d.calibration.source,
+            "interpolate_azimuth": d.interpolate_azimuth,
+            "dual": format!("{:?}", d.dual),
+            "cut_angle_deg": d.cut_angle_deg,
+            "keep_partial": d.keep_partial,
+        },
+        "figure_frame": args.figure_frame,
+        "figure_extent": args.figure_extent,
+    }))
+}
+
+/// True for the files `sweep` writes (for folders without a manifest): tables, page,
+/// plots and cells.
+fn is_sweep_output(name: &str) -> bool {
+    let parts: Vec<&str> = name.split('/').collect();
+    match parts.as_slice() {
+        [crate::sweep::outputs::TIDY_CSV]
+        | [crate::sweep::outputs::TIDY_JSON]
+        | [crate::sweep::outputs::AGGREGATE_CSV]
+        | [crate::sweep::outputs::INDEX_HTML] => true,
+        ["cells", _, cell] => cell.ends_with(".json"),
+        ["plots", .., png] => png.ends_with(".png"),
+        _ => false,
+    }
 }

@@ -137,15 +137,43 @@ struct Labels {
     classes: BTreeMap<i32, String>,
 }
 
+/// Which cells a call computes and whether it reads the rows back.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// Every cell not done yet; every row is read back.
+    All,
+    /// Only the cells that fall to this shard (see [`shard_index`]); no rows.
+    Shard(crate::options::Shard),
+    /// No cell is computed: every cell must be done (else an error lists the missing).
+    Merge,
+}
+
+/// Index of cell `cell` (in [`super::plan::cells`] order) of capture `capture` in the
+/// sweep's list of cells, which `--shard K/N` deals round-robin.
+pub fn shard_index(capture: usize, cell: usize, cells_per_capture: usize) -> usize {
+    capture * cells_per_capture + cell
+}
+
 /// Runs (or resumes) the sweep and returns every row; `protected` are input paths.
 pub fn run(
     s: &SweepSettings,
     captures: &[CaptureInput],
     observer: &dyn Observer,
 ) -> Result<Outcome> {
+    run_mode(s, captures, observer, Mode::All)
+}
+
+/// [`run`] restricted to a shard's cells (no rows), or a merge that computes nothing.
+pub fn run_mode(
+    s: &SweepSettings,
+    captures: &[CaptureInput],
+    observer: &dyn Observer,
+    mode: Mode,
+) -> Result<Outcome> {
     let mut outcome = Outcome::default();
     let canonical = canonical_cells(s);
-    for capture in captures {
+    let mut missing = Vec::new();
+    for (capture_index, capture) in captures.iter().enumerate() {
         let dir = s.output.join("cells").join(&capture.name);
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
         let protected = protected_paths(capture);
@@ -156,7 +184,14 @@ pub fn run(
         // Execution order: seeds outermost so cells sharing a baseline run together.
         let mut pending = Vec::new();
         let mut loaded = 0usize;
-        for cell in super::plan::cells(&s.varies, &s.seeds) {
+        let all_cells = super::plan::cells(&s.varies, &s.seeds);
+        let per_capture = all_cells.len();
+        for (cell_index, cell) in all_cells.into_iter().enumerate() {
+            if let Mode::Shard(shard) = mode {
+                if !shard.owns(shard_index(capture_index, cell_index, per_capture)) {
+                    continue;
+                }
+            }
             let config = s.base.cell_config(&s.varies, &cell)?;
             let mut baseline = config.clone();
             baseline.noise.clear();
@@ -206,6 +241,10 @@ pub fn run(
                 min_points: config.cluster.min_points,
             });
         }
+        if mode == Mode::Merge && !pending.is_empty() {
+            missing.extend(pending.iter().map(|p| p.path.display().to_string()));
+            continue;
+        }
         observer.capture(&capture.name, pending.len() as u64);
         for _ in 0..loaded {
             observer.cell_done();
@@ -234,6 +273,9 @@ pub fn run(
             }
         }
         outcome.computed += pending.len();
+        if matches!(mode, Mode::Shard(_)) {
+            continue;
+        }
         for cell in &canonical {
             let path = dir.join(cell.file_name(&s.varies));
             let file = read_cell(&path).and_then(Result::ok).ok_or_else(|| {
@@ -249,6 +291,22 @@ pub fn run(
                 metrics: m,
             }));
         }
+    }
+    if !missing.is_empty() {
+        let n = missing.len();
+        let shown: Vec<&str> = missing.iter().take(10).map(String::as_str).collect();
+        return Err(Error::Invalid(format!(
+            "sweep --merge: {n} cell{} missing, unfinished or computed with other settings \
+             (run the shards that own them, or rerun without --merge to compute them here): \
+             {}{}",
+            if n == 1 { " is" } else { "s are" },
+            shown.join(", "),
+            if n > 10 {
+                format!(", and {} more", n - 10)
+            } else {
+                String::new()
+            }
+        )));
     }
     Ok(outcome)
 }

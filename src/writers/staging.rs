@@ -6,6 +6,12 @@
 //! hidden staging folder beside their target (`DIR/.NAME.staging-PID`) and renamed into
 //! place only when every capture of the run succeeded; on failure or on a signal the
 //! staging folders are deleted, and a folder the run created is removed again.
+//!
+//! Each result folder also holds a manifest (`.lidar-noise.json`): the command, the
+//! settings that decide its results and the files it wrote. [`check_replace`] reads it to
+//! tell a rerun of the same settings (replaced, same bytes) from another run's results
+//! (refused unless `--force`), and refuses, even with `--force`, a folder holding files
+//! this tool did not write, so that nothing but our own results is ever deleted.
 
 use crate::error::{Error, Result};
 use crate::signals;
@@ -14,6 +20,9 @@ use std::path::{Path, PathBuf};
 
 /// Name of the lock file inside an output folder.
 pub const LOCK_FILE: &str = ".lidar-noise.lock";
+
+/// Name of the manifest in each result folder (the run that wrote it and its files).
+pub const MANIFEST: &str = ".lidar-noise.json";
 
 /// An output folder this process holds the lock of.
 pub struct OutputFolder {
@@ -25,6 +34,18 @@ pub struct OutputFolder {
 impl OutputFolder {
     /// Creates `dir` if needed, locks it and removes what killed runs left in it.
     pub fn lock(dir: &Path) -> Result<Self> {
+        Self::lock_as(dir, true)
+    }
+
+    /// Creates `dir` if needed and takes a shared lock on it, for the shards of one sweep
+    /// or batch that write distinct results into the same folder at the same time: they
+    /// exclude an exclusive run (a merge) but not each other. Leftovers are not removed,
+    /// since a hidden temporary file may be another shard's work in progress.
+    pub fn lock_shared(dir: &Path) -> Result<Self> {
+        Self::lock_as(dir, false)
+    }
+
+    fn lock_as(dir: &Path, exclusive: bool) -> Result<Self> {
         if dir.exists() && !dir.is_dir() {
             return Err(Error::Invalid(format!(
                 "{}: the output folder is a file, not a folder",
@@ -40,7 +61,12 @@ impl OutputFolder {
             .write(true)
             .open(&lock_path)
             .map_err(|e| Error::io(&lock_path, e))?;
-        match file.try_lock() {
+        let locked = if exclusive {
+            file.try_lock()
+        } else {
+            file.try_lock_shared()
+        };
+        match locked {
             Ok(()) => {}
             Err(fs::TryLockError::WouldBlock) => {
                 return Err(Error::Invalid(format!(
@@ -52,13 +78,16 @@ impl OutputFolder {
             }
             Err(fs::TryLockError::Error(e)) => return Err(Error::io(&lock_path, e)),
         }
-        remove_stale(dir);
-        if created {
+        if exclusive {
+            remove_stale(dir);
+        }
+        if created && exclusive {
             signals::critical(|g| g.created_folder(dir, &lock_path));
         }
         Ok(OutputFolder {
             dir: dir.to_path_buf(),
-            created,
+            // A shard never removes the folder again: another shard may be writing in it.
+            created: created && exclusive,
             _lock: file,
         })
     }
@@ -171,10 +200,12 @@ pub fn commit(staged: Vec<Staged>) -> Result<()> {
 }
 
 /// Moves every file of a staging folder into `dir` (the folder the files belong in, for
-/// commands such as `convert` whose output folder is the target itself), replacing files
-/// of the same name, with signals held off; then deletes the staging folder.
-pub fn commit_files(mut staged: Staged, dir: &Path) -> Result<()> {
+/// commands such as `convert` whose output folder is the target itself), after deleting
+/// `old` (an earlier run's results, from [`check_replace`]), with signals held off; then
+/// deletes the staging folder.
+pub fn commit_files(mut staged: Staged, dir: &Path, old: &[String]) -> Result<()> {
     signals::critical(|g| {
+        remove_results(dir, old, &|_| false);
         let entries = fs::read_dir(&staged.path).map_err(|e| Error::io(&staged.path, e))?;
         let mut names: Vec<_> = entries
             .filter_map(|e| e.ok())
@@ -190,6 +221,219 @@ pub fn commit_files(mut staged: Staged, dir: &Path) -> Result<()> {
         staged.done = true;
         Ok(())
     })
+}
+
+/// The manifest of a result folder: which command wrote it, with which settings, and
+/// which files (relative paths with `/`, sorted).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Manifest {
+    /// Always `lidar-noise`.
+    pub tool: String,
+    /// Tool version that wrote the folder (recorded, not compared).
+    pub version: String,
+    /// The subcommand (`run`, `convert`, `sweep`).
+    pub command: String,
+    /// Everything that decides the folder's results.
+    pub settings: serde_json::Value,
+    /// The files written (a sweep's cells are named by pattern instead).
+    pub files: Vec<String>,
+}
+
+/// A refused output folder: it holds another run's results (without `--force`) or files
+/// this tool did not write. The command exits with [`crate::cli::EXIT_REFUSED`].
+#[derive(Debug)]
+pub struct Refused(pub String);
+
+impl std::fmt::Display for Refused {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Refused {}
+
+/// Reads the manifest of `dir`, if there is a readable one.
+pub fn read_manifest(dir: &Path) -> Option<Manifest> {
+    let bytes = fs::read(dir.join(MANIFEST)).ok()?;
+    serde_json::from_slice(&bytes).ok()
+}
+
+/// Writes `dir/.lidar-noise.json` (atomically) for `command` with `settings` and `files`.
+pub fn write_manifest(
+    dir: &Path,
+    command: &str,
+    settings: &serde_json::Value,
+    mut files: Vec<String>,
+) -> Result<()> {
+    files.sort();
+    files.dedup();
+    let manifest = Manifest {
+        tool: "lidar-noise".into(),
+        version: env!("CARGO_PKG_VERSION").into(),
+        command: command.into(),
+        settings: settings.clone(),
+        files,
+    };
+    let mut bytes = serde_json::to_vec_pretty(&manifest)
+        .map_err(|e| Error::Invalid(format!("{}: {e}", dir.join(MANIFEST).display())))?;
+    bytes.push(b'\n');
+    crate::writers::atomic::write_atomically(&dir.join(MANIFEST), &[], |o| o.write_all(&bytes))
+}
+
+/// Files of a folder (relative, `/`-separated, sorted), without hidden leftovers of killed
+/// runs, the lock file and the manifest.
+pub fn result_files(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    list_files(dir, "", &mut out);
+    out.retain(|f| f != LOCK_FILE && f != MANIFEST);
+    out.sort();
+    out
+}
+
+fn list_files(dir: &Path, prefix: &str, out: &mut Vec<String>) {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.filter_map(|e| e.ok()) {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if is_leftover(&name) {
+            continue;
+        }
+        let rel = format!("{prefix}{name}");
+        if e.file_type().is_ok_and(|t| t.is_dir()) {
+            list_files(&e.path(), &format!("{rel}/"), out);
+        } else {
+            out.push(rel);
+        }
+    }
+}
+
+/// True for the hidden temporary names our writers use (`.*.staging-*`, `.*.tmp`).
+fn is_leftover(name: &str) -> bool {
+    name.starts_with('.') && (name.contains(".staging-") || name.ends_with(".tmp"))
+}
+
+/// Checks that `target` may receive the results of `command` run with `settings`, and
+/// returns the files of an earlier run in it (to be replaced).
+///
+/// `ours` tells whether a relative path is one of the command's output names (for folders
+/// written before manifests existed). Refused, even with `force`: a file neither named in
+/// the manifest nor matching `ours` (it was not written by this tool, and replacing the
+/// folder would delete it). Refused without `force`: results of another run (other
+/// command or settings, or no manifest to tell). An empty or missing folder and a rerun
+/// with the same settings are accepted.
+pub fn check_replace(
+    target: &Path,
+    command: &str,
+    settings: &serde_json::Value,
+    ours: &dyn Fn(&str) -> bool,
+    force: bool,
+    inputs: &[&Path],
+) -> anyhow::Result<Vec<String>> {
+    let files = result_files(target);
+    if files.is_empty() {
+        return Ok(files);
+    }
+    // An input kept among the results is never replaced (a plain error, as elsewhere).
+    for f in &files {
+        crate::writers::atomic::refuse_inputs(&target.join(f), inputs)?;
+    }
+    let manifest = read_manifest(target);
+    let listed = |f: &String| manifest.as_ref().is_some_and(|m| m.files.contains(f));
+    let foreign: Vec<&String> = files.iter().filter(|f| !listed(f) && !ours(f)).collect();
+    if !foreign.is_empty() {
+        let mut names: Vec<String> = foreign.iter().take(5).map(|f| f.to_string()).collect();
+        if foreign.len() > 5 {
+            names.push(format!("and {} more", foreign.len() - 5));
+        }
+        return Err(anyhow::Error::new(Refused(format!(
+            "{}: holds {} that `lidar-noise {command}` did not write ({}); refusing to \
+             write into it, even with --force, so as not to mix results with them or \
+             delete them; move them away or choose another output folder",
+            target.display(),
+            if foreign.len() == 1 {
+                "a file"
+            } else {
+                "files"
+            },
+            names.join(", ")
+        ))));
+    }
+    let why = match &manifest {
+        None => "results without a record of the run that wrote them".to_string(),
+        Some(m) if m.command != command => format!("results of `lidar-noise {}`", m.command),
+        Some(m) if m.settings != *settings => {
+            let mut diff = Vec::new();
+            differences(&m.settings, settings, "", &mut diff);
+            let more = diff.len().saturating_sub(4);
+            diff.truncate(4);
+            if more > 0 {
+                diff.push(format!("{more} more"));
+            }
+            format!("results of another run: different {}", diff.join(", "))
+        }
+        Some(_) => return Ok(files),
+    };
+    if force {
+        return Ok(files);
+    }
+    Err(anyhow::Error::new(Refused(format!(
+        "{}: holds {why}; rerun with --force to replace them (the folder's results are \
+         replaced as a whole), or choose another output folder",
+        target.display()
+    ))))
+}
+
+/// Dotted paths where `a` and `b` differ (objects by key, arrays by index).
+fn differences(a: &serde_json::Value, b: &serde_json::Value, path: &str, out: &mut Vec<String>) {
+    use serde_json::Value;
+    let join = |k: &str| {
+        if path.is_empty() {
+            k.to_string()
+        } else {
+            format!("{path}.{k}")
+        }
+    };
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            let mut keys: Vec<&String> = x.keys().chain(y.keys()).collect();
+            keys.sort();
+            keys.dedup();
+            for k in keys {
+                match (x.get(k), y.get(k)) {
+                    (Some(p), Some(q)) => differences(p, q, &join(k), out),
+                    _ => out.push(join(k)),
+                }
+            }
+        }
+        (Value::Array(x), Value::Array(y)) if x.len() == y.len() => {
+            for (i, (p, q)) in x.iter().zip(y).enumerate() {
+                differences(p, q, &format!("{path}[{i}]"), out);
+            }
+        }
+        _ if a != b => out.push(if path.is_empty() {
+            "settings".into()
+        } else {
+            path.to_string()
+        }),
+        _ => {}
+    }
+}
+
+/// Deletes `files` (relative to `dir`, results of an earlier run that `check_replace`
+/// returned) and the folders they leave empty, except those `keep` selects.
+pub fn remove_results(dir: &Path, files: &[String], keep: &dyn Fn(&str) -> bool) {
+    for f in files.iter().filter(|f| !keep(f)) {
+        let path = dir.join(f);
+        let _ = fs::remove_file(&path);
+        let mut parent = path.parent();
+        while let Some(p) = parent.filter(|p| *p != dir) {
+            if fs::remove_dir(p).is_err() {
+                break;
+            }
+            parent = p.parent();
+        }
+    }
 }
 
 #[cfg(test)]
@@ -241,5 +485,75 @@ mod tests {
             .filter(|n| n.starts_with('.') && n != LOCK_FILE)
             .collect();
         assert!(hidden.is_empty(), "{hidden:?}");
+    }
+
+    fn refused(r: anyhow::Result<Vec<String>>) -> String {
+        let e = r.expect_err("accepted");
+        assert!(e.downcast_ref::<Refused>().is_some(), "{e}");
+        e.to_string()
+    }
+
+    #[test]
+    fn check_replace_tells_reruns_other_runs_and_foreign_files_apart() {
+        let dir = tempfile::tempdir().unwrap();
+        let t = dir.path().join("cap");
+        let ours = |f: &str| f.ends_with(".ply");
+        let a = serde_json::json!({"seed": 1, "frames": [0, 3]});
+        let b = serde_json::json!({"seed": 2, "frames": [0, 3]});
+        // Missing and empty folders take anything.
+        assert!(check_replace(&t, "run", &a, &ours, false, &[])
+            .unwrap()
+            .is_empty());
+        fs::create_dir_all(&t).unwrap();
+        fs::write(t.join("frame_00000.ply"), "x").unwrap();
+        fs::write(t.join("summary.json"), "{}").unwrap();
+        write_manifest(&t, "run", &a, vec!["summary.json".into()]).unwrap();
+        let files = check_replace(&t, "run", &a, &ours, false, &[]).unwrap();
+        assert_eq!(files, vec!["frame_00000.ply", "summary.json"]);
+        let e = refused(check_replace(&t, "run", &b, &ours, false, &[]));
+        assert!(e.contains("--force") && e.contains("different seed"), "{e}");
+        assert!(!e.contains("frames"), "{e}");
+        let e = refused(check_replace(&t, "convert", &a, &ours, false, &[]));
+        assert!(e.contains("lidar-noise run"), "{e}");
+        assert_eq!(
+            check_replace(&t, "run", &b, &ours, true, &[])
+                .unwrap()
+                .len(),
+            2
+        );
+        // Leftovers of killed runs are not foreign; a file of someone else is.
+        fs::write(t.join(".frame_00001.ply.x1.tmp"), "").unwrap();
+        check_replace(&t, "run", &a, &ours, false, &[]).unwrap();
+        fs::write(t.join("notes.txt"), "mine").unwrap();
+        let e = refused(check_replace(&t, "run", &a, &ours, true, &[]));
+        assert!(
+            e.contains("notes.txt") && e.contains("even with --force"),
+            "{e}"
+        );
+        // An input among the results is a plain error.
+        fs::remove_file(t.join("notes.txt")).unwrap();
+        let input = t.join("frame_00000.ply");
+        let e = check_replace(&t, "run", &a, &ours, true, &[&input]).unwrap_err();
+        assert!(e.downcast_ref::<Refused>().is_none(), "{e}");
+    }
+
+    #[test]
+    fn remove_results_keeps_what_is_asked_and_prunes_empty_folders() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        fs::create_dir_all(d.join("plots/a")).unwrap();
+        fs::create_dir_all(d.join("cells/a")).unwrap();
+        for f in [
+            "plots/a/x.png",
+            "cells/a/1.json",
+            "cells/a/2.json",
+            "sweep.csv",
+        ] {
+            fs::write(d.join(f), "").unwrap();
+        }
+        let files = result_files(d);
+        remove_results(d, &files, &|f| f == "cells/a/2.json");
+        assert_eq!(result_files(d), vec!["cells/a/2.json"]);
+        assert!(!d.join("plots").exists());
     }
 }

@@ -49,13 +49,15 @@ fn draw_err<E: std::fmt::Display>(e: E) -> std::io::Error {
 }
 
 /// Encodes an RGB buffer as PNG to `path`, atomically, with the figure's title as the
-/// PNG `Title` text (iTXt), so a reader or a test can tell what a file shows.
+/// PNG `Title` text and an optional `Description` (iTXt, UTF-8), so a reader or a test
+/// can tell what a file shows without looking at it.
 fn write_png(
     path: &Path,
     protected: &[&Path],
     buf: &[u8],
     (w, h): (u32, u32),
     title: &str,
+    description: &str,
 ) -> Result<()> {
     super::atomic::write_atomically(path, protected, |out| {
         let mut enc = png::Encoder::new(out, w, h);
@@ -63,6 +65,10 @@ fn write_png(
         enc.set_depth(png::BitDepth::Eight);
         enc.add_itxt_chunk("Title".into(), title.into())
             .map_err(std::io::Error::other)?;
+        if !description.is_empty() {
+            enc.add_itxt_chunk("Description".into(), description.into())
+                .map_err(std::io::Error::other)?;
+        }
         let mut writer = enc.write_header().map_err(std::io::Error::other)?;
         writer
             .write_image_data(buf)
@@ -256,7 +262,7 @@ pub fn line_plot(plot: &LinePlot, path: &Path, protected: &[&Path]) -> Result<()
     let size = (PLOT_W + legend_w, PLOT_H);
     let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
     render_line_plot(plot, legend_w, &mut buf, size).map_err(|e| Error::io(path, e))?;
-    write_png(path, protected, &buf, size, &plot.title)
+    write_png(path, protected, &buf, size, &plot.title, "")
 }
 
 fn legend_width(plot: &LinePlot) -> u32 {
@@ -473,7 +479,7 @@ pub fn heatmap(map: &Heatmap, path: &Path, protected: &[&Path]) -> Result<()> {
     let size = layout.size;
     let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
     render_heatmap(map, &layout, &mut buf).map_err(|e| Error::io(path, e))?;
-    write_png(path, protected, &buf, size, &map.title)
+    write_png(path, protected, &buf, size, &map.title, "")
 }
 
 /// Pixel layout of a heatmap, from the widest labels.
@@ -646,7 +652,24 @@ pub fn birdseye(
     let size = (1400u32, 1520u32);
     let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
     render_birdseye(title, panels, extent_m, &mut buf, size).map_err(|e| Error::io(path, e))?;
-    write_png(path, protected, &buf, size, title)
+    // The panels' titles and stage lines, one panel per paragraph.
+    let description: Vec<String> = panels
+        .iter()
+        .map(|p| {
+            std::iter::once(p.title.as_str())
+                .chain(p.details.iter().map(String::as_str))
+                .collect::<Vec<_>>()
+                .join("\n")
+        })
+        .collect();
+    write_png(
+        path,
+        protected,
+        &buf,
+        size,
+        title,
+        &description.join("\n\n"),
+    )
 }
 
 fn render_birdseye(

@@ -127,7 +127,7 @@ fn tables_of(html: &str) -> Vec<(Vec<String>, Vec<Vec<String>>)> {
 
 /// Numbers in a table cell ("0.896 [0.851, 0.941]" -> three).
 fn numbers(cell: &str) -> Vec<&str> {
-    cell.split(|c: char| c == ' ' || c == '[' || c == ']' || c == ',')
+    cell.split([' ', '[', ']', ','])
         .filter(|t| !t.is_empty())
         .collect()
 }

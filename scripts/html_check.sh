@@ -180,7 +180,7 @@ for name in ("wide", "narrow"):
         bad.append("screenshot %s looks blank: %d distinct rows of %d" % (name, distinct, h))
     print("html_check: screenshot %s %dx%d, %d distinct rows: %s" % (name, w, h, distinct, path))
 
-for b in bad:
+for b in dict.fromkeys(bad):
     print("FAIL: " + b)
 sys.exit(1 if bad else 0)
 PY

@@ -844,3 +844,50 @@ mod tests {
         );
     }
 }
+
+#[cfg(test)]
+mod heatmap_tests {
+    use super::*;
+
+    #[test]
+    fn heatmap_draws_cells_in_scale_colours() {
+        let map = Heatmap {
+            title: "Detected share, both minus independence".into(),
+            x_label: "distance band".into(),
+            y_label: "stage pair".into(),
+            columns: vec!["[0, 5) m".into(), "[5, 10) m".into(), ">= 10 m".into()],
+            rows: vec!["occlusion x rain".into(), "rain x spray".into()],
+            values: vec![
+                vec![Some(-0.4), Some(0.0), Some(0.4)],
+                vec![None, Some(0.1), Some(-0.1)],
+            ],
+            range: (-0.4, 0.4),
+            diverging: true,
+            decimals: 2,
+            scale_label: "difference".into(),
+        };
+        assert_eq!(map.colour(-0.4), RGBColor(33, 102, 172));
+        assert_eq!(map.colour(0.4), RGBColor(178, 24, 43));
+        assert_eq!(map.colour(0.0), RGBColor(247, 247, 247));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("map.png");
+        heatmap(&map, &path, &[]).unwrap();
+        let decoder = png::Decoder::new(std::fs::File::open(&path).unwrap());
+        let mut reader = decoder.read_info().unwrap();
+        let title = reader.info().utf8_text[0].get_text().unwrap();
+        assert_eq!(title, map.title);
+        let mut buf = vec![0; reader.output_buffer_size()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        let l = HeatmapLayout::of(&map);
+        assert_eq!((info.width, info.height), l.size);
+        // The centre-left of the first cell has the scale's colour for -0.4 (the value's
+        // text sits in the middle).
+        let px = |x: u32, y: u32| {
+            let i = ((y * info.width + x) * 3) as usize;
+            RGBColor(buf[i], buf[i + 1], buf[i + 2])
+        };
+        let (x, y) = (l.left + 6, l.top + l.cell.1 / 2);
+        assert_eq!(px(x, y), map.colour(-0.4));
+        assert_eq!(px(x + 2 * l.cell.0, y), map.colour(0.4));
+    }
+}

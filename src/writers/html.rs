@@ -129,7 +129,7 @@ table{border-collapse:collapse;font-size:0.85em;font-variant-numeric:tabular-num
 td,th{border:1px solid #ccc;padding:2px 6px;text-align:right;white-space:nowrap}\
 th{background:#f0f0f0}\
 th[title]{text-decoration:underline dotted;cursor:help}\
-ul.files{columns:2 28em;font-size:0.92em}\
+ul.files{columns:2 28em;font-size:0.92em;overflow-wrap:anywhere}\
 ul.files span{color:#555}\
 .note{color:#555}";
 

@@ -518,10 +518,12 @@ pub fn write_outputs(
         written.push(path);
         section.figures.push(Figure {
             src: rel,
-            caption: format!(
-                "{capture}: the verdict of each stage pair in each distance band; read a \
-                 row across to see where (at which distance) two stages interact"
-            ),
+            caption: format!("{capture}: stage pairs by distance band"),
+            read: "Each cell is one pair in one band: its colour is the verdict, \"both X vs \
+                   Y\" the detected share with both stages against the product of each alone. \
+                   Read a row across to see at which distances two stages interact."
+                .into(),
+            wide: true,
         });
     }
     let header: Vec<String> = [

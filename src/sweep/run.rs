@@ -788,6 +788,8 @@ pub struct Panel {
     pub points: Vec<(f32, f32, i32)>,
     /// Clusters found.
     pub clusters: usize,
+    /// The noise stages applied, one "type: settings" line each, in chain order.
+    pub stages: Vec<String>,
 }
 
 /// Runs one frame through the clean configuration, each stage type of the base alone, and
@@ -822,6 +824,11 @@ pub fn birdseye_panels(base: &BaseConfig, seed: u64, frame: &Frame) -> Result<Ve
                 title: title.clone(),
                 points,
                 clusters: r.clusters.len(),
+                stages: config
+                    .noise
+                    .iter()
+                    .map(|s| format!("{}: {}", s.kind(), s.describe()))
+                    .collect(),
             })
         })
         .collect()

@@ -55,7 +55,7 @@ pub fn heatmap(map: &Heatmap, path: &Path, protected: &[&Path]) -> Result<()> {
     let h = TOP + CELL_H * map.rows.len() as u32 + 30 + key_h + MARGIN;
     let mut buf = vec![0u8; (w * h * 3) as usize];
     render(map, &mut buf, (w, h)).map_err(|e| Error::io(path, e))?;
-    write_png(path, protected, &buf, (w, h))
+    write_png(path, protected, &buf, (w, h), &map.title, "")
 }
 
 fn render(map: &Heatmap, buf: &mut [u8], size: (u32, u32)) -> std::io::Result<()> {

@@ -16,10 +16,13 @@ agree with it within 1 mm. A wrong range in one slot, a missing or extra return,
 ring mix-up fails.
 
 usage: pcap_out_check.py NOISY_PCAP PLY_DIR [SUMMARY_JSON]
+       pcap_out_check.py --make-dual OUT.pcap   (a two-rotation dual-return capture,
+                                                 none of the fixtures being dual)
 """
 
 import json
 import pathlib
+import struct
 import sys
 
 import numpy as np
@@ -43,6 +46,12 @@ def theirs(pcap):
     ranges, rings, kinds = [], [], []
     for scan in vd.read_pcap(pcap, config):
         pts = scan[1]
+        # Dual mode: velodyne_decoder lists both returns of a laser together (last, then
+        # strongest); lidar-noise lists the packet's blocks in order (the firing's last
+        # block, then its strongest). Reorder by firing (column), then return type, and
+        # keep the order within (a no-op for single-return captures).
+        order = np.lexsort((np.arange(len(pts)), -pts[:, 7], pts[:, 5]))
+        pts = pts[order]
         ranges.append(np.linalg.norm(pts[:, 0:3].astype(np.float64), axis=1))
         rings.append(pts[:, 6].astype(np.int64))
         kinds.append(pts[:, 7].astype(np.int64))
@@ -71,7 +80,35 @@ def compare(our_r, our_ring, vd_r, vd_ring):
     return fail
 
 
+def make_dual(path):
+    """Two rotations in dual mode (0x39): even block last return at 10 m + 2 mm * laser,
+    odd block strongest at 20 m + 2 mm * laser, 0.2 degrees per firing."""
+    out = bytearray(struct.pack("<IHHiIII", 0xA1B2C3D4, 2, 4, 0, 0, 65535, 1))
+    ts, firing, ident = 1000, 0, 0
+    while firing * 20 < 2 * 36000 + 600:
+        payload = bytearray()
+        for b in range(12):
+            payload += b"\xff\xee" + struct.pack("<H", ((firing + b // 2) * 20) % 36000)
+            for j in range(32):
+                payload += struct.pack("<HB", (10000 if b % 2 else 5000) + j, (b * 3 + j) % 256)
+        payload += struct.pack("<I", ts) + bytes([0x39, 0x21])
+        ip = bytearray(struct.pack(">BBHHHBBH4s4s", 0x45, 0, 28 + len(payload), ident, 0x4000,
+                                   64, 17, 0, bytes([192, 168, 1, 201]), bytes([255] * 4)))
+        total = sum(struct.unpack(">10H", bytes(ip)))
+        total = (total & 0xFFFF) + (total >> 16)
+        total = (total & 0xFFFF) + (total >> 16)
+        ip[10:12] = struct.pack(">H", ~total & 0xFFFF)
+        frame = (b"\xff" * 6 + bytes([0x60, 0x76, 0x88, 0, 0, 1]) + b"\x08\x00" + bytes(ip)
+                 + struct.pack(">HHHH", 2368, 2368, 8 + len(payload), 0) + bytes(payload))
+        out += struct.pack("<IIII", 1_700_000_000, ts, len(frame), len(frame)) + frame
+        firing, ts, ident = firing + 6, ts + 277, ident + 1
+    pathlib.Path(path).write_bytes(bytes(out))
+
+
 def main():
+    if len(sys.argv) == 3 and sys.argv[1] == "--make-dual":
+        make_dual(sys.argv[2])
+        return
     if len(sys.argv) not in (3, 4):
         sys.exit(__doc__)
     pcap, ply_dir = sys.argv[1], sys.argv[2]

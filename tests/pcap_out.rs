@@ -4,7 +4,7 @@
 //! stage a packet cannot express is refused before anything is written.
 
 use assert_cmd::Command;
-use lidar_noise::capture::writer::PcapWriter;
+use lidar_noise::capture::writer::{PcapNgWriter, PcapWriter};
 use lidar_noise::capture::CaptureReader;
 use lidar_noise::config::Config;
 use lidar_noise::frame::ReturnKind;
@@ -198,10 +198,10 @@ fn shared_capture_round_trips_to_the_noisy_returns() {
 }
 
 /// Two rotations in dual mode (even block last at 10 m + laser, odd block strongest at
-/// 20 m + laser), with a position packet every 10 data packets.
-fn dual_capture() -> Vec<u8> {
-    let mut w = PcapWriter::new(Vec::new()).unwrap();
+/// 20 m + laser), with a position packet every 10 data packets: (time, port, payload).
+fn dual_packets() -> Vec<(u64, u16, Vec<u8>)> {
     let (mut firing, mut ts, mut n) = (0u32, 1_000u32, 0);
+    let mut out = Vec::new();
     while firing * 20 < 2 * 36000 + 600 {
         let mut blocks = [FiringBlock::default(); 12];
         for (b, block) in blocks.iter_mut().enumerate() {
@@ -212,18 +212,53 @@ fn dual_capture() -> Vec<u8> {
             }
         }
         let payload = encode_data_packet(&blocks, ts, 0x39);
-        w.write_udp(u64::from(ts), DATA_PORT, DATA_PORT, &payload)
-            .unwrap();
+        out.push((u64::from(ts), DATA_PORT, payload.to_vec()));
         if n % 10 == 0 {
             let pos = encode_position_packet(ts);
-            w.write_udp(u64::from(ts), POSITION_PORT, POSITION_PORT, &pos)
-                .unwrap();
+            out.push((u64::from(ts), POSITION_PORT, pos.to_vec()));
         }
         n += 1;
         firing += 6;
         ts += (6.0f64 * 46.08).round() as u32;
     }
+    out
+}
+
+fn dual_capture() -> Vec<u8> {
+    let mut w = PcapWriter::new(Vec::new()).unwrap();
+    for (ts, port, payload) in dual_packets() {
+        w.write_udp(ts, port, port, &payload).unwrap();
+    }
     w.into_inner().unwrap()
+}
+
+#[test]
+fn pcapng_captures_round_trip_and_are_written_as_pcapng() {
+    let mut w = PcapNgWriter::new(Vec::new()).unwrap();
+    for (ts, port, payload) in dual_packets() {
+        w.write_udp(ts, port, port, &payload).unwrap();
+    }
+    let input = w.into_inner().unwrap();
+    check_round_trip(&input, "pcapng");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ng.pcapng");
+    std::fs::write(&path, &input).unwrap();
+    Command::cargo_bin("lidar-noise")
+        .unwrap()
+        .arg("run")
+        .arg(&path)
+        .args(["--pcap-out", "--no-ply", "--keep-partial"])
+        .arg("-o")
+        .arg(dir.path().join("out"))
+        .assert()
+        .success();
+    let written = std::fs::read(dir.path().join("out/ng/noisy.pcapng")).unwrap();
+    assert_eq!(
+        &written[..4],
+        &[0x0A, 0x0D, 0x0D, 0x0A],
+        "a pcapng section header"
+    );
+    assert_eq!(written.len(), input.len());
 }
 
 #[test]
@@ -289,23 +324,29 @@ fn ranges_the_wire_cannot_hold_are_written_as_no_return() {
 #[test]
 fn cli_writes_what_the_library_writes() {
     let dir = tempfile::tempdir().unwrap();
-    let mut cmd = Command::cargo_bin("lidar-noise").unwrap();
-    cmd.args([
-        "run",
-        "fixtures/parking.pcap",
-        "--pcap-out",
-        "--keep-partial",
-        "--no-ply",
-    ])
-    .arg("-o")
-    .arg(dir.path());
-    for s in SETS {
-        cmd.args(["--set", s]);
-    }
-    cmd.assert().success();
-    let written = std::fs::read(dir.path().join("parking/noisy.pcap")).unwrap();
     let input = std::fs::read("fixtures/parking.pcap").unwrap();
-    assert!(written == run_library(&input, &config()).bytes);
+    let expected = run_library(&input, &config()).bytes;
+    // Workers fill disjoint slots: the bytes do not depend on the thread count.
+    for threads in ["1", "2"] {
+        let out = dir.path().join(threads);
+        let mut cmd = Command::cargo_bin("lidar-noise").unwrap();
+        cmd.args([
+            "--threads",
+            threads,
+            "run",
+            "fixtures/parking.pcap",
+            "--pcap-out",
+        ])
+        .args(["--keep-partial", "--no-ply"])
+        .arg("-o")
+        .arg(&out);
+        for s in SETS {
+            cmd.args(["--set", s]);
+        }
+        cmd.assert().success();
+        let written = std::fs::read(out.join("parking/noisy.pcap")).unwrap();
+        assert!(written == expected, "{threads} threads");
+    }
 }
 
 #[test]
@@ -351,4 +392,23 @@ fn a_stage_a_packet_cannot_express_is_refused_before_anything_is_written() {
         .assert()
         .success();
     assert!(out.join("parking/noisy.pcap").exists());
+}
+
+#[test]
+fn a_dual_capture_decoded_as_single_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("dual.pcap");
+    std::fs::write(&path, dual_capture()).unwrap();
+    let out = dir.path().join("out");
+    let assert = Command::cargo_bin("lidar-noise")
+        .unwrap()
+        .arg("run")
+        .arg(&path)
+        .args(["--pcap-out", "--dual", "last", "-o"])
+        .arg(&out)
+        .assert()
+        .code(1);
+    let stderr = String::from_utf8_lossy(&assert.get_output().stderr).to_string();
+    assert!(stderr.contains("--dual both"), "{stderr}");
+    assert!(!out.exists(), "nothing is written");
 }

@@ -264,16 +264,17 @@ fn run_capture(
     // does not grow with the capture's length.
     let mut spool = ReportSpool::new(dir)?;
     // --pcap-out: a copy of the capture whose return slots each worker fills in.
-    let pcap = match plan.pcap_out {
-        true => Some(crate::writers::pcap::NoisyCapture::new(
-            match capture {
-                Some(p) => std::fs::read(p).with_context(|| format!("{}", p.display()))?,
-                None => DEFAULT_CAPTURE.to_vec(),
-            },
-            Path::new(source),
+    let pcap = if plan.pcap_out {
+        let path = capture.unwrap_or(Path::new(DEFAULT_CAPTURE_NAME));
+        let bytes = capture.map_or(Ok(DEFAULT_CAPTURE.to_vec()), std::fs::read);
+        let bytes = bytes.with_context(|| format!("{}", path.display()))?;
+        Some(crate::writers::pcap::NoisyCapture::new(
+            bytes,
+            path,
             &plan.decoder.calibration,
-        )?),
-        false => None,
+        )?)
+    } else {
+        None
     };
     let mut batch = reader.next_batch(batch_size, &plan.frames)?;
     while !batch.is_empty() {

@@ -62,6 +62,9 @@ pub struct Datagram<'a> {
     pub src_port: u16,
     /// UDP destination port.
     pub dst_port: u16,
+    /// Byte offset of the UDP payload in the file (where `payload` starts), so that a
+    /// writer can patch the payload in a byte-for-byte copy of the capture.
+    pub payload_offset: u64,
     /// UDP payload.
     pub payload: &'a [u8],
 }
@@ -203,6 +206,7 @@ impl CaptureReader {
             ts_ns: found.ts_ns,
             src_port: found.src_port,
             dst_port: found.dst_port,
+            payload_offset: found.offset + found.start as u64,
             payload,
         }))
     }

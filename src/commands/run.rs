@@ -65,6 +65,10 @@ pub struct Args {
     /// captures in the order given), e.g. --shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT.
     #[arg(long, value_name = "K/N", value_parser = crate::options::Shard::parse)]
     pub shard: Option<crate::options::Shard>,
+    /// Also write the capture re-encoded from the noisy returns as DIR/<name>/noisy.pcap
+    /// (see README "Noisy capture out").
+    #[arg(long)]
+    pub pcap_out: bool,
     /// Decoder settings shared by the commands that read captures.
     #[command(flatten)]
     pub decoder: DecoderArgs,
@@ -80,6 +84,7 @@ struct Plan {
     ply: bool,
     output: FrameOutput,
     linkage: bool,
+    pcap_out: bool,
 }
 
 /// The per-capture summary written as summary.json.
@@ -140,21 +145,33 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         ply: !args.no_ply,
         output: args.output_format.to_output()?,
         linkage: args.linkage_out,
+        pcap_out: args.pcap_out,
     };
     super::check_stdin_once(&args.captures)?;
+    if plan.pcap_out {
+        crate::writers::pcap::check_encodable(plan.pipeline.chain(), plan.config.seed)?;
+        if args.captures.iter().any(|p| super::is_stdin(p)) {
+            anyhow::bail!("--pcap-out needs capture files: standard input (`-`) is not kept");
+        }
+    }
     let mut inputs: Vec<&Path> = args.captures.iter().map(PathBuf::as_path).collect();
     if let Some(c) = &args.config {
         inputs.push(c);
     }
     // Every input and target is checked before anything is written.
-    let mut jobs: Vec<(FrameReader, String, String)> = Vec::new();
+    let mut jobs: Vec<(FrameReader, String, String, Option<&Path>)> = Vec::new();
     if args.captures.is_empty() {
         let reader = FrameReader::from_bytes(
             Arc::from(DEFAULT_CAPTURE),
             Path::new(DEFAULT_CAPTURE_NAME),
             &plan.decoder,
         )?;
-        jobs.push((reader, DEFAULT_CAPTURE_NAME.into(), "crossroad".into()));
+        jobs.push((
+            reader,
+            DEFAULT_CAPTURE_NAME.into(),
+            "crossroad".into(),
+            None,
+        ));
     }
     for (path, name) in args
         .captures
@@ -162,7 +179,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         .zip(super::output_names(&args.captures))
     {
         let reader = super::open_capture(path, &plan.decoder)?;
-        jobs.push((reader, super::capture_label(path), name));
+        jobs.push((reader, super::capture_label(path), name, Some(path)));
     }
     if let Some(shard) = args.shard {
         let total = jobs.len();
@@ -183,7 +200,11 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             return Ok(());
         }
     }
-    for (_, source, name) in &jobs {
+    for (reader, source, name, _) in &jobs {
+        if plan.pcap_out {
+            let mode = reader.summary().return_mode;
+            crate::writers::pcap::check_capture(source, mode, plan.decoder.dual)?;
+        }
         let target = args.output.join(name);
         check_target(&target, &inputs)?;
         staging::check_replace(
@@ -203,7 +224,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     };
     let mut staged = Vec::new();
     let mut reports = Vec::new();
-    for (reader, source, name) in jobs {
+    for (reader, source, name, capture) in jobs {
         let stage = match folder.stage(&name) {
             Ok(s) => s,
             Err(e) => {
@@ -213,12 +234,19 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             }
         };
         let settings = run_settings(&plan, &source);
-        let result =
-            run_capture(&plan, reader, &source, stage.path(), &inputs, global).and_then(|report| {
-                let files = staging::result_files(stage.path());
-                staging::write_manifest(stage.path(), "run", &settings, files)?;
-                Ok(report)
-            });
+        let result = run_capture(
+            &plan,
+            reader,
+            (&source, capture),
+            stage.path(),
+            &inputs,
+            global,
+        )
+        .and_then(|report| {
+            let files = staging::result_files(stage.path());
+            staging::write_manifest(stage.path(), "run", &settings, files)?;
+            Ok(report)
+        });
         match result {
             Ok(report) => {
                 staged.push(stage);
@@ -308,7 +336,7 @@ fn check_target(dir: &Path, inputs: &[&Path]) -> Result<()> {
 fn run_capture(
     plan: &Plan,
     mut reader: FrameReader,
-    source: &str,
+    (source, capture): (&str, Option<&Path>),
     dir: &Path,
     inputs: &[&Path],
     global: Global,
@@ -323,6 +351,19 @@ fn run_capture(
     // Per-frame reports are streamed to spool files and joined at the end, so memory
     // does not grow with the capture's length.
     let mut spool = ReportSpool::new(dir)?;
+    // --pcap-out: a copy of the capture whose return slots each worker fills in.
+    let pcap = if plan.pcap_out {
+        let path = capture.unwrap_or(Path::new(DEFAULT_CAPTURE_NAME));
+        let bytes = capture.map_or(Ok(DEFAULT_CAPTURE.to_vec()), std::fs::read);
+        let bytes = bytes.with_context(|| format!("{}", path.display()))?;
+        Some(crate::writers::pcap::NoisyCapture::new(
+            bytes,
+            path,
+            &plan.decoder.calibration,
+        )?)
+    } else {
+        None
+    };
     let mut batch = reader.next_batch(batch_size, &plan.frames)?;
     while !batch.is_empty() {
         let (next, results) = rayon::join(
@@ -332,6 +373,9 @@ fn run_capture(
                     .into_par_iter()
                     .map(|f| -> Result<SpoolEntry> {
                         let result = plan.pipeline.process(f)?;
+                        if let Some(p) = &pcap {
+                            p.encode_frame(&result.noisy);
+                        }
                         if plan.ply {
                             write_ply(plan, &result, source, dir, inputs)?;
                         }
@@ -421,6 +465,16 @@ fn run_capture(
         frames: &[],
     };
     let frames = spool.frames;
+    if let Some(p) = pcap {
+        let name = p.file_name();
+        let lost = p.finish(dir, inputs)?;
+        if lost > 0 {
+            global.warn(&format!(
+                "{source}: {lost} kept returns lie outside the range a packet can hold \
+                 (0 to 131.07 m) and are written as no return in {name}"
+            ));
+        }
+    }
     spool.finish(&summary, &clusters, dir, inputs)?;
     let t = &summary.totals;
     Ok(format!(

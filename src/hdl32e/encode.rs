@@ -93,6 +93,33 @@ pub fn encode_data_packet(
     out
 }
 
+/// Largest raw distance a packet can hold (2 mm units: 131.07 m at the default resolution).
+pub const MAX_RAW_DISTANCE: u16 = u16::MAX;
+
+/// Raw packet distance of a range in metres: `round((range - offset) / resolution)`, the
+/// inverse of the decoder's `raw * resolution + offset`.
+///
+/// `None` when the sensor could not report the range: the quotient rounds to zero or
+/// less (0 means "no return" on the wire) or above [`MAX_RAW_DISTANCE`], or is not finite.
+#[inline]
+pub fn raw_distance(range_m: f32, offset_m: f32, resolution_m: f32) -> Option<u16> {
+    let q = ((range_m - offset_m) / resolution_m).round();
+    if q.is_finite() && q >= 1.0 && q <= f32::from(MAX_RAW_DISTANCE) {
+        Some(q as u16)
+    } else {
+        None
+    }
+}
+
+/// Writes one return slot (distance and intensity) of block `block`, laser `laser` into
+/// a data packet payload; the block flag and azimuth are left as they are.
+#[inline]
+pub fn write_return_slot(payload: &mut [u8], block: usize, laser: usize, raw: u16, intensity: u8) {
+    let at = block * BLOCK_LEN + 4 + 3 * laser;
+    payload[at..at + 2].copy_from_slice(&raw.to_le_bytes());
+    payload[at + 2] = intensity;
+}
+
 /// Returns a 512-byte position packet payload with a `$GPRMC` sentence.
 ///
 /// Layout (HDL-32E manual, checked against a real capture): bytes 0..13 unused,
@@ -156,5 +183,27 @@ mod tests {
         let sum = body.bytes().fold(0u8, |a, b| a ^ b);
         assert_eq!(tail.trim_end(), format!("{sum:02X}"));
         assert!(s.len() <= 82, "NMEA sentences are at most 82 bytes");
+    }
+
+    #[test]
+    fn raw_distance_rounds_and_refuses_what_the_wire_cannot_hold() {
+        assert_eq!(raw_distance(10.0, 0.0, 0.002), Some(5000));
+        assert_eq!(raw_distance(10.0011, 0.0, 0.002), Some(5001));
+        assert_eq!(raw_distance(10.1, 0.1, 0.002), Some(5000));
+        assert_eq!(raw_distance(0.002, 0.0, 0.002), Some(1));
+        assert_eq!(raw_distance(0.0009, 0.0, 0.002), None);
+        assert_eq!(raw_distance(-1.0, 0.0, 0.002), None);
+        assert_eq!(raw_distance(131.07, 0.0, 0.002), Some(65535));
+        assert_eq!(raw_distance(131.072, 0.0, 0.002), None);
+        assert_eq!(raw_distance(f32::NAN, 0.0, 0.002), None);
+    }
+
+    #[test]
+    fn return_slot_lands_where_the_decoder_reads_it() {
+        let mut p = encode_data_packet(&[FiringBlock::default(); BLOCKS_PER_PACKET], 0, 0x37);
+        write_return_slot(&mut p, 11, 31, 0xBEEF, 9);
+        assert_eq!(&p[1197..1200], &[0xEF, 0xBE, 9]);
+        write_return_slot(&mut p, 0, 0, 0x0102, 3);
+        assert_eq!(&p[4..7], &[0x02, 0x01, 3]);
     }
 }

@@ -10,6 +10,7 @@ pub mod heatmap;
 pub mod html;
 pub mod json;
 pub mod las;
+pub mod pcap;
 pub mod ply;
 pub mod png;
 pub mod staging;

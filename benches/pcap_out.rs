@@ -1,0 +1,67 @@
+//! Cost of `run --pcap-out`: re-encoding one 50,304-return frame (131 data packets) into
+//! the capture copy (target: under 1 ms per frame on one core), and the once-per-capture
+//! setup (copy, scan, clear) per frame of that capture.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use lidar_noise::capture::writer::PcapWriter;
+use lidar_noise::config::Config;
+use lidar_noise::hdl32e::encode::{encode_data_packet, FiringBlock, DATA_PORT};
+use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::noise::NoiseChain;
+use lidar_noise::writers::pcap::NoisyCapture;
+use std::hint::black_box;
+use std::path::Path;
+use std::sync::Arc;
+
+/// 131 packets, every slot returning (1..80 m, varied intensities): one frame of 50,304
+/// returns over 314 degrees.
+fn capture() -> Vec<u8> {
+    let mut w = PcapWriter::new(Vec::new()).unwrap();
+    let mut ts = 1_000u32;
+    for p in 0..131u32 {
+        let mut blocks = [FiringBlock::default(); 12];
+        for (b, block) in blocks.iter_mut().enumerate() {
+            let f = p * 12 + b as u32;
+            block.azimuth = ((f * 20) % 36000) as u16;
+            for j in 0..32 {
+                let i = f * 32 + j as u32;
+                block.distances[j] = 500 + (i.wrapping_mul(2_654_435_761) % 39_500) as u16;
+                block.intensities[j] = (i % 101) as u8;
+            }
+        }
+        let payload = encode_data_packet(&blocks, ts, 0x37);
+        w.write_udp(u64::from(ts), DATA_PORT, DATA_PORT, &payload)
+            .unwrap();
+        ts += 553;
+    }
+    w.into_inner().unwrap()
+}
+
+fn bench_pcap_out(c: &mut Criterion) {
+    let bytes = capture();
+    let opts = DecoderOptions {
+        keep_partial: true,
+        ..DecoderOptions::default()
+    };
+    let mut reader =
+        FrameReader::from_bytes(Arc::from(bytes.clone()), Path::new("bench.pcap"), &opts).unwrap();
+    let frame = reader.next().unwrap().unwrap();
+    assert_eq!(frame.returns.len(), 131 * 384);
+    let (config, _) = Config::load(None, &[], None).expect("built-in config");
+    let noisy = NoiseChain::new(&config).process(&frame);
+    let out = NoisyCapture::new(bytes.clone(), Path::new("bench.pcap"), &opts.calibration).unwrap();
+    c.bench_function("pcap-out encode frame, 50k returns", |b| {
+        b.iter(|| out.encode_frame(black_box(&noisy)))
+    });
+    c.bench_function("pcap-out setup, 131-packet capture", |b| {
+        b.iter(|| {
+            black_box(
+                NoisyCapture::new(black_box(bytes.clone()), Path::new("b"), &opts.calibration)
+                    .unwrap(),
+            )
+        })
+    });
+}
+
+criterion_group!(benches, bench_pcap_out);
+criterion_main!(benches);

@@ -105,8 +105,9 @@ pub struct Moved {
     pub azimuth_deg: Option<Vec<f32>>,
     /// Elevation change in degrees, like `azimuth_deg`.
     pub elevation_deg: Option<Vec<f32>>,
-    /// Rigid motion applied to the reported point last (mounting, ego-motion, vibration).
-    pub pose: Option<Vec<sensor::Pose>>,
+    /// Rigid motion applied to the reported point last (mounting, ego-motion, vibration),
+    /// one pose per firing.
+    pub pose: Option<sensor::Poses>,
     /// Reported firing time (seconds, as `Return::time`).
     pub time: Option<Vec<f64>>,
     /// Reported intensity byte.
@@ -121,11 +122,6 @@ impl Moved {
     /// The elevation changes, allocated as zeros on first use.
     pub fn elevation_mut(&mut self, n: usize) -> &mut Vec<f32> {
         self.elevation_deg.get_or_insert_with(|| vec![0.0; n])
-    }
-    /// The poses, allocated as identities on first use.
-    pub fn pose_mut(&mut self, n: usize) -> &mut Vec<sensor::Pose> {
-        self.pose
-            .get_or_insert_with(|| vec![sensor::Pose::IDENTITY; n])
     }
 }
 
@@ -220,7 +216,7 @@ impl NoisyFrame {
             out.elevation = r.elevation + de;
         }
         if let Some(p) = &m.pose {
-            let [x, y, z] = p[i].apply([out.x, out.y, out.z]);
+            let [x, y, z] = p.of(i).apply([out.x, out.y, out.z], r.time - p.t_ref);
             out.x = x;
             out.y = y;
             out.z = z;

@@ -222,7 +222,23 @@ impl Poses {
     }
 }
 
+/// `clamp(round(v g), 0, 255)` for a factor `g >= 0` (a finite gain), without a libm
+/// call: for non-negative x, round (half away from zero) is the truncation plus one when
+/// the fraction (exact: x - trunc(x)) is at least 0.5. Same bytes as `f64::round`.
+#[inline]
+pub fn scale_byte(v: u8, g: f64) -> u8 {
+    let x = f64::from(v) * g;
+    if !(x >= 0.0) {
+        // NaN or negative: keep the exact formula for the cases the fast path skips.
+        return x.round().clamp(0.0, 255.0) as u8;
+    }
+    let t = x.min(256.0) as u32;
+    let up = u32::from(x - f64::from(t) >= 0.5);
+    (t + up).min(255) as u8
+}
+
 /// One standard normal draw.
+#[inline]
 pub fn normal(rng: &mut ChaCha8Rng) -> f64 {
     rng.sample::<f64, _>(StandardNormal)
 }
@@ -286,4 +302,28 @@ pub fn float(v: f64) -> toml::Value {
 /// The clean firing time of the frame's first return (reference for per-frame times).
 pub fn frame_start(frame: &super::NoisyFrame) -> f64 {
     frame.clean.first().map_or(0.0, |r| r.time)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::scale_byte;
+
+    #[test]
+    fn scale_byte_rounds_like_f64_round() {
+        let gains = [
+            0.0, 0.25, 0.5, 0.9, 0.95, 1.0, 1.02, 1.5, 1.7, 2.0, 3.3, 10.0,
+        ];
+        for v in 0..=255u8 {
+            for g in gains
+                .into_iter()
+                .chain((0..200).map(|k| 0.8 + f64::from(k) * 0.0021))
+            {
+                let want = (f64::from(v) * g).round().clamp(0.0, 255.0) as u8;
+                assert_eq!(scale_byte(v, g), want, "{v} * {g}");
+            }
+        }
+        // Exact halves round up (away from zero), like f64::round.
+        assert_eq!(scale_byte(5, 0.5), 3);
+        assert_eq!(scale_byte(1, 0.5), 1);
+    }
 }

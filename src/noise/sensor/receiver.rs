@@ -15,7 +15,7 @@
 //! assumption. Frame stream: two normal draws per return when the corresponding sigma
 //! is non-zero.
 
-use super::{float, normal, number, sigma};
+use super::{float, normal, number, scale_byte, sigma};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -82,32 +82,35 @@ impl NoiseStage for Receiver {
             || self.sigma_noise != 0.0
             || self.range_noise_m != 0.0;
         if any {
-            for i in 0..frame.len() {
-                let n_det = if self.sigma_noise > 0.0 {
-                    normal(rng)
-                } else {
-                    0.0
-                };
-                let n_range = if self.range_noise_m > 0.0 {
-                    normal(rng)
-                } else {
-                    0.0
-                };
-                if frame.fate[i] != Fate::Kept {
+            // Per-laser power factor, formed once per frame (same product as per return).
+            let factor = self.gains.map(|g| self.responsivity * g);
+            let (draw_det, draw_range) = (self.sigma_noise > 0.0, self.range_noise_m > 0.0);
+            let noise_sd = self.sigma_noise * p_th;
+            let it = frame
+                .fate
+                .iter_mut()
+                .zip(frame.power.iter_mut())
+                .zip(frame.range.iter_mut())
+                .zip(&frame.clean);
+            for (((fate, power), range), r) in it {
+                // Draw before the fate test: the same draws per return whatever earlier
+                // stages dropped (common random numbers).
+                let n_det = if draw_det { normal(rng) } else { 0.0 };
+                let n_range = if draw_range { normal(rng) } else { 0.0 };
+                if *fate != Fate::Kept {
                     continue;
                 }
-                let laser = usize::from(frame.clean[i].laser) % 32;
                 if scale_power {
-                    frame.power[i] *= self.responsivity * self.gains[laser];
+                    *power *= factor[usize::from(r.laser) % 32];
                 }
-                let p = frame.power[i];
-                if p + self.sigma_noise * p_th * n_det < cut {
-                    frame.fate[i] = Fate::BelowPower;
+                let p = *power;
+                if p + noise_sd * n_det < cut {
+                    *fate = Fate::BelowPower;
                     continue;
                 }
-                if self.range_noise_m > 0.0 {
+                if draw_range {
                     let s_r = self.range_noise_m / (2.0 * p / p_th).sqrt();
-                    frame.range[i] = (f64::from(frame.range[i]) + s_r * n_range) as f32;
+                    *range = (f64::from(*range) + s_r * n_range) as f32;
                 }
             }
         }
@@ -119,7 +122,7 @@ impl NoiseStage for Receiver {
                 .intensity
                 .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect());
             for x in v.iter_mut() {
-                *x = (f64::from(*x) * g).round().clamp(0.0, 255.0) as u8;
+                *x = scale_byte(*x, g);
             }
         }
     }

@@ -295,7 +295,7 @@ fn wrap_360(a: f64) -> f64 {
 /// sin and cos of `t` radians; a Taylor series for the small angles sensor stages use
 /// (|t| < 0.01: truncation error below 1e-13, far under f32 precision), which is several
 /// times faster than `sin_cos` in the per-return loop of [`NoisyFrame::survivors`].
-fn small_sin_cos(t: f64) -> (f64, f64) {
+pub(crate) fn small_sin_cos(t: f64) -> (f64, f64) {
     if t.abs() < 0.01 {
         let t2 = t * t;
         (

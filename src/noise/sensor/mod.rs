@@ -40,9 +40,28 @@ impl Pose {
     /// Rotation Rz(yaw) Ry(pitch) Rx(roll) (radians, right-handed, yaw about +z turns
     /// +x towards +y) followed by translation `t`.
     pub fn from_rpy(roll: f64, pitch: f64, yaw: f64, t: [f64; 3]) -> Pose {
-        let (sr, cr) = roll.sin_cos();
-        let (sp, cp) = pitch.sin_cos();
-        let (sy, cy) = yaw.sin_cos();
+        Pose::from_sin_cos(roll.sin_cos(), pitch.sin_cos(), yaw.sin_cos(), t)
+    }
+
+    /// Same as [`Pose::from_rpy`] with sin and cos from a series for small angles (see
+    /// `small_sin_cos`; exact `sin_cos` above 0.01 rad): for the per-firing poses of
+    /// `motion`, where the angles are tiny and libm calls dominated.
+    pub fn from_small_rpy(roll: f64, pitch: f64, yaw: f64, t: [f64; 3]) -> Pose {
+        use crate::noise::small_sin_cos;
+        Pose::from_sin_cos(
+            small_sin_cos(roll),
+            small_sin_cos(pitch),
+            small_sin_cos(yaw),
+            t,
+        )
+    }
+
+    fn from_sin_cos(
+        (sr, cr): (f64, f64),
+        (sp, cp): (f64, f64),
+        (sy, cy): (f64, f64),
+        t: [f64; 3],
+    ) -> Pose {
         Pose {
             r: [
                 [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
@@ -235,6 +254,19 @@ pub fn scale_byte(v: u8, g: f64) -> u8 {
     let t = x.min(256.0) as u32;
     let up = u32::from(x - f64::from(t) >= 0.5);
     (t + up).min(255) as u8
+}
+
+/// Returns per chunk of [`fill_normals`]: the draws of a chunk are made first (same
+/// stream order as one draw at a time), then the arithmetic runs on a buffer, free of
+/// calls, so the square roots and divisions of successive returns overlap.
+pub const CHUNK: usize = 256;
+
+/// Fills `out` with standard normal draws, in order.
+#[inline]
+pub fn fill_normals(rng: &mut ChaCha8Rng, out: &mut [f64]) {
+    for x in out.iter_mut() {
+        *x = rng.sample::<f64, _>(StandardNormal);
+    }
 }
 
 /// One standard normal draw.

@@ -100,8 +100,8 @@ impl NoiseStage for Motion {
                 let dt = r.time - t_ref;
                 let roll = vib * (w * dt + phi[0]).sin();
                 let pitch = vib * (w * dt + phi[1]).sin();
-                let ego = Pose::from_rpy(0.0, 0.0, -omega * dt, [0.0; 3]);
-                let rot = Pose::from_rpy(roll, pitch, 0.0, [0.0; 3]).then_after(&ego);
+                let ego = Pose::from_small_rpy(0.0, 0.0, -omega * dt, [0.0; 3]);
+                let rot = Pose::from_small_rpy(roll, pitch, 0.0, [0.0; 3]).then_after(&ego);
                 let velocity = [0, 1, 2].map(|k| -self.speed_mps * rot.r[k][0]);
                 firings.push(FiringPose {
                     pose: rot,

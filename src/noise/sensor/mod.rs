@@ -247,7 +247,7 @@ impl Poses {
 #[inline]
 pub fn scale_byte(v: u8, g: f64) -> u8 {
     let x = f64::from(v) * g;
-    if !(x >= 0.0) {
+    if x.is_nan() || x < 0.0 {
         // NaN or negative: keep the exact formula for the cases the fast path skips.
         return x.round().clamp(0.0, 255.0) as u8;
     }

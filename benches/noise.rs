@@ -69,6 +69,16 @@ fn bench_chain(c: &mut Criterion) {
     c.bench_function("pdiagram-sensor chain + filters, 50k returns", |b| {
         b.iter(|| black_box(sensor_chain.process(black_box(&frame))))
     });
+    // The same configuration without its `[[noise]]` stages (same power model and
+    // detection filters): the difference with the line above is exactly what the eight
+    // sensor stages cost.
+    let mut bare = sensor.clone();
+    bare.noise.clear();
+    let bare_chain = NoiseChain::new(&bare);
+    c.bench_function(
+        "pdiagram-sensor config without its stages, 50k returns",
+        |b| b.iter(|| black_box(bare_chain.process(black_box(&frame)))),
+    );
     let out = sensor_chain.process(&frame);
     c.bench_function("survivors after the sensor chain, 50k returns", |b| {
         b.iter(|| black_box(black_box(&out).survivors()))

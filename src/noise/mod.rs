@@ -105,8 +105,9 @@ pub struct Moved {
     pub azimuth_deg: Option<Vec<f32>>,
     /// Elevation change in degrees, like `azimuth_deg`.
     pub elevation_deg: Option<Vec<f32>>,
-    /// Rigid motion applied to the reported point last (mounting, ego-motion, vibration).
-    pub pose: Option<Vec<sensor::Pose>>,
+    /// Rigid motion applied to the reported point last (mounting, ego-motion, vibration),
+    /// one pose per firing.
+    pub pose: Option<sensor::Poses>,
     /// Reported firing time (seconds, as `Return::time`).
     pub time: Option<Vec<f64>>,
     /// Reported intensity byte.
@@ -121,11 +122,6 @@ impl Moved {
     /// The elevation changes, allocated as zeros on first use.
     pub fn elevation_mut(&mut self, n: usize) -> &mut Vec<f32> {
         self.elevation_deg.get_or_insert_with(|| vec![0.0; n])
-    }
-    /// The poses, allocated as identities on first use.
-    pub fn pose_mut(&mut self, n: usize) -> &mut Vec<sensor::Pose> {
-        self.pose
-            .get_or_insert_with(|| vec![sensor::Pose::IDENTITY; n])
     }
 }
 
@@ -173,10 +169,11 @@ impl NoisyFrame {
     /// along the changed direction), time and intensity, and moved the point rigidly
     /// (`moved.pose`, applied last; range and angles stay as the sensor reports them).
     pub fn survivors(&self) -> Vec<Return> {
+        let view = View::of(self);
         let mut out = Vec::with_capacity(self.len());
-        for i in 0..self.len() {
-            if self.fate[i] == Fate::Kept {
-                out.push(self.noisy_return(i));
+        for (i, fate) in self.fate.iter().enumerate() {
+            if *fate == Fate::Kept {
+                out.push(view.noisy_return(i));
             }
         }
         out
@@ -184,6 +181,43 @@ impl NoisyFrame {
 
     /// The noisy version of return `i` (whatever its fate).
     pub fn noisy_return(&self, i: usize) -> Return {
+        View::of(self).noisy_return(i)
+    }
+
+    /// Counts and range statistics of this frame.
+    pub fn summary(&self) -> NoiseSummary {
+        NoiseSummary::from_frame(self)
+    }
+}
+
+/// The per-return state of a [`NoisyFrame`] with its optional parts resolved once, so
+/// the per-return loop of [`NoisyFrame::survivors`] tests no `Option` per return.
+struct View<'a> {
+    clean: &'a [Return],
+    range: &'a [f32],
+    azimuth: Option<&'a [f32]>,
+    elevation: Option<&'a [f32]>,
+    pose: Option<&'a sensor::Poses>,
+    time: Option<&'a [f64]>,
+    intensity: Option<&'a [u8]>,
+}
+
+impl<'a> View<'a> {
+    fn of(frame: &'a NoisyFrame) -> Self {
+        let m = &frame.moved;
+        View {
+            clean: &frame.clean,
+            range: &frame.range,
+            azimuth: m.azimuth_deg.as_deref(),
+            elevation: m.elevation_deg.as_deref(),
+            pose: m.pose.as_ref(),
+            time: m.time.as_deref(),
+            intensity: m.intensity.as_deref(),
+        }
+    }
+
+    #[inline]
+    fn noisy_return(&self, i: usize) -> Return {
         let r = &self.clean[i];
         let rn = self.range[i];
         let mut out = *r;
@@ -195,55 +229,73 @@ impl NoisyFrame {
             out.z *= s;
         }
         out.range = rn;
-        let m = &self.moved;
-        let da = m.azimuth_deg.as_ref().map_or(0.0, |v| v[i]);
-        let de = m.elevation_deg.as_ref().map_or(0.0, |v| v[i]);
+        let da = self.azimuth.map_or(0.0, |v| v[i]);
+        let de = self.elevation.map_or(0.0, |v| v[i]);
         if (da != 0.0 || de != 0.0) && r.range > 0.0 {
             // Turn the actual direction of the point (whatever the calibration's azimuth
             // offsets): elevation in the vertical plane of the beam, then azimuth about
             // z, clockwise seen from above like the sensor's azimuth.
             let (x, y, z) = (f64::from(out.x), f64::from(out.y), f64::from(out.z));
-            let h = (x * x + y * y).sqrt();
             let (se, ce) = small_sin_cos(f64::from(de).to_radians());
-            let (h2, z2) = (h * ce - z * se, h * se + z * ce);
-            let (x1, y1) = if h > 0.0 {
-                let k = h2 / h;
-                (x * k, y * k)
+            let (x1, y1, z2) = if de != 0.0 || (x == 0.0 && y == 0.0) {
+                let h = (x * x + y * y).sqrt();
+                let (h2, z2) = (h * ce - z * se, h * se + z * ce);
+                if h > 0.0 {
+                    let k = h2 / h;
+                    (x * k, y * k, z2)
+                } else {
+                    (h2, 0.0, z2)
+                }
             } else {
-                (h2, 0.0)
+                // No elevation change (se = +-0, ce = 1) and h > 0: the turn above gives
+                // h2 = h, k = 1 and z2 = (+-0) + z exactly, so skip its square root and
+                // division (h * se is a zero with the sign of se).
+                (x, y, se + z * ce)
             };
             let (sa, ca) = small_sin_cos(f64::from(da).to_radians());
             out.x = (x1 * ca + y1 * sa) as f32;
             out.y = (y1 * ca - x1 * sa) as f32;
             out.z = z2 as f32;
-            out.azimuth = (f64::from(r.azimuth) + f64::from(da)).rem_euclid(360.0) as f32;
+            out.azimuth = wrap_360(f64::from(r.azimuth) + f64::from(da)) as f32;
             out.elevation = r.elevation + de;
         }
-        if let Some(p) = &m.pose {
-            let [x, y, z] = p[i].apply([out.x, out.y, out.z]);
+        if let Some(p) = self.pose {
+            let [x, y, z] = p.of(i).apply([out.x, out.y, out.z], r.time - p.t_ref);
             out.x = x;
             out.y = y;
             out.z = z;
         }
-        if let Some(t) = &m.time {
+        if let Some(t) = self.time {
             out.time = t[i];
         }
-        if let Some(v) = &m.intensity {
+        if let Some(v) = self.intensity {
             out.intensity = v[i];
         }
         out
     }
+}
 
-    /// Counts and range statistics of this frame.
-    pub fn summary(&self) -> NoiseSummary {
-        NoiseSummary::from_frame(self)
+/// `a.rem_euclid(360.0)` without the `fmod` call for the angles sensor stages produce
+/// (within one turn of [0, 360)): the same value, since `a - 360` is exact there and
+/// `a + 360` is the rounded sum `rem_euclid` also returns.
+#[inline]
+fn wrap_360(a: f64) -> f64 {
+    if (0.0..360.0).contains(&a) {
+        a
+    } else if a > -360.0 && a < 0.0 {
+        // (-360 itself gives -0.0 under rem_euclid: left to it below.)
+        a + 360.0
+    } else if (360.0..720.0).contains(&a) {
+        a - 360.0
+    } else {
+        a.rem_euclid(360.0)
     }
 }
 
 /// sin and cos of `t` radians; a Taylor series for the small angles sensor stages use
 /// (|t| < 0.01: truncation error below 1e-13, far under f32 precision), which is several
 /// times faster than `sin_cos` in the per-return loop of [`NoisyFrame::survivors`].
-fn small_sin_cos(t: f64) -> (f64, f64) {
+pub(crate) fn small_sin_cos(t: f64) -> (f64, f64) {
     if t.abs() < 0.01 {
         let t2 = t * t;
         (
@@ -397,6 +449,26 @@ mod tests {
             );
         }
         assert_eq!(small_sin_cos(0.5), 0.5f64.sin_cos());
+    }
+
+    #[test]
+    fn wrap_360_agrees_with_rem_euclid() {
+        let mut a = -1000.0f64;
+        while a < 1000.0 {
+            for x in [
+                a,
+                a + 1e-9,
+                -1e-300,
+                -0.0,
+                0.0,
+                359.99999999999994,
+                -360.0,
+                720.0,
+            ] {
+                assert_eq!(wrap_360(x).to_bits(), x.rem_euclid(360.0).to_bits(), "{x}");
+            }
+            a += 0.37;
+        }
     }
 
     #[test]

@@ -10,7 +10,7 @@
 //! plus receiver noise stay within the datasheet's 2 cm. One normal draw per return
 //! when `jitter_ps > 0`, from the stage's frame stream.
 
-use super::{float, normal, number, sigma, C_M_PER_S};
+use super::{fill_normals, float, number, sigma, CHUNK, C_M_PER_S};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -63,11 +63,18 @@ impl NoiseStage for Clock {
         let sigma_m = C_M_PER_S * self.jitter_ps * 1e-12 / 2.0;
         let scale = 1.0 + self.drift_ppm * 1e-6;
         if bias_m != 0.0 || sigma_m != 0.0 || scale != 1.0 {
-            for (range, fate) in frame.range.iter_mut().zip(&frame.fate) {
-                // Draw before the fate test: one draw per return keeps streams aligned.
-                let n = if sigma_m > 0.0 { normal(rng) } else { 0.0 };
-                if *fate == Fate::Kept {
-                    *range = (f64::from(*range) * scale + bias_m + sigma_m * n) as f32;
+            // Draw before the fate test: one draw per return keeps streams aligned. The
+            // draws of a chunk of returns are made first (same order; see `CHUNK`).
+            let mut buf = [0.0f64; CHUNK];
+            for (ranges, fates) in frame.range.chunks_mut(CHUNK).zip(frame.fate.chunks(CHUNK)) {
+                let draws = &mut buf[..ranges.len()];
+                if sigma_m > 0.0 {
+                    fill_normals(rng, draws);
+                }
+                for ((range, fate), n) in ranges.iter_mut().zip(fates).zip(draws.iter()) {
+                    if *fate == Fate::Kept {
+                        *range = (f64::from(*range) * scale + bias_m + sigma_m * n) as f32;
+                    }
                 }
             }
         }

@@ -11,7 +11,7 @@
 //! engineering assumption (no ageing data for HDL-32E emitters was found); the default
 //! 0.9 is half of the doc's 20 % end-of-life loss.
 
-use super::{float, number};
+use super::{float, number, scale_byte};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -64,7 +64,7 @@ impl NoiseStage for Emitter {
             let h = clean[i].time / 3600.0;
             let f = (self.power_factor * (1.0 - self.drift_per_hour * h)).max(0.0);
             frame.power[i] *= f;
-            inten[i] = (f64::from(inten[i]) * f).round().clamp(0.0, 255.0) as u8;
+            inten[i] = scale_byte(inten[i], f);
         }
     }
 }

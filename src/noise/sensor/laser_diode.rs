@@ -11,7 +11,7 @@
 //! (per-beam intensity response and range offsets); defaults are engineering
 //! assumptions under the HDL-32E's 2 cm accuracy.
 
-use super::{float, normal, per_laser, sigma};
+use super::{float, normal, per_laser, scale_byte, sigma};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -83,26 +83,33 @@ impl NoiseStage for LaserDiode {
     fn apply(&self, frame: &mut NoisyFrame, _rng: &mut ChaCha8Rng) {
         let [gain, bias, elev, azim] = &self.values;
         let n = frame.len();
-        let laser = |frame: &NoisyFrame, i: usize| usize::from(frame.clean[i].laser) % 32;
-        if gain.iter().any(|&g| g != 1.0) {
+        let gains = gain.iter().any(|&g| g != 1.0);
+        let biases = bias.iter().any(|&b| b != 0.0);
+        if gains || biases {
             let clean = &frame.clean;
-            let inten = frame
-                .moved
-                .intensity
-                .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect());
+            let mut inten = if gains {
+                Some(
+                    frame
+                        .moved
+                        .intensity
+                        .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect()),
+                )
+            } else {
+                None
+            };
+            // One pass over the returns; the laser's values are looked up once.
             for i in 0..n {
-                if frame.fate[i] == Fate::Kept {
-                    let g = gain[usize::from(clean[i].laser) % 32];
-                    frame.power[i] *= g;
-                    inten[i] = (f64::from(inten[i]) * g).round().clamp(0.0, 255.0) as u8;
+                if frame.fate[i] != Fate::Kept {
+                    continue;
                 }
-            }
-        }
-        if bias.iter().any(|&b| b != 0.0) {
-            for i in 0..n {
-                if frame.fate[i] == Fate::Kept {
-                    let b = bias[laser(frame, i)];
-                    frame.range[i] = (f64::from(frame.range[i]) + b) as f32;
+                let l = usize::from(clean[i].laser) % 32;
+                if let Some(inten) = inten.as_deref_mut() {
+                    let g = gain[l];
+                    frame.power[i] *= g;
+                    inten[i] = scale_byte(inten[i], g);
+                }
+                if biases {
+                    frame.range[i] = (f64::from(frame.range[i]) + bias[l]) as f32;
                 }
             }
         }
@@ -110,14 +117,15 @@ impl NoiseStage for LaserDiode {
             if values.iter().all(|&v| v == 0.0) {
                 continue;
             }
-            let lasers: Vec<usize> = (0..n).map(|i| laser(frame, i)).collect();
+            let offsets = values.map(|v| v as f32);
+            let clean = &frame.clean;
             let target = if is_azimuth {
                 frame.moved.azimuth_mut(n)
             } else {
                 frame.moved.elevation_mut(n)
             };
-            for (t, l) in target.iter_mut().zip(lasers) {
-                *t += values[l] as f32;
+            for (t, r) in target.iter_mut().zip(clean) {
+                *t += offsets[usize::from(r.laser) % 32];
             }
         }
     }

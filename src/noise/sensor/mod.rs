@@ -40,9 +40,28 @@ impl Pose {
     /// Rotation Rz(yaw) Ry(pitch) Rx(roll) (radians, right-handed, yaw about +z turns
     /// +x towards +y) followed by translation `t`.
     pub fn from_rpy(roll: f64, pitch: f64, yaw: f64, t: [f64; 3]) -> Pose {
-        let (sr, cr) = roll.sin_cos();
-        let (sp, cp) = pitch.sin_cos();
-        let (sy, cy) = yaw.sin_cos();
+        Pose::from_sin_cos(roll.sin_cos(), pitch.sin_cos(), yaw.sin_cos(), t)
+    }
+
+    /// Same as [`Pose::from_rpy`] with sin and cos from a series for small angles (see
+    /// `small_sin_cos`; exact `sin_cos` above 0.01 rad): for the per-firing poses of
+    /// `motion`, where the angles are tiny and libm calls dominated.
+    pub fn from_small_rpy(roll: f64, pitch: f64, yaw: f64, t: [f64; 3]) -> Pose {
+        use crate::noise::small_sin_cos;
+        Pose::from_sin_cos(
+            small_sin_cos(roll),
+            small_sin_cos(pitch),
+            small_sin_cos(yaw),
+            t,
+        )
+    }
+
+    fn from_sin_cos(
+        (sr, cr): (f64, f64),
+        (sp, cp): (f64, f64),
+        (sy, cy): (f64, f64),
+        t: [f64; 3],
+    ) -> Pose {
         Pose {
             r: [
                 [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
@@ -69,6 +88,7 @@ impl Pose {
     }
 
     /// Applies the motion to a point.
+    #[inline]
     pub fn apply(&self, p: [f32; 3]) -> [f32; 3] {
         let p = p.map(f64::from);
         let mut out = [0.0f32; 3];
@@ -80,7 +100,214 @@ impl Pose {
     }
 }
 
+/// The rigid motion of the returns of one firing: p -> r p + t + velocity (time - t_ref),
+/// with `time` the return's clean firing time and `t_ref` the table's reference time
+/// ([`Poses::t_ref`]). The velocity term lets the returns of a firing (fired 1.152 us
+/// apart) share one rotation and still move by their own time (motion's translation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FiringPose {
+    /// Rotation and translation at `t_ref`.
+    pub pose: Pose,
+    /// Translation per second of firing time after `t_ref`, metres per second.
+    pub velocity: [f64; 3],
+}
+
+impl FiringPose {
+    /// `self` after `first`: p -> self(first(p)) (velocity terms compose linearly).
+    pub fn then_after(&self, first: &FiringPose) -> FiringPose {
+        let r = &self.pose.r;
+        let mut velocity = self.velocity;
+        for (i, v) in velocity.iter_mut().enumerate() {
+            *v += r[i][0] * first.velocity[0]
+                + r[i][1] * first.velocity[1]
+                + r[i][2] * first.velocity[2];
+        }
+        FiringPose {
+            pose: self.pose.then_after(&first.pose),
+            velocity,
+        }
+    }
+
+    /// Applies the motion to a point fired `dt` seconds after the table's `t_ref`.
+    #[inline]
+    pub fn apply(&self, p: [f32; 3], dt: f64) -> [f32; 3] {
+        let p = p.map(f64::from);
+        let (r, t, v) = (&self.pose.r, &self.pose.t, &self.velocity);
+        let mut out = [0.0f32; 3];
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = (r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2] + (t[i] + v[i] * dt)) as f32;
+        }
+        out
+    }
+}
+
+/// Rigid motions of a frame's returns: a table of per-firing poses plus, per return, the
+/// index of its firing (one pose per firing instead of one per return: 4 bytes per
+/// return instead of 96, and composing stages costs one product per firing).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Poses {
+    /// Reference time of the velocity terms (seconds, as `Return::time`).
+    pub t_ref: f64,
+    /// The poses, one per firing (or a single one shared by every return).
+    pub firings: Vec<FiringPose>,
+    /// Index into `firings` of each return; `None` when every return uses `firings[0]`.
+    pub index: Option<Vec<u32>>,
+}
+
+impl Poses {
+    /// One pose for every return.
+    pub fn uniform(pose: Pose) -> Poses {
+        Poses {
+            t_ref: 0.0,
+            firings: vec![FiringPose {
+                pose,
+                velocity: [0.0; 3],
+            }],
+            index: None,
+        }
+    }
+
+    /// The pose of return `i`.
+    #[inline]
+    pub fn of(&self, i: usize) -> &FiringPose {
+        match &self.index {
+            None => &self.firings[0],
+            Some(ix) => &self.firings[ix[i] as usize],
+        }
+    }
+
+    /// Applies `outer` after every pose (a rigid mount acting last).
+    pub fn then(&mut self, outer: &Pose) {
+        let outer = FiringPose {
+            pose: *outer,
+            velocity: [0.0; 3],
+        };
+        for f in self.firings.iter_mut() {
+            *f = outer.then_after(f);
+        }
+    }
+
+    /// Every pose of `self` applied after the pose of the same return in `inner`
+    /// (`inner` then `self`); the result keeps `inner`'s firing index.
+    pub fn after(&self, mut inner: Poses) -> Poses {
+        // Re-reference inner's velocity terms to self's reference time:
+        // t + v (time - t_in) = (t + v (t_self - t_in)) + v (time - t_self).
+        let shift = self.t_ref - inner.t_ref;
+        if shift != 0.0 {
+            for f in inner.firings.iter_mut() {
+                for k in 0..3 {
+                    f.pose.t[k] += f.velocity[k] * shift;
+                }
+            }
+        }
+        match (&self.index, &inner.index) {
+            (None, _) => {
+                let outer = self.firings[0];
+                for f in inner.firings.iter_mut() {
+                    *f = outer.then_after(f);
+                }
+                inner.t_ref = self.t_ref;
+                inner
+            }
+            (Some(_), None) => {
+                let mut out = self.clone();
+                for f in out.firings.iter_mut() {
+                    *f = f.then_after(&inner.firings[0]);
+                }
+                out
+            }
+            (Some(a), Some(b)) => {
+                // Both per firing: one entry per distinct pair of indices (the same
+                // firing grouping gives one pair per firing).
+                let mut firings = Vec::new();
+                let mut index = Vec::with_capacity(a.len());
+                let mut last = None;
+                for (&ia, &ib) in a.iter().zip(b) {
+                    if last != Some((ia, ib)) {
+                        last = Some((ia, ib));
+                        firings.push(
+                            self.firings[ia as usize].then_after(&inner.firings[ib as usize]),
+                        );
+                    }
+                    index.push(firings.len() as u32 - 1);
+                }
+                Poses {
+                    t_ref: self.t_ref,
+                    firings,
+                    index: Some(index),
+                }
+            }
+        }
+    }
+}
+
+/// `clamp(round(v g), 0, 255)` for a factor `g >= 0` (a finite gain), without a libm
+/// call: for non-negative x, round (half away from zero) is the truncation plus one when
+/// the fraction (exact: x - trunc(x)) is at least 0.5. Same bytes as `f64::round`.
+#[inline]
+pub fn scale_byte(v: u8, g: f64) -> u8 {
+    let x = f64::from(v) * g;
+    if x.is_nan() || x < 0.0 {
+        // NaN or negative: keep the exact formula for the cases the fast path skips.
+        return x.round().clamp(0.0, 255.0) as u8;
+    }
+    let t = x.min(256.0) as u32;
+    let up = u32::from(x - f64::from(t) >= 0.5);
+    (t + up).min(255) as u8
+}
+
+/// Returns per chunk of [`fill_normals`]: the draws of a chunk are made first (same
+/// stream order as one draw at a time), then the arithmetic runs on a buffer, free of
+/// calls, so the square roots and divisions of successive returns overlap.
+pub const CHUNK: usize = 256;
+
+/// Fills `out` (at most [`CHUNK`] * 2 values) with standard normal draws (ziggurat,
+/// `rand_distr::StandardNormal`). The random words are taken from `rng` in one bulk
+/// fill, one word per draw, and the ziggurat runs on that buffer (its rare rejections
+/// take further words from `rng`): the same distribution and the same stream, in a
+/// different order than one draw at a time, and much cheaper per draw.
+pub fn fill_normals(rng: &mut ChaCha8Rng, out: &mut [f64]) {
+    let mut words = [0u64; 2 * CHUNK];
+    let words = &mut words[..out.len()];
+    rng.fill(words);
+    let mut src = Buffered { words, pos: 0, rng };
+    for x in out.iter_mut() {
+        *x = src.sample::<f64, _>(StandardNormal);
+    }
+}
+
+/// Random words from a pre-filled buffer, then from the stream once it is used up.
+struct Buffered<'a> {
+    words: &'a [u64],
+    pos: usize,
+    rng: &'a mut ChaCha8Rng,
+}
+
+impl rand::RngCore for Buffered<'_> {
+    #[inline]
+    fn next_u64(&mut self) -> u64 {
+        match self.words.get(self.pos) {
+            Some(&w) => {
+                self.pos += 1;
+                w
+            }
+            None => self.rng.next_u64(),
+        }
+    }
+    #[inline]
+    fn next_u32(&mut self) -> u32 {
+        self.next_u64() as u32
+    }
+    fn fill_bytes(&mut self, dst: &mut [u8]) {
+        for chunk in dst.chunks_mut(8) {
+            let w = self.next_u64().to_le_bytes();
+            chunk.copy_from_slice(&w[..chunk.len()]);
+        }
+    }
+}
+
 /// One standard normal draw.
+#[inline]
 pub fn normal(rng: &mut ChaCha8Rng) -> f64 {
     rng.sample::<f64, _>(StandardNormal)
 }
@@ -144,4 +371,28 @@ pub fn float(v: f64) -> toml::Value {
 /// The clean firing time of the frame's first return (reference for per-frame times).
 pub fn frame_start(frame: &super::NoisyFrame) -> f64 {
     frame.clean.first().map_or(0.0, |r| r.time)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::scale_byte;
+
+    #[test]
+    fn scale_byte_rounds_like_f64_round() {
+        let gains = [
+            0.0, 0.25, 0.5, 0.9, 0.95, 1.0, 1.02, 1.5, 1.7, 2.0, 3.3, 10.0,
+        ];
+        for v in 0..=255u8 {
+            for g in gains
+                .into_iter()
+                .chain((0..200).map(|k| 0.8 + f64::from(k) * 0.0021))
+            {
+                let want = (f64::from(v) * g).round().clamp(0.0, 255.0) as u8;
+                assert_eq!(scale_byte(v, g), want, "{v} * {g}");
+            }
+        }
+        // Exact halves round up (away from zero), like f64::round.
+        assert_eq!(scale_byte(5, 0.5), 3);
+        assert_eq!(scale_byte(1, 0.5), 1);
+    }
 }

@@ -13,7 +13,7 @@
 //! order). Range, azimuth and time fields stay as reported. Source: Zhang and Singh,
 //! LOAM, RSS 2014; vibration values engineering assumption.
 
-use super::{float, number, Pose};
+use super::{float, number, FiringPose, Pose, Poses};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -87,9 +87,12 @@ impl NoiseStage for Motion {
         };
         let omega = self.yaw_rate_deg_s.to_radians();
         let w = std::f64::consts::TAU * self.vibration_hz;
+        // One pose per firing (the returns of a data block): the rotation at the
+        // firing's time, and a velocity term that moves each return by its own time:
+        // p' = R (p - v dt x) = R p + (-v R x) dt.
         let mut firing = None;
-        let mut rot = Pose::IDENTITY;
-        let mut poses = Vec::with_capacity(n);
+        let mut firings = Vec::with_capacity(n / 32 + 1);
+        let mut index = Vec::with_capacity(n);
         for r in &frame.clean {
             let key = (r.packet, r.block);
             if firing != Some(key) {
@@ -97,26 +100,26 @@ impl NoiseStage for Motion {
                 let dt = r.time - t_ref;
                 let roll = vib * (w * dt + phi[0]).sin();
                 let pitch = vib * (w * dt + phi[1]).sin();
-                let ego = Pose::from_rpy(0.0, 0.0, -omega * dt, [0.0; 3]);
-                rot = Pose::from_rpy(roll, pitch, 0.0, [0.0; 3]).then_after(&ego);
+                let ego = Pose::from_small_rpy(0.0, 0.0, -omega * dt, [0.0; 3]);
+                let rot = Pose::from_small_rpy(roll, pitch, 0.0, [0.0; 3]).then_after(&ego);
+                let velocity = [0, 1, 2].map(|k| -self.speed_mps * rot.r[k][0]);
+                firings.push(FiringPose {
+                    pose: rot,
+                    velocity,
+                });
             }
-            let dt = r.time - t_ref;
-            let mut p = rot;
-            // p' = R (p - v dt x): the translation is -v dt times R's first column.
-            for k in 0..3 {
-                p.t[k] = -self.speed_mps * dt * rot.r[k][0];
-            }
-            poses.push(p);
+            index.push(firings.len() as u32 - 1);
         }
-        match frame.moved.pose.take() {
-            None => frame.moved.pose = Some(poses),
-            Some(mut existing) => {
-                for (e, p) in existing.iter_mut().zip(&poses) {
-                    *e = e.then_after(p);
-                }
-                frame.moved.pose = Some(existing);
-            }
-        }
+        let poses = Poses {
+            t_ref,
+            firings,
+            index: Some(index),
+        };
+        frame.moved.pose = Some(match frame.moved.pose.take() {
+            None => poses,
+            // Whatever is already there (a mount) acts after the motion.
+            Some(existing) => existing.after(poses),
+        });
     }
 }
 

@@ -8,7 +8,7 @@
 //! Source: 3D_Corruptions_AD spatial alignment noise (Dong et al., CVPR 2023) for the
 //! kind of error; defaults (0.2 deg, 0.02 m, a calibrated rig) are engineering assumptions.
 
-use super::{float, normal, number, sigma, Pose};
+use super::{float, normal, number, sigma, Pose, Poses};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -81,11 +81,12 @@ impl NoiseStage for Mounting {
         if self.pose == Pose::IDENTITY {
             return;
         }
-        let n = frame.len();
-        for p in frame.moved.pose_mut(n).iter_mut() {
-            // The mount acts last: whatever moved the point in the sensor frame
-            // (motion, vibration) happened before the sensor-to-vehicle transform.
-            *p = self.pose.then_after(p);
+        // The mount acts last: whatever moved the point in the sensor frame (motion,
+        // vibration) happened before the sensor-to-vehicle transform. One product per
+        // firing pose, not per return.
+        match &mut frame.moved.pose {
+            None => frame.moved.pose = Some(Poses::uniform(self.pose)),
+            Some(poses) => poses.then(&self.pose),
         }
     }
 }

@@ -15,7 +15,7 @@
 //! assumption. Frame stream: two normal draws per return when the corresponding sigma
 //! is non-zero.
 
-use super::{float, normal, number, sigma};
+use super::{fill_normals, float, normal, number, scale_byte, sigma, CHUNK};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -82,33 +82,46 @@ impl NoiseStage for Receiver {
             || self.sigma_noise != 0.0
             || self.range_noise_m != 0.0;
         if any {
-            for i in 0..frame.len() {
-                let n_det = if self.sigma_noise > 0.0 {
-                    normal(rng)
-                } else {
-                    0.0
-                };
-                let n_range = if self.range_noise_m > 0.0 {
-                    normal(rng)
-                } else {
-                    0.0
-                };
-                if frame.fate[i] != Fate::Kept {
-                    continue;
+            // Per-laser power factor, formed once per frame (same product as per return).
+            let factor = self.gains.map(|g| self.responsivity * g);
+            let (draw_det, draw_range) = (self.sigma_noise > 0.0, self.range_noise_m > 0.0);
+            let noise_sd = self.sigma_noise * p_th;
+            // Draws per return, in stream order: detection noise, then range noise (each
+            // only when its sigma is non-zero), made before the fate test so a return
+            // draws the same numbers whatever earlier stages dropped (common random
+            // numbers). They are drawn a chunk at a time (see `CHUNK`).
+            let per = usize::from(draw_det) + usize::from(draw_range);
+            let mut buf = [0.0f64; 2 * CHUNK];
+            let n = frame.len();
+            let mut start = 0;
+            while start < n {
+                let end = (start + CHUNK).min(n);
+                let draws = &mut buf[..per * (end - start)];
+                fill_normals(rng, draws);
+                for (k, i) in (start..end).enumerate() {
+                    if frame.fate[i] != Fate::Kept {
+                        continue;
+                    }
+                    let n_det = if draw_det { draws[per * k] } else { 0.0 };
+                    let n_range = if draw_range {
+                        draws[per * k + per - 1]
+                    } else {
+                        0.0
+                    };
+                    if scale_power {
+                        frame.power[i] *= factor[usize::from(frame.clean[i].laser) % 32];
+                    }
+                    let p = frame.power[i];
+                    if p + noise_sd * n_det < cut {
+                        frame.fate[i] = Fate::BelowPower;
+                        continue;
+                    }
+                    if draw_range {
+                        let s_r = self.range_noise_m / (2.0 * p / p_th).sqrt();
+                        frame.range[i] = (f64::from(frame.range[i]) + s_r * n_range) as f32;
+                    }
                 }
-                let laser = usize::from(frame.clean[i].laser) % 32;
-                if scale_power {
-                    frame.power[i] *= self.responsivity * self.gains[laser];
-                }
-                let p = frame.power[i];
-                if p + self.sigma_noise * p_th * n_det < cut {
-                    frame.fate[i] = Fate::BelowPower;
-                    continue;
-                }
-                if self.range_noise_m > 0.0 {
-                    let s_r = self.range_noise_m / (2.0 * p / p_th).sqrt();
-                    frame.range[i] = (f64::from(frame.range[i]) + s_r * n_range) as f32;
-                }
+                start = end;
             }
         }
         if self.gain_error != 1.0 {
@@ -119,7 +132,7 @@ impl NoiseStage for Receiver {
                 .intensity
                 .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect());
             for x in v.iter_mut() {
-                *x = (f64::from(*x) * g).round().clamp(0.0, 255.0) as u8;
+                *x = scale_byte(*x, g);
             }
         }
     }

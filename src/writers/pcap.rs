@@ -230,10 +230,10 @@ pub fn check_encodable(chain: &NoiseChain, seed: u64) -> Result<()> {
         {
             what.push("elevation");
         }
-        if m.pose.as_ref().is_some_and(|v| {
-            v.iter()
-                .zip(&probe)
-                .any(|(p, r)| p.apply([r.x, r.y, r.z]) != [r.x, r.y, r.z])
+        if m.pose.as_ref().is_some_and(|poses| {
+            probe.iter().enumerate().any(|(i, r)| {
+                poses.of(i).apply([r.x, r.y, r.z], r.time - poses.t_ref) != [r.x, r.y, r.z]
+            })
         }) {
             what.push("position (pose)");
         }

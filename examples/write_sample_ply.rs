@@ -80,6 +80,7 @@ fn main() -> anyhow::Result<()> {
             range_clean: Some(&range_clean),
             power: Some(&power),
             fate: Some(&fate),
+            cause: None,
             ground: Some(&ground),
             cluster: Some(&cluster),
         };

@@ -134,6 +134,7 @@ fn las_and_laz_hold_every_field_of_the_ply() {
         "range_clean",
         "power",
         "fate",
+        "cause",
         "cluster",
     ];
     assert_eq!(las.extra_names, names);

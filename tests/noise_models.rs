@@ -522,6 +522,7 @@ fn summaries_count_and_merge_exactly() {
                     pow_by_laser[fr.clean[i].laser as usize] += 1;
                 }
                 Fate::BelowMinRange => rng += 1,
+                Fate::Replaced | Fate::Added => panic!("occlusion and rain propose no echoes"),
             }
         }
     }

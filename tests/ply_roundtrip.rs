@@ -58,6 +58,7 @@ struct Extras {
     range_clean: Vec<f32>,
     power: Vec<f32>,
     fate: Vec<u8>,
+    cause: Vec<u8>,
     ground: Vec<u8>,
     cluster: Vec<i32>,
 }
@@ -68,6 +69,7 @@ fn extras(n: usize, seed: u64) -> Extras {
         range_clean: (0..n).map(|_| any_f32(&mut rng)).collect(),
         power: (0..n).map(|_| rng.random_range(0.0f32..1e-6)).collect(),
         fate: (0..n).map(|_| rng.random()).collect(),
+        cause: (0..n).map(|_| rng.random()).collect(),
         ground: (0..n).map(|_| rng.random_range(0..2)).collect(),
         cluster: (0..n)
             .map(|i| {
@@ -130,6 +132,7 @@ fn expected_properties(with_extras: bool) -> Vec<(&'static str, ScalarType)> {
             ("range_clean", ScalarType::Float),
             ("power", ScalarType::Float),
             ("fate", ScalarType::UChar),
+            ("cause", ScalarType::UChar),
             ("ground", ScalarType::UChar),
             ("cluster", ScalarType::Int),
         ]);
@@ -153,6 +156,7 @@ fn check(encoding: PlyEncoding, with_extras: bool) {
             range_clean: Some(&ex.range_clean),
             power: Some(&ex.power),
             fate: Some(&ex.fate),
+            cause: Some(&ex.cause),
             ground: Some(&ex.ground),
             cluster: Some(&ex.cluster),
         };
@@ -213,6 +217,7 @@ fn check(encoding: PlyEncoding, with_extras: bool) {
             );
             assert!(same(float(&p["power"]), ex.power[i]), "point {i}");
             assert_eq!(uchar(&p["fate"]), ex.fate[i], "point {i}");
+            assert_eq!(uchar(&p["cause"]), ex.cause[i], "point {i}");
             assert_eq!(uchar(&p["ground"]), ex.ground[i], "point {i}");
             assert_eq!(int(&p["cluster"]), ex.cluster[i], "point {i}");
         } else {

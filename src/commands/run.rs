@@ -97,7 +97,7 @@ struct Summary<'a> {
     settings: crate::config::EffectiveConfig<'a>,
     power_constants: &'a crate::noise::PowerConstants,
     decoder: DecoderSettings,
-    fate_codes: [&'static str; 4],
+    fate_codes: [&'static str; 6],
     capture_summary: &'a CaptureSummary,
     totals: Totals,
     frames: &'a [FrameReport],
@@ -654,9 +654,17 @@ fn write_ply(
         format!("config {}", plan.config.provenance()),
         format!("seed {}", plan.config.seed),
         format!(
-            "fate codes: 0 {}, 1 {}, 2 {}, 3 {}",
-            FATE_CODES[0], FATE_CODES[1], FATE_CODES[2], FATE_CODES[3]
+            "fate codes: {}",
+            FATE_CODES
+                .iter()
+                .enumerate()
+                .map(|(i, c)| format!("{i} {c}"))
+                .collect::<Vec<_>>()
+                .join(", ")
         ),
+        "cause: index of the stage in the noise chain that decided the fate, 255 none or the \
+         detection filters; range_clean 0 for added returns"
+            .into(),
         "range is after noise, range_clean before; power is a fraction of emitted power".into(),
         "cluster -1 is ground or noise".into(),
     ];
@@ -679,7 +687,7 @@ fn write_ply(
             ground_all[k as usize] = ground[s];
             cluster_all[k as usize] = r.labels[s];
         }
-        let range_clean: Vec<f32> = r.noisy.clean.iter().map(|c| c.range).collect();
+        let range_clean: Vec<f32> = (0..r.noisy.len()).map(|i| clean_range(r, i)).collect();
         let power: Vec<f32> = r.noisy.power.iter().map(|&p| p as f32).collect();
         let fate: Vec<u8> = r.noisy.fate.iter().map(|&f| f as u8).collect();
         let ply = PlyFrame {
@@ -687,6 +695,7 @@ fn write_ply(
                 range_clean: Some(&range_clean),
                 power: Some(&power),
                 fate: Some(&fate),
+                cause: Some(&r.noisy.cause),
                 ground: Some(&ground_all),
                 cluster: Some(&cluster_all),
             },
@@ -695,21 +704,29 @@ fn write_ply(
         };
         write_file(&*plan.output.document(ply), &path, inputs)?;
     } else {
-        let range_clean: Vec<f32> = r
-            .kept
-            .iter()
-            .map(|&k| r.noisy.clean[k as usize].range)
-            .collect();
+        let range_clean: Vec<f32> = r.kept.iter().map(|&k| clean_range(r, k as usize)).collect();
         let power: Vec<f32> = r
             .kept
             .iter()
             .map(|&k| r.noisy.power[k as usize] as f32)
             .collect();
+        // Chains that can report spurious echoes say which points are echoes; the
+        // columns depend on the configuration only, never on the data.
+        let (fate, cause): (Vec<u8>, Vec<u8>) = if plan.pipeline.chain().proposes_echoes() {
+            r.kept
+                .iter()
+                .map(|&k| (r.noisy.fate[k as usize] as u8, r.noisy.cause[k as usize]))
+                .unzip()
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        let echoes = plan.pipeline.chain().proposes_echoes();
         let ply = PlyFrame {
             columns: PlyColumns {
                 range_clean: Some(&range_clean),
                 power: Some(&power),
-                fate: None,
+                fate: echoes.then_some(&fate[..]),
+                cause: echoes.then_some(&cause[..]),
                 ground: Some(&ground),
                 cluster: Some(&r.labels),
             },
@@ -719,6 +736,15 @@ fn write_ply(
         write_file(&*plan.output.document(ply), &path, inputs)?;
     }
     Ok(())
+}
+
+/// Range of return `i` before noise: 0 for a return a stage added (it has no clean origin).
+fn clean_range(r: &FrameResult, i: usize) -> f32 {
+    if i < r.noisy.clean_len {
+        r.noisy.clean[i].range
+    } else {
+        0.0
+    }
 }
 
 fn write_linkage(plan: &Plan, r: &FrameResult, dir: &Path, inputs: &[&Path]) -> Result<()> {

@@ -599,7 +599,18 @@ fn read_config(root: &Section<'_>, file: &Path) -> Result<Config> {
     // Stage options are validated by the noise registry (crate::loader); here they are
     // only recorded as data.
     let mut stages: Vec<StageSpec> = Vec::new();
-    for entry in root.table_array("noise")? {
+    let entries = root.table_array("noise")?;
+    // PLY and LAS store the deciding stage's index in one byte, 255 meaning none.
+    if entries.len() > 254 {
+        return Err(root.error(
+            "noise",
+            format!(
+                "{} [[noise]] stages; at most 254 are supported",
+                entries.len()
+            ),
+        ));
+    }
+    for entry in entries {
         stages.push(StageSpec {
             path: entry.path().to_string(),
             options: entry.raw().clone(),

@@ -25,6 +25,7 @@ pub mod detection;
 pub mod power;
 pub mod registry;
 pub mod sensor;
+pub mod spurious;
 pub mod summary;
 pub mod world;
 
@@ -41,6 +42,7 @@ use std::sync::Arc;
 
 pub use detection::apply_detection;
 pub use power::{IdealPower, PowerConstants};
+pub use spurious::{Echo, SlotId, Slots};
 pub use summary::NoiseSummary;
 
 /// What happened to a return; the first cause in pipeline order wins.
@@ -56,11 +58,32 @@ pub enum Fate {
     BelowPower = 2,
     /// Noisy range under the minimum range.
     BelowMinRange = 3,
+    /// Replaced by a spurious echo that won its firing slot: the position and range are
+    /// the echo's, `clean` keeps the return that was recorded.
+    Replaced = 4,
+    /// Added by a stage in a firing slot that had no return (no clean origin).
+    Added = 5,
 }
+
+/// `cause` of returns whose fate no stage decided: kept returns, and returns dropped by
+/// the detection filters.
+pub const NO_CAUSE: u8 = u8::MAX;
 
 impl Fate {
     /// The causes of removal, in pipeline order.
     pub const DROPS: [Fate; 3] = [Fate::Occluded, Fate::BelowPower, Fate::BelowMinRange];
+
+    /// True while the sensor still reports the return (kept, or a spurious echo in its place).
+    #[inline]
+    pub fn is_alive(self) -> bool {
+        matches!(self, Fate::Kept | Fate::Replaced | Fate::Added)
+    }
+
+    /// True for returns that are echoes of no recorded return.
+    #[inline]
+    pub fn is_spurious(self) -> bool {
+        matches!(self, Fate::Replaced | Fate::Added)
+    }
 
     /// Short snake_case name (as in reports).
     pub fn name(self) -> &'static str {
@@ -69,28 +92,47 @@ impl Fate {
             Fate::Occluded => "occluded",
             Fate::BelowPower => "below_power",
             Fate::BelowMinRange => "below_min_range",
+            Fate::Replaced => "replaced",
+            Fate::Added => "added",
         }
     }
 }
 
 /// One frame on its way through the chain: clean returns plus per-return noisy state.
 ///
-/// All vectors have one entry per clean return, in the clean order.
+/// All vectors have one entry per return, in the clean order: first the `clean_len`
+/// returns of the capture, then the returns stages added (fate [`Fate::Added`]), whose
+/// `clean` entry is the echo itself.
 #[derive(Clone, Debug, Default)]
 pub struct NoisyFrame {
     /// Index of the frame in the capture (keys the random streams).
     pub index: u32,
-    /// The returns as recorded.
+    /// The returns as recorded (and, past `clean_len`, the added returns).
     pub clean: Vec<Return>,
+    /// Number of returns of the capture; entries from here on were added by stages.
+    pub clean_len: usize,
     /// Current range in metres (the clean range until a stage changes it).
     pub range: Vec<f32>,
     /// Current power as a fraction of emitted power (the ideal power at first).
     pub power: Vec<f64>,
-    /// Current fate; stages and filters only change `Kept` entries.
+    /// Current fate; stages and filters only change alive entries ([`Fate::is_alive`]).
     pub fate: Vec<Fate>,
+    /// Index in the chain of the stage that decided the fate ([`NO_CAUSE`] for kept
+    /// returns and for the detection filters' drops).
+    pub cause: Vec<u8>,
     /// The detection threshold (fraction of emitted power) the filters will apply, for
     /// stages that raise it (receiver noise floor, ambient light).
     pub threshold: f64,
+    /// The minimum range (m) of the detection filters.
+    pub min_range: f64,
+    /// Index in the chain of the stage being applied (set by the chain).
+    pub stage: u8,
+    /// Echoes proposed by the stages, resolved once per firing slot after the chain.
+    pub candidates: Vec<spurious::Candidate>,
+    /// The firing slots of the frame, built when a stage first asks for them.
+    pub slots: Option<Arc<Slots>>,
+    /// The ideal-power model, for the intensity of spurious echoes.
+    pub power_model: Option<Arc<IdealPower>>,
     /// Per-return state that only sensor stages change; `None` until one does, so that a
     /// chain without them (or with them at zero magnitude) writes the same bytes.
     pub moved: Moved,
@@ -133,16 +175,37 @@ impl NoisyFrame {
             .iter()
             .map(|r| ideal.power(r.intensity, r.range))
             .collect();
-        let fate = vec![Fate::Kept; clean.len()];
+        let n = clean.len();
         NoisyFrame {
             index,
             clean,
+            clean_len: n,
             range,
             power,
-            fate,
+            fate: vec![Fate::Kept; n],
+            cause: vec![NO_CAUSE; n],
             threshold: crate::config::DetectionConfig::default().min_power,
+            min_range: crate::config::DetectionConfig::default().min_range_m,
+            stage: 0,
+            candidates: Vec::new(),
+            slots: None,
+            power_model: None,
             moved: Moved::default(),
         }
+    }
+
+    /// Sets the fate of return `i`, recording the stage being applied as its cause.
+    #[inline]
+    pub fn set_fate(&mut self, i: usize, fate: Fate) {
+        self.fate[i] = fate;
+        self.cause[i] = self.stage;
+    }
+
+    /// True if the sensor could detect an echo of `power` at `range` metres now (power at
+    /// or above the current threshold, range at or above the minimum range).
+    #[inline]
+    pub fn detectable(&self, range: f32, power: f64) -> bool {
+        power >= self.threshold && f64::from(range) >= self.min_range
     }
 
     /// Number of returns (clean and noisy alike).
@@ -155,10 +218,11 @@ impl NoisyFrame {
         self.clean.is_empty()
     }
 
-    /// Indices (into `clean`) of the returns that survived, in clean order.
+    /// Indices (into `clean`) of the returns the sensor reports (kept, replaced and
+    /// added), in order.
     pub fn kept_indices(&self) -> Vec<u32> {
         (0..self.len() as u32)
-            .filter(|&i| self.fate[i as usize] == Fate::Kept)
+            .filter(|&i| self.fate[i as usize].is_alive())
             .collect()
     }
 
@@ -172,7 +236,7 @@ impl NoisyFrame {
         let view = View::of(self);
         let mut out = Vec::with_capacity(self.len());
         for (i, fate) in self.fate.iter().enumerate() {
-            if *fate == Fate::Kept {
+            if fate.is_alive() {
                 out.push(view.noisy_return(i));
             }
         }
@@ -324,6 +388,11 @@ pub trait NoiseStage: Send + Sync + std::fmt::Debug {
     fn with_unit_draws(&self, _rng: &mut ChaCha8Rng) -> Option<Arc<dyn NoiseStage>> {
         None
     }
+    /// True when the stage, with its options, may propose spurious echoes (the PLY of
+    /// kept returns then carries `fate` and `cause`).
+    fn proposes_echoes(&self) -> bool {
+        false
+    }
 }
 
 /// Frame index reserved for per-unit draws: the unit stream of a stage is
@@ -364,7 +433,7 @@ pub fn stage_tags(kinds: &[&str]) -> Vec<u32> {
 #[derive(Clone, Debug)]
 pub struct NoiseChain {
     seed: u64,
-    power: IdealPower,
+    power: Arc<IdealPower>,
     stages: Vec<Arc<dyn NoiseStage>>,
     tags: Vec<u32>,
     detection: crate::config::DetectionConfig,
@@ -385,7 +454,11 @@ impl NoiseChain {
             .collect();
         NoiseChain {
             seed: config.seed,
-            power: IdealPower::new(&config.power, &config.sensor, &config.detection),
+            power: Arc::new(IdealPower::new(
+                &config.power,
+                &config.sensor,
+                &config.detection,
+            )),
             stages,
             tags,
             detection: config.detection.clone(),
@@ -402,6 +475,11 @@ impl NoiseChain {
         &self.stages
     }
 
+    /// True when some stage may propose spurious echoes.
+    pub fn proposes_echoes(&self) -> bool {
+        self.stages.iter().any(|s| s.proposes_echoes())
+    }
+
     /// Runs ideal power, the stages and the detection filters on a copy of `frame`.
     pub fn process(&self, frame: &Frame) -> NoisyFrame {
         self.process_returns(frame.index, frame.returns.clone())
@@ -416,10 +494,16 @@ impl NoiseChain {
     pub fn process_returns(&self, index: u32, returns: Vec<Return>) -> NoisyFrame {
         let mut noisy = NoisyFrame::new(index, returns, &self.power);
         noisy.threshold = self.detection.min_power;
-        for (stage, &tag) in self.stages.iter().zip(&self.tags) {
+        noisy.min_range = self.detection.min_range_m;
+        noisy.power_model = Some(Arc::clone(&self.power));
+        for (i, (stage, &tag)) in self.stages.iter().zip(&self.tags).enumerate() {
+            // Chains are far shorter than 255 stages (checked when the config is read).
+            noisy.stage = i.min(usize::from(NO_CAUSE) - 1) as u8;
             let mut rng = stage_rng(self.seed, index, tag);
             stage.apply(&mut noisy, &mut rng);
         }
+        // Every stage's echoes compete once, per firing slot, with the return-mode rule.
+        spurious::resolve(&mut noisy);
         apply_detection(&mut noisy, &self.detection);
         noisy
     }

@@ -111,4 +111,19 @@ impl IdealPower {
         (c.threshold * (self.reflectance(intensity) / c.reference_reflectance) * q * q)
             .min(c.saturation)
     }
+
+    /// Intensity byte the sensor would report for a return of `power` at `range` metres:
+    /// the inverse of [`IdealPower::power`], rounded and clamped to the byte's full scale
+    /// (spurious echoes get their intensity from it).
+    pub fn intensity_of(&self, power: f64, range: f32) -> u8 {
+        let c = &self.constants;
+        let q = f64::from(range) / c.reference_range_m;
+        let rho = power / c.threshold * c.reference_reflectance * q * q;
+        let level = (rho.clamp(0.0, 1.0) * c.intensity_full_scale).round();
+        if level.is_finite() {
+            level as u8
+        } else {
+            0
+        }
+    }
 }

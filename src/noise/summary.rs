@@ -189,6 +189,26 @@ pub struct NoiseSummary {
     pub dropped_by_laser: DropsByLaser,
     /// R_n - R_i of kept returns.
     pub range_change: RangeChange,
+    /// Returns that are spurious echoes (left out of reports while there are none, so
+    /// chains without scatter stages report as before).
+    #[serde(skip_serializing_if = "SpuriousCounts::is_empty")]
+    pub spurious: SpuriousCounts,
+}
+
+/// Reported returns that are spurious echoes, by kind.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct SpuriousCounts {
+    /// Recorded returns replaced by an echo that won their firing slot (fate 4).
+    pub replaced: u64,
+    /// Echoes added in firing slots that had no return (fate 5).
+    pub added: u64,
+}
+
+impl SpuriousCounts {
+    /// True when there are none.
+    pub fn is_empty(&self) -> bool {
+        self.replaced == 0 && self.added == 0
+    }
 }
 
 impl NoiseSummary {
@@ -196,7 +216,7 @@ impl NoiseSummary {
     pub fn from_frame(frame: &NoisyFrame) -> Self {
         let mut s = NoiseSummary {
             frames: 1,
-            returns_in: frame.len() as u64,
+            returns_in: frame.clean_len as u64,
             ..Default::default()
         };
         for ((r, &fate), &rn) in frame.clean.iter().zip(&frame.fate).zip(&frame.range) {
@@ -205,6 +225,14 @@ impl NoiseSummary {
                 Fate::Kept => {
                     s.returns_out += 1;
                     s.range_change.add(f64::from(rn) - f64::from(r.range));
+                }
+                Fate::Replaced => {
+                    s.returns_out += 1;
+                    s.spurious.replaced += 1;
+                }
+                Fate::Added => {
+                    s.returns_out += 1;
+                    s.spurious.added += 1;
                 }
                 Fate::Occluded => {
                     s.dropped.occluded += 1;
@@ -237,6 +265,8 @@ impl NoiseSummary {
             self.dropped_by_laser.below_min_range[i] += other.dropped_by_laser.below_min_range[i];
         }
         self.range_change.merge(&other.range_change);
+        self.spurious.replaced += other.spurious.replaced;
+        self.spurious.added += other.spurious.added;
     }
 }
 

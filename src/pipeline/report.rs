@@ -7,7 +7,14 @@ use crate::writers::csv::CsvTable;
 use serde::Serialize;
 
 /// Meaning of the PLY `fate` codes, in code order.
-pub const FATE_CODES: [&str; 4] = ["kept", "occluded", "below_power", "below_min_range"];
+pub const FATE_CODES: [&str; 6] = [
+    "kept",
+    "occluded",
+    "below_power",
+    "below_min_range",
+    "replaced",
+    "added",
+];
 
 /// One frame's line in the summary.
 #[derive(Clone, Debug, Serialize)]

@@ -509,12 +509,34 @@ fn truth_of(frame: &Frame, labels: &HashMap<u32, Vec<LabelRow>>, origin: &Path) 
 }
 
 /// Cluster id of every clean return (-1 when dropped, ground or noise).
+/// Cluster id per recorded return (-1: none). A spurious echo (replaced or added) is no
+/// recorded return: it gets no label, so it never counts for an object.
 fn labels_per_clean(r: &FrameResult) -> Vec<i32> {
-    let mut out = vec![-1; r.noisy.len()];
+    let mut out = vec![-1; r.noisy.clean_len];
     for (&k, &l) in r.kept.iter().zip(&r.labels) {
-        out[k as usize] = l;
+        if r.noisy.fate[k as usize] == crate::noise::Fate::Kept {
+            out[k as usize] = l;
+        }
     }
     out
+}
+
+/// Object clusters made of spurious echoes only: false clusters no recorded return shows.
+fn spurious_object_clusters(r: &FrameResult) -> u64 {
+    let mut real = std::collections::BTreeSet::new();
+    let mut any = std::collections::BTreeSet::new();
+    for (&k, &l) in r.kept.iter().zip(&r.labels) {
+        if l >= 0 {
+            any.insert(l);
+            if r.noisy.fate[k as usize] == crate::noise::Fate::Kept {
+                real.insert(l);
+            }
+        }
+    }
+    r.clusters
+        .iter()
+        .filter(|c| c.object && any.contains(&c.id) && !real.contains(&c.id))
+        .count() as u64
 }
 
 /// `labels` (cluster id per clean return) with every cluster that is not an object set
@@ -575,6 +597,7 @@ fn frame_metrics(
     let change = metrics::range_change(
         r.kept
             .iter()
+            .filter(|&&k| r.noisy.fate[k as usize] == Fate::Kept)
             .map(|&k| (r.noisy.clean[k as usize].range, r.noisy.range[k as usize])),
     );
     let noisy = labels_per_clean(r);
@@ -603,8 +626,11 @@ fn frame_metrics(
         })
         .collect();
     for (&k, &g) in r.kept.iter().zip(&r.ground) {
-        states[k as usize].reached = true;
-        states[k as usize].ground = g;
+        // Only recorded returns the sensor still reports reach an object; echoes do not.
+        if r.noisy.fate[k as usize] == Fate::Kept {
+            states[k as usize].reached = true;
+            states[k as usize].ground = g;
+        }
     }
     let object_ids = truth.map_or(&reference.objects, |t| &t.objects);
     for (s, &o) in states.iter_mut().zip(object_ids) {
@@ -629,7 +655,7 @@ fn frame_metrics(
         baseline_object_clusters: reference.object_clusters,
         matched: m.matched() as u64,
         object_survival: m.survival(),
-        false_clusters: clutter.false_clusters as u64,
+        false_clusters: clutter.false_clusters as u64 + spurious_object_clusters(r),
         farthest_matched_m: farthest(&mut m.pairs.iter().map(|p| p.0)),
         baseline_farthest_m: farthest(&mut reference.distance.keys().copied()),
         labelled: truth.is_some(),
@@ -646,7 +672,12 @@ fn frame_metrics(
     if let Some(t) = truth {
         // Ground precision and recall over the returns that reach ground removal; the
         // ground returns dropped before it are reported on their own.
-        let truth_reached: Vec<bool> = r.kept.iter().map(|&k| t.ground[k as usize]).collect();
+        // A spurious echo is never ground in truth (it is no recorded return).
+        let truth_reached: Vec<bool> = r
+            .kept
+            .iter()
+            .map(|&k| r.noisy.fate[k as usize] == Fate::Kept && t.ground[k as usize])
+            .collect();
         (out.ground_precision, out.ground_recall) =
             metrics::precision_recall(&truth_reached, &r.ground);
         let ground_total = t.ground.iter().filter(|&&g| g).count();

@@ -11,7 +11,7 @@
 //! | `time` | GPS Time: the return's absolute time, seconds past the hour as the HDL-32E stamps it (the sensor knows no GPS week); the PLY's `time` is this minus the frame start |
 //! | `ground` | Classification 2 (ground); other kept returns 1 (unclassified); `convert` writes 0 (never classified) |
 //! | `fate` > 0 | Classification 7 (low noise), plus the `fate` extra byte |
-//! | `ring`, `laser`, `azimuth`, `range`, `range_clean`, `power`, `fate`, `cluster` | extra bytes, described in the Extra Bytes VLR (LASF_Spec, record 4) under those names |
+//! | `ring`, `laser`, `azimuth`, `range`, `range_clean`, `power`, `fate`, `cause`, `cluster` | extra bytes, described in the Extra Bytes VLR (LASF_Spec, record 4) under those names |
 //!
 //! Return number and number of returns are both 1: each return of a dual-return capture
 //! is its own pulse record here. Provenance (the PLY's comment lines) is a VLR with user id
@@ -92,10 +92,11 @@ pub const BASE_DIMS: [ExtraDim; 4] = [
 
 /// Optional dimensions, in record order, present when the frame has the column.
 /// (`ground` is the classification, not an extra dimension.)
-pub const OPTIONAL_DIMS: [ExtraDim; 4] = [
+pub const OPTIONAL_DIMS: [ExtraDim; 5] = [
     dim("range_clean", ExtraType::F32, "metres before noise"),
     dim("power", ExtraType::F32, "fraction of emitted power"),
-    dim("fate", ExtraType::U8, "0 kept 1 occl 2 power 3 range"),
+    dim("fate", ExtraType::U8, "0kept 1occl 2pow 3rng 4rep 5add"),
+    dim("cause", ExtraType::U8, "stage index, 255 none/filters"),
     dim("cluster", ExtraType::I32, "cluster id, -1 = none"),
 ];
 
@@ -116,6 +117,7 @@ impl LasFrame<'_> {
             c.range_clean.is_some(),
             c.power.is_some(),
             c.fate.is_some(),
+            c.cause.is_some(),
             c.cluster.is_some(),
         ];
         BASE_DIMS
@@ -181,6 +183,9 @@ impl LasFrame<'_> {
             let fate = c.fate.map_or(0, |v| v[i]);
             if c.fate.is_some() {
                 extra.push(fate);
+            }
+            if let Some(v) = c.cause {
+                extra.push(v[i]);
             }
             if let Some(v) = c.cluster {
                 extra.extend_from_slice(&v[i].to_le_bytes());
@@ -248,7 +253,7 @@ mod tests {
 
     #[test]
     fn descriptors_are_192_bytes_with_name_type_and_description() {
-        let d = descriptor(&OPTIONAL_DIMS[3]);
+        let d = descriptor(&OPTIONAL_DIMS[4]);
         assert_eq!(d.len(), 192);
         assert_eq!(d[2], 6);
         assert_eq!(&d[4..11], b"cluster");

@@ -32,7 +32,7 @@ use crate::frame::{Return, ReturnKind};
 use crate::hdl32e::decode::DualSelect;
 use crate::hdl32e::encode::{raw_distance, write_return_slot, BLOCKS_PER_PACKET, BLOCK_LEN};
 use crate::hdl32e::packet::{self, ReturnMode};
-use crate::noise::{stage_rng, Fate, NoiseChain, NoisyFrame};
+use crate::noise::{stage_rng, NoiseChain, NoisyFrame};
 use crate::writers::Output;
 use anyhow::{bail, Result};
 use std::io::Write;
@@ -143,7 +143,7 @@ impl NoisyCapture {
                 continue;
             }
             let laser = usize::from(r.laser) & 31;
-            let (raw, value) = if frame.fate[i] == Fate::Kept {
+            let (raw, value) = if frame.fate[i].is_alive() {
                 match raw_distance(frame.range[i], self.offsets[laser], self.resolution) {
                     Some(raw) => (raw, intensity.map_or(r.intensity, |v| v[i])),
                     None => {

@@ -15,6 +15,7 @@
 //! | `range_clean` | float | optional: range before noise was applied |
 //! | `power` | float | optional: received power (model units) |
 //! | `fate` | uchar | optional: what the noise/detection stages did (codes in comments) |
+//! | `cause` | uchar | optional: index in the chain of the stage that decided the fate (255: none, or the detection filters) |
 //! | `ground` | uchar | optional: 1 = ground, 0 = not |
 //! | `cluster` | int | optional: cluster id, -1 = none |
 //!
@@ -44,10 +45,11 @@ pub const BASE_PROPERTIES: [(&str, &str); 9] = [
 ];
 
 /// The optional properties, in the order they are written when present, as (name, PLY type).
-pub const OPTIONAL_PROPERTIES: [(&str, &str); 5] = [
+pub const OPTIONAL_PROPERTIES: [(&str, &str); 6] = [
     ("range_clean", "float"),
     ("power", "float"),
     ("fate", "uchar"),
+    ("cause", "uchar"),
     ("ground", "uchar"),
     ("cluster", "int"),
 ];
@@ -61,6 +63,8 @@ pub struct PlyColumns<'a> {
     pub power: Option<&'a [f32]>,
     /// Fate code of each point (`uchar fate`); describe the codes in the comments.
     pub fate: Option<&'a [u8]>,
+    /// Index in the noise chain of the stage that decided the fate (`uchar cause`).
+    pub cause: Option<&'a [u8]>,
     /// Ground flag, 1 = ground (`uchar ground`).
     pub ground: Option<&'a [u8]>,
     /// Cluster id, -1 = none (`int cluster`).
@@ -69,11 +73,12 @@ pub struct PlyColumns<'a> {
 
 impl PlyColumns<'_> {
     /// Length of each present column with its name, in file order.
-    fn lengths(&self) -> [(&'static str, Option<usize>); 5] {
+    fn lengths(&self) -> [(&'static str, Option<usize>); 6] {
         [
             ("range_clean", self.range_clean.map(<[f32]>::len)),
             ("power", self.power.map(<[f32]>::len)),
             ("fate", self.fate.map(<[u8]>::len)),
+            ("cause", self.cause.map(<[u8]>::len)),
             ("ground", self.ground.map(<[u8]>::len)),
             ("cluster", self.cluster.map(<[i32]>::len)),
         ]
@@ -223,6 +228,7 @@ impl<'a> PlyFrame<'a> {
         27 + 4 * usize::from(c.range_clean.is_some())
             + 4 * usize::from(c.power.is_some())
             + usize::from(c.fate.is_some())
+            + usize::from(c.cause.is_some())
             + usize::from(c.ground.is_some())
             + 4 * usize::from(c.cluster.is_some())
     }
@@ -264,6 +270,9 @@ impl<'a> PlyFrame<'a> {
                 if let Some(v) = c.fate {
                     buf.push(v[i]);
                 }
+                if let Some(v) = c.cause {
+                    buf.push(v[i]);
+                }
                 if let Some(v) = c.ground {
                     buf.push(v[i]);
                 }
@@ -303,6 +312,9 @@ impl<'a> PlyFrame<'a> {
                 let _ = write!(line, " {}", v[i]);
             }
             if let Some(v) = c.fate {
+                let _ = write!(line, " {}", v[i]);
+            }
+            if let Some(v) = c.cause {
                 let _ = write!(line, " {}", v[i]);
             }
             if let Some(v) = c.ground {

@@ -68,11 +68,11 @@ impl NoiseStage for Ambient {
             return;
         }
         for i in 0..frame.len() {
-            if frame.fate[i] != Fate::Kept {
+            if !frame.fate[i].is_alive() {
                 continue;
             }
             if p_bg > 0.0 && frame.power[i] < cut {
-                frame.fate[i] = Fate::BelowPower;
+                frame.set_fate(i, Fate::BelowPower);
             } else if offset != 0.0 {
                 frame.range[i] = (f64::from(frame.range[i]) + offset) as f32;
             }

@@ -14,7 +14,7 @@ use super::{fill_normals, float, number, sigma, CHUNK, C_M_PER_S};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
-use crate::noise::{Fate, NoiseStage, NoisyFrame, StageKind};
+use crate::noise::{NoiseStage, NoisyFrame, StageKind};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 use toml::Value;
@@ -72,7 +72,7 @@ impl NoiseStage for Clock {
                     fill_normals(rng, draws);
                 }
                 for ((range, fate), n) in ranges.iter_mut().zip(fates).zip(draws.iter()) {
-                    if *fate == Fate::Kept {
+                    if fate.is_alive() {
                         *range = (f64::from(*range) * scale + bias_m + sigma_m * n) as f32;
                     }
                 }

@@ -15,7 +15,7 @@ use super::{float, number, scale_byte};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
-use crate::noise::{Fate, NoiseStage, NoisyFrame, StageKind};
+use crate::noise::{NoiseStage, NoisyFrame, StageKind};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 use toml::Value;
@@ -58,7 +58,7 @@ impl NoiseStage for Emitter {
             .intensity
             .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect());
         for i in 0..clean.len() {
-            if frame.fate[i] != Fate::Kept {
+            if !frame.fate[i].is_alive() {
                 continue;
             }
             let h = clean[i].time / 3600.0;

@@ -15,7 +15,7 @@ use super::{float, normal, per_laser, scale_byte, sigma};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
-use crate::noise::{Fate, NoiseStage, NoisyFrame, StageKind};
+use crate::noise::{NoiseStage, NoisyFrame, StageKind};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 use toml::Value;
@@ -99,7 +99,7 @@ impl NoiseStage for LaserDiode {
             };
             // One pass over the returns; the laser's values are looked up once.
             for i in 0..n {
-                if frame.fate[i] != Fate::Kept {
+                if !frame.fate[i].is_alive() {
                     continue;
                 }
                 let l = usize::from(clean[i].laser) % 32;

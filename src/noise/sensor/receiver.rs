@@ -99,7 +99,7 @@ impl NoiseStage for Receiver {
                 let draws = &mut buf[..per * (end - start)];
                 fill_normals(rng, draws);
                 for (k, i) in (start..end).enumerate() {
-                    if frame.fate[i] != Fate::Kept {
+                    if !frame.fate[i].is_alive() {
                         continue;
                     }
                     let n_det = if draw_det { draws[per * k] } else { 0.0 };
@@ -113,7 +113,7 @@ impl NoiseStage for Receiver {
                     }
                     let p = frame.power[i];
                     if p + noise_sd * n_det < cut {
-                        frame.fate[i] = Fate::BelowPower;
+                        frame.set_fate(i, Fate::BelowPower);
                         continue;
                     }
                     if draw_range {

@@ -128,17 +128,20 @@ impl NoiseStage for Occlusion {
     }
 
     fn apply(&self, frame: &mut NoisyFrame, _rng: &mut ChaCha8Rng) {
-        for ((r, fate), power) in frame
+        let stage = frame.stage;
+        for (((r, fate), cause), power) in frame
             .clean
             .iter()
             .zip(frame.fate.iter_mut())
+            .zip(frame.cause.iter_mut())
             .zip(frame.power.iter_mut())
         {
-            if *fate != Fate::Kept || !self.covers(r.laser, r.ring, r.elevation, r.azimuth) {
+            if !fate.is_alive() || !self.covers(r.laser, r.ring, r.elevation, r.azimuth) {
                 continue;
             }
             if self.transmission == 0.0 {
                 *fate = Fate::Occluded;
+                *cause = stage;
             } else {
                 *power *= self.transmission;
             }

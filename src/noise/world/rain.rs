@@ -14,7 +14,7 @@
 
 use crate::config::reader::Section;
 use crate::error::Result;
-use crate::noise::{Fate, NoiseStage, NoisyFrame};
+use crate::noise::{NoiseStage, NoisyFrame};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -120,7 +120,7 @@ impl NoiseStage for Rain {
                 RangeNoise::Goodin => rng.sample::<f64, _>(StandardNormal),
                 RangeNoise::Mavs => MAVS_JITTER_M * (2.0 * rng.random::<f64>() - 1.0),
             };
-            if *fate != Fate::Kept {
+            if !fate.is_alive() {
                 continue;
             }
             let r_i = f64::from(*range);

@@ -1,0 +1,516 @@
+//! Spurious echoes: firing slots, the echoes stages propose, and the sensor's return logic
+//! that chooses once per slot what the sensor reports.
+//!
+//! A sensor reports at most one return per laser per firing in single-return mode
+//! (strongest 0x37 or last 0x38) and two in dual mode (0x39). Scatter stages (fog, snow,
+//! rain drops, crosstalk, spoofing, ...) therefore do not write returns themselves: they
+//! [propose](NoisyFrame::propose) echoes, and after the whole chain [`resolve`] lets every
+//! slot's detectable echoes compete once with its return, as the sensor's return logic
+//! does (`pdiagram-models.md`, "Spurious and replaced returns" and "Interactions": choosing
+//! once keeps the stage order from deciding the result):
+//! - strongest mode: the echo of highest power is reported;
+//! - last mode: the farthest echo is reported;
+//! - dual mode: the farthest is reported as the last return and the strongest of the
+//!   others as the strongest (the last one again when it is the only echo).
+//!
+//! Only detectable echoes take part (power at or above the frame's threshold, range at or
+//! above the minimum range), so an echo never hides a return and is then dropped by the
+//! filters. Ties go to the recorded return, then to the earlier proposal. A slot whose
+//! return was occluded gets no echo (occlusion removes the beam); an empty slot counts as
+//! occluded when the return of the same laser its direction is taken from was.
+//!
+//! The winner replaces the slot's return (fate [`Fate::Replaced`], `clean` kept, so
+//! `range_clean` stays the recorded range) or, in an empty slot, is appended as a new
+//! return (fate [`Fate::Added`]); either way `cause` names the proposing stage.
+
+use super::{Fate, NoisyFrame};
+use crate::frame::{Return, ReturnKind};
+use std::collections::HashMap;
+use std::sync::Arc;
+
+/// A spurious echo a stage proposes for one firing slot.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Echo {
+    /// Range of the echo in metres (along the slot's beam).
+    pub range: f32,
+    /// Received power as a fraction of emitted power (the scale of `NoisyFrame::power`).
+    pub power: f64,
+}
+
+/// Index of a firing slot in [`Slots`]: `firing * 32 + laser`.
+pub type SlotId = u32;
+
+/// An echo waiting for [`resolve`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Candidate {
+    /// The slot it competes in.
+    pub slot: SlotId,
+    /// The echo.
+    pub echo: Echo,
+    /// Index in the chain of the stage that proposed it.
+    pub stage: u8,
+}
+
+/// Which return logic the capture's firings follow.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SlotMode {
+    /// One return per laser and firing, the strongest.
+    Strongest,
+    /// One return per laser and firing, the last.
+    Last,
+    /// Two returns per laser and firing: last and strongest.
+    Dual,
+}
+
+/// One firing (one block, or a pair of blocks in dual mode) of a frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Firing {
+    /// Capture record (packet) that carried it.
+    pub packet: u32,
+    /// Its block in the packet (the even block of a dual pair).
+    pub block: u8,
+}
+
+/// The firing slots of a frame: every (firing, laser) pair, occupied or not.
+#[derive(Clone, Debug)]
+pub struct Slots {
+    /// The return logic.
+    pub mode: SlotMode,
+    /// The firings, in capture order.
+    pub firings: Vec<Firing>,
+    /// Per slot (`firing * 32 + laser`): up to two indices of returns in it (`u32::MAX`
+    /// for none); in dual mode the last return first.
+    occupants: Vec<[u32; 2]>,
+    /// Slot of each recorded return.
+    slot_of: Vec<SlotId>,
+}
+
+const NONE: u32 = u32::MAX;
+const LASERS: usize = 32;
+
+impl Slots {
+    /// The slots of a frame's recorded returns (the first `clean_len` of `returns`).
+    pub fn of(returns: &[Return]) -> Slots {
+        // A dual capture decoded with one of its two returns behaves like that single
+        // mode: its slots hold one return of that kind.
+        let has = |k: ReturnKind| returns.iter().any(|r| r.kind == k);
+        let mode = match (has(ReturnKind::DualLast), has(ReturnKind::DualStrongest)) {
+            (true, true) => SlotMode::Dual,
+            (true, false) => SlotMode::Last,
+            (false, true) => SlotMode::Strongest,
+            _ if has(ReturnKind::Last) => SlotMode::Last,
+            _ => SlotMode::Strongest,
+        };
+        let mut firings: Vec<Firing> = Vec::new();
+        let mut occupants: Vec<[u32; 2]> = Vec::new();
+        let mut slot_of = Vec::with_capacity(returns.len());
+        let mut index: HashMap<(u32, u8), u32> = HashMap::new();
+        let mut last_key = None;
+        for (i, r) in returns.iter().enumerate() {
+            let block = if mode == SlotMode::Dual {
+                r.block & !1
+            } else {
+                r.block
+            };
+            let key = (r.packet, block);
+            let f = match last_key {
+                Some((k, f)) if k == key => f,
+                _ => *index.entry(key).or_insert_with(|| {
+                    firings.push(Firing {
+                        packet: r.packet,
+                        block,
+                    });
+                    occupants.extend(std::iter::repeat_n([NONE; 2], LASERS));
+                    (firings.len() - 1) as u32
+                }),
+            };
+            last_key = Some((key, f));
+            let slot = f * LASERS as u32 + u32::from(r.laser.min(31));
+            let o = &mut occupants[slot as usize];
+            // Dual: the last return in entry 0, the strongest in entry 1.
+            let at = match r.kind {
+                ReturnKind::DualStrongest => 1,
+                _ if o[0] == NONE => 0,
+                _ => 1,
+            };
+            if o[at] == NONE {
+                o[at] = i as u32;
+            }
+            slot_of.push(slot);
+        }
+        Slots {
+            mode,
+            firings,
+            occupants,
+            slot_of,
+        }
+    }
+
+    /// Number of slots (firings times 32 lasers).
+    pub fn len(&self) -> usize {
+        self.occupants.len()
+    }
+
+    /// True if the frame has no firings.
+    pub fn is_empty(&self) -> bool {
+        self.occupants.is_empty()
+    }
+
+    /// The slot of recorded return `i`.
+    pub fn slot_of(&self, i: usize) -> SlotId {
+        self.slot_of[i]
+    }
+
+    /// The slot of `laser` in firing `firing`.
+    pub fn slot(&self, firing: usize, laser: u8) -> SlotId {
+        (firing * LASERS + usize::from(laser.min(31))) as SlotId
+    }
+
+    /// Firing index and laser of a slot.
+    pub fn split(slot: SlotId) -> (usize, u8) {
+        ((slot as usize) / LASERS, (slot as usize % LASERS) as u8)
+    }
+
+    /// The recorded returns in a slot (none, one, or two in dual mode; last first).
+    pub fn occupants(&self, slot: SlotId) -> impl Iterator<Item = usize> + '_ {
+        self.occupants[slot as usize]
+            .iter()
+            .filter(|&&i| i != NONE)
+            .map(|&i| i as usize)
+    }
+
+    /// True when no recorded return is in the slot.
+    pub fn is_vacant(&self, slot: SlotId) -> bool {
+        self.occupants[slot as usize][0] == NONE
+    }
+
+    /// A recorded return of `laser` in the firing nearest to `firing` (the same firing
+    /// first), searching at most `reach` firings each way.
+    pub fn nearest_of_laser(&self, firing: usize, laser: u8, reach: usize) -> Option<usize> {
+        let n = self.firings.len();
+        for d in 0..=reach.min(n) {
+            for f in [firing.checked_sub(d), Some(firing + d)]
+                .into_iter()
+                .flatten()
+            {
+                if f < n {
+                    let o = self.occupants[f * LASERS + usize::from(laser)][0];
+                    if o != NONE {
+                        return Some(o as usize);
+                    }
+                }
+            }
+        }
+        None
+    }
+
+    /// A return present in both firings (same laser), for carrying angles and times
+    /// from one firing to the other.
+    fn common(&self, a: usize, b: usize) -> Option<(usize, usize)> {
+        (0..LASERS).find_map(|l| {
+            let x = self.occupants[a * LASERS + l][0];
+            let y = self.occupants[b * LASERS + l][0];
+            (x != NONE && y != NONE).then_some((x as usize, y as usize))
+        })
+    }
+
+    /// The return a sensor would report in a vacant slot at `range`: direction, azimuth,
+    /// time and elevation come from the nearest return of the same laser, turned to the
+    /// slot's firing (by the azimuth and time difference of a laser present in both
+    /// firings). `None` when the laser has no return within 1000 firings, or the two
+    /// firings share no laser. Also gives the template's index.
+    pub fn vacant_return(
+        &self,
+        returns: &[Return],
+        slot: SlotId,
+        range: f32,
+    ) -> Option<(Return, usize)> {
+        let (firing, laser) = Slots::split(slot);
+        let t = self.nearest_of_laser(firing, laser, 1000)?;
+        let template = returns[t];
+        let tf = Slots::split(self.slot_of[t]).0;
+        let (mut azimuth, mut time) = (f64::from(template.azimuth), template.time);
+        if tf != firing {
+            let (here, there) = self.common(firing, tf)?;
+            let mut d_az = f64::from(returns[here].azimuth) - f64::from(returns[there].azimuth);
+            if d_az > 180.0 {
+                d_az -= 360.0;
+            } else if d_az < -180.0 {
+                d_az += 360.0;
+            }
+            azimuth = (azimuth + d_az).rem_euclid(360.0);
+            time += returns[here].time - returns[there].time;
+            // Turn the template's direction by the azimuth difference (clockwise seen from
+            // above, like the sensor's azimuth).
+        }
+        let d = (f64::from(template.azimuth) - azimuth).to_radians();
+        let (s, c) = d.sin_cos();
+        let (x, y, z) = if template.range > 0.0 {
+            let k = 1.0 / f64::from(template.range);
+            (
+                f64::from(template.x) * k,
+                f64::from(template.y) * k,
+                f64::from(template.z) * k,
+            )
+        } else {
+            let (se, ce) = f64::from(template.elevation).to_radians().sin_cos();
+            let (sa, ca) = f64::from(template.azimuth).to_radians().sin_cos();
+            (ce * ca, -ce * sa, se)
+        };
+        let (ux, uy) = (x * c - y * s, x * s + y * c);
+        let firing_info = self.firings[firing];
+        let block = match (self.mode, template.kind) {
+            (SlotMode::Dual, ReturnKind::DualStrongest) => firing_info.block + 1,
+            _ => firing_info.block,
+        };
+        let r = f64::from(range);
+        Some((
+            Return {
+                x: (ux * r) as f32,
+                y: (uy * r) as f32,
+                z: (z * r) as f32,
+                range,
+                azimuth: azimuth as f32,
+                elevation: template.elevation,
+                time,
+                packet: firing_info.packet,
+                raw_distance: (r / 0.002).round().clamp(0.0, 65535.0) as u16,
+                intensity: 0,
+                laser: template.laser,
+                ring: template.ring,
+                block,
+                kind: template.kind,
+            },
+            t,
+        ))
+    }
+}
+
+impl NoisyFrame {
+    /// The firing slots of the frame's recorded returns (built on first use).
+    pub fn slots(&mut self) -> Arc<Slots> {
+        if self.slots.is_none() {
+            self.slots = Some(Arc::new(Slots::of(&self.clean[..self.clean_len])));
+        }
+        Arc::clone(self.slots.as_ref().expect("just built"))
+    }
+
+    /// Proposes an echo in the firing slot of recorded return `i` (along its beam).
+    pub fn propose(&mut self, i: usize, echo: Echo) {
+        let slot = self.slots().slot_of(i);
+        self.propose_slot(slot, echo);
+    }
+
+    /// Proposes an echo in a firing slot (occupied or vacant).
+    pub fn propose_slot(&mut self, slot: SlotId, echo: Echo) {
+        if echo.range.is_finite() && echo.power.is_finite() {
+            self.candidates.push(Candidate {
+                slot,
+                echo,
+                stage: self.stage,
+            });
+        }
+    }
+
+    /// Appends a return with fate `Added` and the given cause; every per-return column
+    /// grows by one entry.
+    fn push_added(&mut self, ret: Return, power: f64, cause: u8, pose_of: usize) {
+        let n = self.len();
+        self.range.push(ret.range);
+        self.power.push(power);
+        self.fate.push(Fate::Added);
+        self.cause.push(cause);
+        let m = &mut self.moved;
+        if let Some(v) = &mut m.azimuth_deg {
+            v.push(0.0);
+        }
+        if let Some(v) = &mut m.elevation_deg {
+            v.push(0.0);
+        }
+        if let Some(v) = &mut m.time {
+            v.push(ret.time);
+        }
+        if let Some(v) = &mut m.intensity {
+            v.push(ret.intensity);
+        }
+        if let Some(p) = &mut m.pose {
+            if let Some(ix) = &mut p.index {
+                let f = ix[pose_of];
+                ix.push(f);
+            }
+        }
+        self.clean.push(ret);
+        debug_assert_eq!(self.clean.len(), n + 1);
+    }
+
+    /// The intensity byte the sensor reports for an echo.
+    fn echo_intensity(&self, echo: &Echo) -> u8 {
+        self.power_model
+            .as_ref()
+            .map_or(0, |m| m.intensity_of(echo.power, echo.range))
+    }
+
+    /// Makes recorded (or added) return `i` report `echo` proposed by stage `cause`.
+    fn replace(&mut self, i: usize, echo: Echo, cause: u8) {
+        self.range[i] = echo.range;
+        self.power[i] = echo.power;
+        self.fate[i] = Fate::Replaced;
+        self.cause[i] = cause;
+        let intensity = self.echo_intensity(&echo);
+        let n = self.len();
+        self.moved
+            .intensity
+            .get_or_insert_with(|| self.clean.iter().map(|r| r.intensity).collect())[i] = intensity;
+        debug_assert_eq!(self.moved.intensity.as_ref().map(Vec::len), Some(n));
+    }
+}
+
+/// One contender of a slot: a recorded return (index) or a candidate.
+#[derive(Clone, Copy, Debug)]
+struct Contender {
+    range: f32,
+    power: f64,
+    /// `Ok(return index)` or `Err(candidate index)`.
+    who: Result<usize, usize>,
+}
+
+/// Lets every slot's proposed echoes compete with its return (see the module
+/// documentation) and applies the winners.
+pub fn resolve(frame: &mut NoisyFrame) {
+    if frame.candidates.is_empty() {
+        return;
+    }
+    let slots = frame.slots();
+    let mut candidates = std::mem::take(&mut frame.candidates);
+    // Group by slot; a stable sort keeps proposal order inside a slot.
+    candidates.sort_by_key(|c| c.slot);
+    let mut start = 0;
+    while start < candidates.len() {
+        let slot = candidates[start].slot;
+        let mut end = start;
+        while end < candidates.len() && candidates[end].slot == slot {
+            end += 1;
+        }
+        resolve_slot(frame, &slots, slot, &candidates[start..end]);
+        start = end;
+    }
+}
+
+fn resolve_slot(frame: &mut NoisyFrame, slots: &Slots, slot: SlotId, group: &[Candidate]) {
+    let occupants: Vec<usize> = slots.occupants(slot).collect();
+    let vacant = occupants.is_empty();
+    // Occlusion removes the beam: no echo in an occluded slot.
+    let occluded = if vacant {
+        let (firing, laser) = Slots::split(slot);
+        slots
+            .nearest_of_laser(firing, laser, 1000)
+            .is_some_and(|t| frame.fate[t] == Fate::Occluded)
+    } else {
+        occupants.iter().any(|&i| frame.fate[i] == Fate::Occluded)
+    };
+    if occluded {
+        return;
+    }
+    let mut contenders: Vec<Contender> = Vec::with_capacity(group.len() + 2);
+    for &i in &occupants {
+        let (range, power) = (frame.range[i], frame.power[i]);
+        // Dual: both entries may hold the same echo (the only one); count it once.
+        let same = contenders
+            .iter()
+            .any(|c| c.range == range && c.power == power);
+        if frame.fate[i].is_alive() && frame.detectable(range, power) && !same {
+            contenders.push(Contender {
+                range,
+                power,
+                who: Ok(i),
+            });
+        }
+    }
+    let real = contenders.len();
+    for (k, c) in group.iter().enumerate() {
+        if frame.detectable(c.echo.range, c.echo.power) {
+            contenders.push(Contender {
+                range: c.echo.range,
+                power: c.echo.power,
+                who: Err(k),
+            });
+        }
+    }
+    if contenders.len() == real {
+        return;
+    }
+    // First maximum wins: recorded returns come first, then proposal order.
+    let strongest_of = |cs: &[Contender], skip: Option<usize>| -> Option<usize> {
+        let mut best: Option<usize> = None;
+        for (k, c) in cs.iter().enumerate() {
+            if Some(k) != skip && best.is_none_or(|b| c.power > cs[b].power) {
+                best = Some(k);
+            }
+        }
+        best
+    };
+    let farthest = {
+        let mut best = 0;
+        for (k, c) in contenders.iter().enumerate() {
+            if c.range > contenders[best].range {
+                best = k;
+            }
+        }
+        best
+    };
+    let strongest = strongest_of(&contenders, None).expect("non-empty");
+    // What each entry of the slot reports: (entry kind, contender).
+    let picks: Vec<(Option<ReturnKind>, usize)> = match slots.mode {
+        SlotMode::Strongest => vec![(None, strongest)],
+        SlotMode::Last => vec![(None, farthest)],
+        SlotMode::Dual => {
+            let second = strongest_of(&contenders, Some(farthest)).unwrap_or(farthest);
+            vec![
+                (Some(ReturnKind::DualLast), farthest),
+                (Some(ReturnKind::DualStrongest), second),
+            ]
+        }
+    };
+    for (kind, pick) in picks {
+        let c = contenders[pick];
+        // The entry of the slot this pick goes to.
+        let entry = match kind {
+            None => occupants.first().copied(),
+            Some(k) => occupants
+                .iter()
+                .copied()
+                .find(|&i| frame.clean[i].kind == k),
+        };
+        let echo = Echo {
+            range: c.range,
+            power: c.power,
+        };
+        match (entry, c.who) {
+            // The entry already reports this echo (a dual slot's two entries may hold the
+            // same one).
+            (Some(i), Ok(j))
+                if i == j || (frame.range[i], frame.power[i]) == (c.range, c.power) => {}
+            (Some(i), Ok(_)) => {
+                // The other recorded return of a dual slot now reports here.
+                let cause = group[0].stage;
+                frame.replace(i, echo, cause);
+            }
+            (Some(i), Err(k)) => frame.replace(i, echo, group[k].stage),
+            (None, Err(k)) if vacant => {
+                if let Some((mut ret, template)) =
+                    slots.vacant_return(&frame.clean, slot, echo.range)
+                {
+                    if let Some(kind) = kind {
+                        ret.kind = kind;
+                        let firing = slots.firings[Slots::split(slot).0];
+                        ret.block = firing.block + u8::from(kind == ReturnKind::DualStrongest);
+                    }
+                    ret.intensity = frame.echo_intensity(&echo);
+                    frame.push_added(ret, echo.power, group[k].stage, template);
+                }
+            }
+            // A recorded return already reports this pick, or no entry can hold it.
+            _ => {}
+        }
+    }
+}

@@ -1,0 +1,309 @@
+//! Bookkeeping of spurious echoes on hand-made frames: what the firing-slot rule reports
+//! (pdiagram-models.md, "Spurious and replaced returns"), the fates, causes and clean
+//! ranges it records, and that stage order does not decide the result.
+
+use lidar_noise::calibration::Calibration;
+use lidar_noise::config::Config;
+use lidar_noise::frame::{Return, ReturnKind};
+use lidar_noise::noise::spurious::resolve;
+use lidar_noise::noise::{Echo, Fate, IdealPower, NoisyFrame, NO_CAUSE};
+use std::path::Path;
+use std::sync::Arc;
+
+/// A return of `laser` at `range` m in firing `firing` (azimuth 0.2 deg per firing).
+fn ret(laser: u8, range: f32, firing: u32, kind: ReturnKind) -> Return {
+    let cal = Calibration::builtin();
+    let el = cal.lasers[laser as usize].elevation_deg as f32;
+    let azimuth = firing as f32 * 0.2;
+    let (se, ce) = el.to_radians().sin_cos();
+    let (sa, ca) = azimuth.to_radians().sin_cos();
+    let dual = matches!(kind, ReturnKind::DualLast | ReturnKind::DualStrongest);
+    let block = if dual {
+        (firing % 6) as u8 * 2 + u8::from(kind == ReturnKind::DualStrongest)
+    } else {
+        (firing % 12) as u8
+    };
+    Return {
+        x: range * ce * ca,
+        y: -range * ce * sa,
+        z: range * se,
+        range,
+        azimuth,
+        elevation: el,
+        time: 10.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6,
+        packet: if dual { firing / 6 } else { firing / 12 },
+        raw_distance: (range / 0.002) as u16,
+        intensity: 50,
+        laser,
+        ring: cal.rings()[laser as usize],
+        block,
+        kind,
+    }
+}
+
+fn ideal() -> IdealPower {
+    let c = Config::from_toml_str("seed = 1\n", Path::new("t.toml"), &[], None)
+        .unwrap()
+        .0;
+    IdealPower::new(&c.power, &c.sensor, &c.detection)
+}
+
+fn frame(returns: Vec<Return>) -> NoisyFrame {
+    let p = ideal();
+    let mut f = NoisyFrame::new(0, returns, &p);
+    f.power_model = Some(Arc::new(p));
+    f
+}
+
+/// Three firings of lasers 0..31 at 20 m, strongest mode, except laser 5 of firing 1
+/// (an empty slot).
+fn strongest_frame() -> NoisyFrame {
+    let mut v = Vec::new();
+    for firing in 0..3 {
+        for laser in 0..32 {
+            if firing == 1 && laser == 5 {
+                continue;
+            }
+            v.push(ret(laser, 20.0, firing, ReturnKind::Strongest));
+        }
+    }
+    frame(v)
+}
+
+fn index_of(f: &NoisyFrame, firing: u32, laser: u8) -> usize {
+    (0..f.clean_len)
+        .find(|&i| f.clean[i].laser == laser && f.clean[i].block == firing as u8)
+        .unwrap()
+}
+
+#[test]
+fn a_stronger_echo_replaces_the_return_and_records_its_cause() {
+    let mut f = strongest_frame();
+    let i = index_of(&f, 2, 7);
+    let p = f.power[i];
+    f.stage = 3;
+    f.propose(
+        i,
+        Echo {
+            range: 1.6,
+            power: p * 2.0,
+        },
+    );
+    resolve(&mut f);
+    assert_eq!(f.fate[i], Fate::Replaced);
+    assert_eq!(f.cause[i], 3);
+    assert_eq!(f.range[i], 1.6);
+    assert_eq!(f.power[i], p * 2.0);
+    // The recorded return is kept as the clean one: range_clean stays 20 m.
+    assert_eq!(f.clean[i].range, 20.0);
+    // The point moves along its beam to the echo's range.
+    let s = f.noisy_return(i);
+    let d = (s.x * s.x + s.y * s.y + s.z * s.z).sqrt();
+    assert!((d - 1.6).abs() < 1e-5, "{d}");
+    // Every other return is untouched.
+    for k in (0..f.len()).filter(|&k| k != i) {
+        assert_eq!(f.fate[k], Fate::Kept);
+        assert_eq!(f.cause[k], NO_CAUSE);
+    }
+    assert_eq!(f.len(), f.clean_len);
+}
+
+#[test]
+fn a_weaker_or_undetectable_echo_loses_in_strongest_mode() {
+    let mut f = strongest_frame();
+    let i = index_of(&f, 0, 9);
+    let p = f.power[i];
+    f.propose(
+        i,
+        Echo {
+            range: 3.0,
+            power: p * 0.5,
+        },
+    );
+    // Stronger than the return, but under the threshold: it never takes part.
+    f.propose(
+        i,
+        Echo {
+            range: 3.0,
+            power: f.threshold * 0.99,
+        },
+    );
+    // Stronger, but closer than the minimum range.
+    f.propose(
+        i,
+        Echo {
+            range: (f.min_range * 0.5) as f32,
+            power: 1.0,
+        },
+    );
+    resolve(&mut f);
+    assert_eq!(f.fate[i], Fate::Kept);
+    assert_eq!(f.range[i], 20.0);
+}
+
+#[test]
+fn last_mode_reports_the_farthest() {
+    let mut v = Vec::new();
+    for laser in 0..32 {
+        v.push(ret(laser, 20.0, 0, ReturnKind::Last));
+    }
+    let mut f = frame(v);
+    let p = f.power[4];
+    // A strong near echo loses to the detectable target; a weak far one wins.
+    f.propose(
+        4,
+        Echo {
+            range: 2.0,
+            power: 0.9,
+        },
+    );
+    f.propose(
+        5,
+        Echo {
+            range: 35.0,
+            power: p * 0.1 + f.threshold,
+        },
+    );
+    resolve(&mut f);
+    assert_eq!(f.fate[4], Fate::Kept);
+    assert_eq!(f.fate[5], Fate::Replaced);
+    assert_eq!(f.range[5], 35.0);
+}
+
+#[test]
+fn dual_mode_reports_the_echo_and_the_target() {
+    // One firing, every laser's two returns equal (a single target at 20 m).
+    let mut v = Vec::new();
+    for laser in 0..32 {
+        v.push(ret(laser, 20.0, 0, ReturnKind::DualLast));
+    }
+    for laser in 0..32 {
+        v.push(ret(laser, 20.0, 0, ReturnKind::DualStrongest));
+    }
+    let mut f = frame(v);
+    let last = 3;
+    let strongest = 32 + 3;
+    let p = f.power[last];
+    f.stage = 1;
+    f.propose(
+        last,
+        Echo {
+            range: 1.7,
+            power: p * 3.0,
+        },
+    );
+    resolve(&mut f);
+    // The target stays the last return; the stronger near echo is the strongest.
+    assert_eq!(f.fate[last], Fate::Kept);
+    assert_eq!(f.fate[strongest], Fate::Replaced);
+    assert_eq!(f.range[strongest], 1.7);
+    assert_eq!(f.cause[strongest], 1);
+    // A weaker echo of a one-target slot is the second strongest: reported too.
+    let mut g = frame(f.clean.clone());
+    g.propose(
+        7,
+        Echo {
+            range: 2.5,
+            power: p * 0.5,
+        },
+    );
+    resolve(&mut g);
+    assert_eq!(g.fate[7], Fate::Kept);
+    assert_eq!(g.fate[32 + 7], Fate::Replaced);
+    assert_eq!(g.range[32 + 7], 2.5);
+    // Never more than two returns per laser and firing.
+    assert_eq!(g.len(), 64);
+}
+
+#[test]
+fn an_echo_in_an_empty_slot_is_added_along_that_slots_beam() {
+    let mut f = strongest_frame();
+    let slots = f.slots();
+    let slot = slots.slot(1, 5);
+    assert!(slots.is_vacant(slot));
+    f.stage = 2;
+    f.propose_slot(
+        slot,
+        Echo {
+            range: 12.0,
+            power: 0.5,
+        },
+    );
+    resolve(&mut f);
+    assert_eq!(f.len(), f.clean_len + 1);
+    let a = f.len() - 1;
+    assert_eq!(f.fate[a], Fate::Added);
+    assert_eq!(f.cause[a], 2);
+    let r = f.noisy_return(a);
+    assert_eq!((r.laser, r.block, r.packet), (5, 1, 0));
+    assert_eq!(r.range, 12.0);
+    // Direction: laser 5's elevation, firing 1's azimuth (0.2 deg), clockwise.
+    let want = ret(5, 12.0, 1, ReturnKind::Strongest);
+    for (got, want) in [(r.x, want.x), (r.y, want.y), (r.z, want.z)] {
+        assert!((got - want).abs() < 1e-4, "{got} vs {want}");
+    }
+    assert!((r.azimuth - 0.2).abs() < 1e-5);
+    assert!((r.time - want.time).abs() < 1e-9);
+    // It is reported: survivors include it, last.
+    let s = f.survivors();
+    assert_eq!(s.len(), f.len());
+    assert_eq!(s.last().unwrap().range, 12.0);
+}
+
+#[test]
+fn occluded_slots_get_no_echo() {
+    let mut f = strongest_frame();
+    let i = index_of(&f, 0, 5);
+    let j = index_of(&f, 2, 5);
+    f.fate[i] = Fate::Occluded;
+    f.fate[j] = Fate::Occluded;
+    f.propose(
+        i,
+        Echo {
+            range: 2.0,
+            power: 0.9,
+        },
+    );
+    // The empty slot of laser 5 in firing 1 takes its beam from an occluded return.
+    let slot = f.slots().slot(1, 5);
+    f.propose_slot(
+        slot,
+        Echo {
+            range: 2.0,
+            power: 0.9,
+        },
+    );
+    resolve(&mut f);
+    assert_eq!(f.fate[i], Fate::Occluded);
+    assert_eq!(f.len(), f.clean_len);
+}
+
+#[test]
+fn stage_order_does_not_decide_the_winner() {
+    let run = |order: [(u8, Echo); 2]| {
+        let mut f = strongest_frame();
+        let i = index_of(&f, 1, 1);
+        for (stage, echo) in order {
+            f.stage = stage;
+            f.propose(i, echo);
+        }
+        resolve(&mut f);
+        (f.fate[i], f.cause[i], f.range[i])
+    };
+    let a = (
+        0,
+        Echo {
+            range: 1.6,
+            power: 0.3,
+        },
+    );
+    let b = (
+        1,
+        Echo {
+            range: 8.0,
+            power: 0.6,
+        },
+    );
+    assert_eq!(run([a, b]), run([b, a]));
+    assert_eq!(run([a, b]), (Fate::Replaced, 1, 8.0));
+}

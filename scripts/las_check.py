@@ -7,7 +7,7 @@ For each file: opens it with laspy, requires LAS 1.4 point format 6, scale 0.001
 at least one point, the extra-bytes dimensions below with these types (the optional
 ones as written by `run`), plausible values in every dimension (finite coordinates
 within the sensor's range, rings and lasers 0-31, azimuth in [0, 360), classes 0, 1, 2
-or 7, fate 0-3 with class 7 exactly where fate > 0, cluster >= -1, finite GPS time).
+or 7, fate 0-5 with class 7 exactly where fate > 0, cluster >= -1, finite GPS time).
 Prints one line per file and exits non-zero if any file fails.
 
 Needs: pip install laspy lazrs numpy
@@ -23,7 +23,7 @@ except ImportError:  # pragma: no cover - message for the user
     sys.exit("laspy is not installed: pip install laspy lazrs numpy")
 
 REQUIRED = {"ring": "u1", "laser": "u1", "azimuth": "f4", "range": "f4"}
-OPTIONAL = {"range_clean": "f4", "power": "f4", "fate": "u1", "cluster": "i4"}
+OPTIONAL = {"range_clean": "f4", "power": "f4", "fate": "u1", "cause": "u1", "cluster": "i4"}
 MAX_RANGE_M = 150.0
 
 
@@ -83,10 +83,10 @@ def check(path):
         problems.append(f"classes {sorted(set(cls.tolist()))}, expected among 0 1 2 7")
     if "fate" in extra:
         fate = np.asarray(las["fate"])
-        if fate.max() > 3:
-            problems.append("fate above 3")
+        if fate.max() > 5:
+            problems.append("fate above 5")
         if not np.array_equal(fate > 0, cls == 7):
-            problems.append("class 7 is not exactly the dropped returns (fate > 0)")
+            problems.append("class 7 is not exactly the dropped and spurious returns (fate > 0)")
     if "cluster" in extra and np.asarray(las["cluster"]).min() < -1:
         problems.append("cluster below -1")
     summary = f"{n} points, {len(extra)} extra dimensions ({' '.join(extra)})"

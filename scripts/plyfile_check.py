@@ -41,6 +41,7 @@ OPTIONAL = {
     "range_clean": "f4",
     "power": "f4",
     "fate": "u1",
+    "cause": "u1",
     "ground": "u1",
     "cluster": "i4",
 }

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Peak RSS of `run --no-ply` and `run` on 1x, 10x and 100x the shared capture (copies
-# back to back with the clocks continuing). Target: the 100x peak within 1.3x of the 10x.
+# Peak RSS of `run --no-ply`, `run` and `run --no-ply --pcap-out` on 1x, 10x and 100x the
+# shared capture (copies back to back with the clocks continuing). Target: the 100x peak
+# within 1.3x of the 10x.
 # Usage: benches/memory.sh [CAPTURE]   (default ../shared/data/hdl32e/monterey.pcap)
+#        MODES='pcap-out' benches/memory.sh   (only some of the modes)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 capture=${1:-../shared/data/hdl32e/monterey.pcap}
@@ -28,9 +30,10 @@ PY
 printf '%-6s %-10s %12s\n' copies mode "peak RSS MB"
 for n in 1 10 100; do
   "target/$profile/examples/repeat_capture" "$capture" "$n" "$work/x$n.pcap"
-  for mode in no-ply ply; do
+  for mode in ${MODES:-no-ply ply pcap-out}; do
     args=(run "$work/x$n.pcap" -o "$work/out-$n-$mode" --quiet)
     [ "$mode" = no-ply ] && args+=(--no-ply)
+    [ "$mode" = pcap-out ] && args+=(--no-ply --pcap-out)
     printf '%-6s %-10s %12s\n' "${n}x" "$mode" "$(peak_mb "$bin" "${args[@]}")"
     rm -rf "$work/out-$n-$mode"
   done

@@ -351,15 +351,20 @@ fn run_capture(
     // Per-frame reports are streamed to spool files and joined at the end, so memory
     // does not grow with the capture's length.
     let mut spool = ReportSpool::new(dir)?;
-    // --pcap-out: a copy of the capture whose return slots each worker fills in.
+    // --pcap-out: workers patch the return slots, frames are written as they complete.
     let pcap = if plan.pcap_out {
+        use crate::writers::pcap::{NoisyCapture, Source};
         let path = capture.unwrap_or(Path::new(DEFAULT_CAPTURE_NAME));
-        let bytes = capture.map_or(Ok(DEFAULT_CAPTURE.to_vec()), std::fs::read);
-        let bytes = bytes.with_context(|| format!("{}", path.display()))?;
-        Some(crate::writers::pcap::NoisyCapture::new(
-            bytes,
+        let source = capture.map_or(Source::Bytes(Arc::from(DEFAULT_CAPTURE)), |p| {
+            Source::File(p.to_path_buf())
+        });
+        let calibration = &plan.decoder.calibration;
+        Some(NoisyCapture::create(
+            source,
             path,
-            &plan.decoder.calibration,
+            calibration,
+            dir,
+            inputs,
         )?)
     } else {
         None
@@ -394,7 +399,11 @@ fn run_capture(
         );
         // Errors in frame order: this batch's before a decoding error in the next.
         for entry in results {
-            spool.add(entry?)?;
+            let entry = entry?;
+            if let Some(p) = &pcap {
+                p.frame_done(entry.report.index)?;
+            }
+            spool.add(entry)?;
             progress.inc(1);
         }
         batch = next?;
@@ -467,7 +476,7 @@ fn run_capture(
     let frames = spool.frames;
     if let Some(p) = pcap {
         let name = p.file_name();
-        let lost = p.finish(dir, inputs)?;
+        let lost = p.finish()?;
         if lost > 0 {
             global.warn(&format!(
                 "{source}: {lost} kept returns lie outside the range a packet can hold \

@@ -44,6 +44,65 @@ where
     result
 }
 
+/// A file written over time (streamed) that appears at its path only when complete.
+///
+/// The streaming counterpart of [`write_atomically`] for outputs too large to produce in
+/// one call: the bytes go to a temporary file beside the target (registered so that
+/// SIGINT/SIGTERM deletes it), [`AtomicFile::commit`] renames it onto the target, and
+/// dropping it uncommitted (an error, a panic) deletes it, so no partial output is left.
+pub struct AtomicFile {
+    out: Option<BufWriter<tempfile::NamedTempFile>>,
+    path: PathBuf,
+    tmp_path: PathBuf,
+}
+
+impl AtomicFile {
+    /// Starts writing `path`, refusing to overwrite any of `protected_inputs`.
+    pub fn create(path: &Path, protected_inputs: &[&Path]) -> Result<Self> {
+        refuse_inputs(path, protected_inputs)?;
+        let tmp = crate::signals::critical(|g| {
+            let tmp = temp_file_for(path)?;
+            g.register(tmp.path());
+            Ok::<_, Error>(tmp)
+        })?;
+        Ok(AtomicFile {
+            tmp_path: tmp.path().to_path_buf(),
+            out: Some(BufWriter::with_capacity(BUFFER_BYTES, tmp)),
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// The final path (for messages).
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Appends `bytes`; an error names the final path.
+    pub fn write_all(&mut self, bytes: &[u8]) -> Result<()> {
+        let out = self.out.as_mut().expect("written only before commit");
+        out.write_all(bytes).map_err(|e| Error::io(&self.path, e))
+    }
+
+    /// Flushes the bytes and renames the temporary file onto the path.
+    pub fn commit(mut self) -> Result<()> {
+        let out = self.out.take().expect("committed once");
+        let tmp = out
+            .into_inner()
+            .map_err(|e| Error::io(&self.path, e.into_error()))?;
+        tmp.persist(&self.path)
+            .map_err(|e| Error::io(&self.path, e.error))?;
+        Ok(())
+    }
+}
+
+impl Drop for AtomicFile {
+    fn drop(&mut self) {
+        // The temporary file itself is deleted by `NamedTempFile` (when not persisted).
+        drop(self.out.take());
+        crate::signals::unregister(&self.tmp_path);
+    }
+}
+
 /// Creates the temporary file that will become `path`: in the same folder, hidden, mode
 /// 0644 on Unix. Persist it with `NamedTempFile::persist(path)` once complete.
 pub fn temp_file_for(path: &Path) -> Result<tempfile::NamedTempFile> {
@@ -188,6 +247,33 @@ mod tests {
         let other = dir.path().join("frame.ply");
         write_atomically(&other, &[&input], |w| w.write_all(b"x")).unwrap();
         assert_eq!(fs::read(&other).unwrap(), b"x");
+    }
+
+    #[test]
+    fn streamed_file_appears_only_when_committed() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("big.pcap");
+        fs::write(&out, "old").unwrap();
+        let mut f = AtomicFile::create(&out, &[]).unwrap();
+        f.write_all(b"first ").unwrap();
+        assert_eq!(fs::read_to_string(&out).unwrap(), "old", "not yet replaced");
+        assert_eq!(tmp_entries(dir.path()).len(), 1);
+        f.write_all(b"second").unwrap();
+        f.commit().unwrap();
+        assert_eq!(fs::read_to_string(&out).unwrap(), "first second");
+        assert!(tmp_entries(dir.path()).is_empty());
+        // Dropped before commit: the old file stays and no temporary is left.
+        let mut f = AtomicFile::create(&out, &[]).unwrap();
+        f.write_all(b"partial").unwrap();
+        drop(f);
+        assert_eq!(fs::read_to_string(&out).unwrap(), "first second");
+        assert!(tmp_entries(dir.path()).is_empty());
+        // Inputs are refused before anything is created.
+        let input = dir.path().join("in.pcap");
+        fs::write(&input, "precious").unwrap();
+        let err = AtomicFile::create(&input, &[&input]).err().unwrap();
+        assert!(err.to_string().contains("refusing to overwrite"), "{err}");
+        assert!(tmp_entries(dir.path()).is_empty());
     }
 
     #[test]

@@ -25,101 +25,305 @@
 //!   `clock` drift or time offset) are refused before anything is written, by name (see
 //!   [`check_encodable`]). Range and intensity changes (clock bias/jitter, ambient,
 //!   rain, receiver, ...) are what the packet holds and are written.
+//! - Spurious returns (issue 12) are written where the sensor would report them: a
+//!   replaced return (fate 4) carries the echo's range and intensity in its own slot, an
+//!   added return (fate 5) fills the vacant slot (packet, block, laser) it was resolved
+//!   into; a dual capture keeps both entries of a slot (the even block the last return,
+//!   the odd block the strongest).
+//!
+//! Streaming: memory does not grow with the capture's length. Workers turn a processed
+//! frame into compact patches (record, slot, raw distance, intensity: 12 bytes per
+//! reported return); the output is written front to back by a second sequential reading
+//! of the input, which copies every record's bytes and writes each data payload with its
+//! return slots cleared and its patches applied. [`NoisyCapture::frame_done`], called in
+//! frame order, writes every record before the frame's last packet (the only record a
+//! later frame may still share), and [`NoisyCapture::finish`] the rest. Only the patches
+//! of frames in flight and one payload are held, never the capture.
 
 use crate::calibration::Calibration;
 use crate::capture::CaptureReader;
+use crate::error::Error;
 use crate::frame::{Return, ReturnKind};
 use crate::hdl32e::decode::DualSelect;
-use crate::hdl32e::encode::{raw_distance, write_return_slot, BLOCKS_PER_PACKET, BLOCK_LEN};
+use crate::hdl32e::encode::{raw_distance, BLOCKS_PER_PACKET, BLOCK_LEN};
 use crate::hdl32e::packet::{self, ReturnMode};
 use crate::noise::{stage_rng, NoiseChain, NoisyFrame};
-use crate::writers::Output;
-use anyhow::{bail, Result};
-use std::io::Write;
-use std::path::Path;
+use crate::writers::atomic::AtomicFile;
+use anyhow::{bail, Context, Result};
+use std::io::{BufReader, Read};
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
-/// Marks a record that carries no data packet.
-const NOT_DATA: u64 = u64::MAX;
+/// Bytes of a data packet payload.
+const PAYLOAD: usize = packet::DATA_PACKET_BYTES;
 
-/// The capture being re-encoded: a copy of its bytes, patched frame by frame.
+/// Where the input capture's bytes come from (it is read twice more, front to back).
+#[derive(Clone, Debug)]
+pub enum Source {
+    /// A capture file.
+    File(PathBuf),
+    /// A capture held in memory.
+    Bytes(Arc<[u8]>),
+}
+
+impl Source {
+    /// A new sequential reader from the first byte; errors name `name`.
+    fn open(&self, name: &Path) -> Result<Box<dyn Read + Send>> {
+        Ok(match self {
+            Source::File(path) => Box::new(BufReader::with_capacity(
+                1 << 18,
+                std::fs::File::open(path).map_err(|e| Error::io(name, e))?,
+            )),
+            Source::Bytes(bytes) => Box::new(std::io::Cursor::new(BytesRef(Arc::clone(bytes)))),
+        })
+    }
+}
+
+/// `Arc<[u8]>` as a cursor's buffer.
+struct BytesRef(Arc<[u8]>);
+
+impl AsRef<[u8]> for BytesRef {
+    fn as_ref(&self) -> &[u8] {
+        &self.0
+    }
+}
+
+/// One return slot to write: 12 bytes, whatever the slot held before.
+#[derive(Clone, Copy, Debug)]
+struct Patch {
+    /// Capture record of the data packet.
+    record: u32,
+    /// Byte offset of the slot in the payload (`block * 100 + 4 + 3 * laser`).
+    at: u16,
+    /// Raw distance (never 0: cleared slots need no patch).
+    raw: u16,
+    /// Intensity byte.
+    intensity: u8,
+}
+
+/// The patches of one processed frame, sorted by record.
+struct FramePatches {
+    index: u32,
+    /// The frame's last record: later frames touch no record before it.
+    last: Option<u32>,
+    patches: Vec<Patch>,
+}
+
+/// Where the re-encoded bytes go.
+enum Sink {
+    Memory(Vec<u8>),
+    File(AtomicFile),
+}
+
+impl Sink {
+    fn write_all(&mut self, bytes: &[u8]) -> Result<()> {
+        match self {
+            Sink::Memory(v) => v.extend_from_slice(bytes),
+            Sink::File(f) => f.write_all(bytes)?,
+        }
+        Ok(())
+    }
+}
+
+/// The sequential writer: a datagram scanner and a raw reader over the same input.
+struct Writer {
+    name: PathBuf,
+    /// Finds each data packet's record and payload offset.
+    scanner: CaptureReader,
+    /// Copies the bytes (a second reader over the same input, kept behind the scanner).
+    raw: Box<dyn Read + Send>,
+    /// Input bytes consumed from `raw` (and written to the sink) so far.
+    copied: u64,
+    /// A data packet found by the scanner but not written yet (record, payload offset).
+    held: Option<(u32, u64)>,
+    /// The scanner has reached the end of the capture.
+    scanned: bool,
+    sink: Sink,
+    payload: Vec<u8>,
+    chunk: Vec<u8>,
+}
+
+impl Writer {
+    /// Copies `n` input bytes to the sink unchanged.
+    fn copy(&mut self, mut n: u64) -> Result<()> {
+        while n > 0 {
+            let take = n.min(self.chunk.len() as u64) as usize;
+            let chunk = &mut self.chunk[..take];
+            self.raw.read_exact(chunk).with_context(|| {
+                format!("{}: cannot read the capture again", self.name.display())
+            })?;
+            self.sink.write_all(chunk)?;
+            self.copied += take as u64;
+            n -= take as u64;
+        }
+        Ok(())
+    }
+
+    /// Skips `n` input bytes, writing `n` zeros instead.
+    fn zeros(&mut self, n: u64) -> Result<()> {
+        let n = n as usize;
+        let chunk = &mut self.chunk[..n];
+        self.raw
+            .read_exact(chunk)
+            .with_context(|| format!("{}: cannot read the capture again", self.name.display()))?;
+        chunk.fill(0);
+        self.sink.write_all(chunk)?;
+        self.copied += n as u64;
+        Ok(())
+    }
+
+    /// The next data packet (record, payload offset), or `None` at the end.
+    fn next_data(&mut self) -> Result<Option<(u32, u64)>> {
+        if let Some(h) = self.held.take() {
+            return Ok(Some(h));
+        }
+        while !self.scanned {
+            match self.scanner.next_datagram()? {
+                Some(d) if packet::is_data_packet(d.payload) => {
+                    return Ok(Some((d.record, d.payload_offset)))
+                }
+                Some(_) => {}
+                None => self.scanned = true,
+            }
+        }
+        Ok(None)
+    }
+
+    /// Writes every record before `bound` (all of them for `u32::MAX`), applying `ready`
+    /// (sorted by record; those of records before `bound`).
+    fn write_until(&mut self, bound: u32, ready: &[Patch]) -> Result<()> {
+        let mut next = 0;
+        while let Some((record, at)) = self.next_data()? {
+            if record >= bound {
+                self.held = Some((record, at));
+                break;
+            }
+            // UDP header: the checksum is its last two bytes, just before the payload.
+            let checksum = at.saturating_sub(2).max(self.copied);
+            self.copy(checksum - self.copied)?;
+            self.zeros(at - checksum)?;
+            let mut payload = std::mem::take(&mut self.payload);
+            self.raw.read_exact(&mut payload).with_context(|| {
+                format!("{}: cannot read the capture again", self.name.display())
+            })?;
+            self.copied += PAYLOAD as u64;
+            for b in 0..BLOCKS_PER_PACKET {
+                payload[b * BLOCK_LEN + 4..(b + 1) * BLOCK_LEN].fill(0);
+            }
+            while next < ready.len() && ready[next].record < record {
+                next += 1;
+            }
+            while next < ready.len() && ready[next].record == record {
+                let p = ready[next];
+                let at = usize::from(p.at);
+                payload[at..at + 2].copy_from_slice(&p.raw.to_le_bytes());
+                payload[at + 2] = p.intensity;
+                next += 1;
+            }
+            let written = self.sink.write_all(&payload);
+            self.payload = payload;
+            written?;
+        }
+        if bound == u32::MAX {
+            // Whatever follows the last data packet (other records, a cut record).
+            let mut rest = Vec::new();
+            self.raw.read_to_end(&mut rest).with_context(|| {
+                format!("{}: cannot read the capture again", self.name.display())
+            })?;
+            self.sink.write_all(&rest)?;
+            self.copied += rest.len() as u64;
+        }
+        Ok(())
+    }
+}
+
+/// The capture being re-encoded, streamed to its output as frames complete.
 pub struct NoisyCapture {
-    bytes: Mutex<Vec<u8>>,
-    /// File offset of each record's data-packet payload ([`NOT_DATA`] for other records).
-    payloads: Vec<u64>,
     pcapng: bool,
     offsets: [f32; 32],
     resolution: f32,
     unencodable: AtomicU64,
-}
-
-/// The patched bytes as a document for [`crate::writers::write_file`].
-struct CaptureBytes<'a> {
-    bytes: &'a [u8],
-    extension: &'static str,
-}
-
-impl Output for CaptureBytes<'_> {
-    fn extension(&self) -> &'static str {
-        self.extension
-    }
-    fn write_to(&self, out: &mut dyn Write) -> std::io::Result<()> {
-        out.write_all(self.bytes)
-    }
+    /// Patches of frames encoded but not yet written.
+    pending: Mutex<Vec<FramePatches>>,
+    writer: Mutex<Writer>,
 }
 
 impl NoisyCapture {
-    /// Copies the capture `bytes` (named `name` in messages), clears every return slot of
-    /// its data packets and zeroes their UDP checksums.
+    /// Re-encodes the capture `bytes` (named `name` in messages) in memory: the result
+    /// is [`NoisyCapture::into_bytes`]. For library use and tests; `run --pcap-out`
+    /// streams to a file with [`NoisyCapture::create`].
     pub fn new(bytes: Vec<u8>, name: &Path, calibration: &Calibration) -> Result<Self> {
-        let mut bytes = bytes;
-        let pcapng = bytes.len() >= 4 && bytes[0..4] == [0x0A, 0x0D, 0x0D, 0x0A];
-        let mut payloads = Vec::new();
-        let mut reader = CaptureReader::from_reader(std::io::Cursor::new(bytes.clone()), name)?;
-        let mut data = Vec::new();
-        while let Some(d) = reader.next_datagram()? {
-            let record = d.record as usize;
-            if payloads.len() <= record {
-                payloads.resize(record + 1, NOT_DATA);
-            }
-            if packet::is_data_packet(d.payload) {
-                payloads[record] = d.payload_offset;
-                data.push(d.payload_offset);
-            }
-        }
-        for at in data {
-            let at = at as usize;
-            // UDP header: the checksum is its last two bytes, just before the payload.
-            if at >= 2 {
-                bytes[at - 2..at].fill(0);
-            }
-            let payload = &mut bytes[at..at + packet::DATA_PACKET_BYTES];
-            for b in 0..BLOCKS_PER_PACKET {
-                payload[b * BLOCK_LEN + 4..(b + 1) * BLOCK_LEN].fill(0);
-            }
-        }
+        Self::with_sink(Source::Bytes(Arc::from(bytes)), name, calibration, |_| {
+            Ok(Sink::Memory(Vec::new()))
+        })
+    }
+
+    /// Re-encodes the capture from `source` (named `name` in messages) into
+    /// `dir/noisy.pcap` (`noisy.pcapng`), streamed into a temporary file there that
+    /// [`NoisyCapture::finish`] renames into place; refuses to overwrite any of `inputs`.
+    pub fn create(
+        source: Source,
+        name: &Path,
+        calibration: &Calibration,
+        dir: &Path,
+        inputs: &[&Path],
+    ) -> Result<Self> {
+        Self::with_sink(source, name, calibration, |file_name| {
+            Ok(Sink::File(AtomicFile::create(
+                &dir.join(file_name),
+                inputs,
+            )?))
+        })
+    }
+
+    fn with_sink(
+        source: Source,
+        name: &Path,
+        calibration: &Calibration,
+        sink: impl FnOnce(&str) -> Result<Sink>,
+    ) -> Result<Self> {
+        let mut magic = [0u8; 4];
+        let mut head = source.open(name)?;
+        let pcapng = head.read_exact(&mut magic).is_ok() && magic == [0x0A, 0x0D, 0x0D, 0x0A];
+        drop(head);
+        let scanner = CaptureReader::from_reader(source.open(name)?, name)?;
         let mut offsets = [0.0f32; 32];
         for (o, l) in offsets.iter_mut().zip(&calibration.lasers) {
             *o = l.distance_offset_m as f32;
         }
+        let writer = Writer {
+            name: name.to_path_buf(),
+            scanner,
+            raw: source.open(name)?,
+            copied: 0,
+            held: None,
+            scanned: false,
+            sink: sink(Self::name_for(pcapng))?,
+            payload: vec![0; PAYLOAD],
+            chunk: vec![0; 1 << 16],
+        };
         Ok(NoisyCapture {
-            bytes: Mutex::new(bytes),
-            payloads,
             pcapng,
             offsets,
             resolution: calibration.distance_resolution_m as f32,
             unencodable: AtomicU64::new(0),
+            pending: Mutex::new(Vec::new()),
+            writer: Mutex::new(writer),
         })
     }
 
-    /// File name of the output: `noisy.pcap`, or `noisy.pcapng` for a pcapng input.
-    pub fn file_name(&self) -> &'static str {
-        if self.pcapng {
+    fn name_for(pcapng: bool) -> &'static str {
+        if pcapng {
             "noisy.pcapng"
         } else {
             "noisy.pcap"
         }
+    }
+
+    /// File name of the output: `noisy.pcap`, or `noisy.pcapng` for a pcapng input.
+    pub fn file_name(&self) -> &'static str {
+        Self::name_for(self.pcapng)
     }
 
     /// Kept returns whose range the wire cannot hold, written as no return so far.
@@ -127,62 +331,131 @@ impl NoisyCapture {
         self.unencodable.load(Ordering::Relaxed)
     }
 
-    /// Writes the returns of one processed frame into their packet slots.
+    /// Turns the returns of one processed frame into patches of their packet slots:
+    /// alive returns (kept, replaced, added) with their noisy range and intensity;
+    /// dropped ones stay cleared (zero distance, as the sensor reports no return).
     ///
     /// Frames touch disjoint slots, so the order in which workers call this does not
     /// change the bytes.
     pub fn encode_frame(&self, frame: &NoisyFrame) {
         let intensity = frame.moved.intensity.as_deref();
         let mut lost = 0u64;
-        let mut bytes = self.bytes.lock().unwrap_or_else(|e| e.into_inner());
+        let mut patches = Vec::with_capacity(frame.len());
+        let last = frame.clean[..frame.clean_len]
+            .iter()
+            .map(|r| r.packet)
+            .max();
         for (i, r) in frame.clean.iter().enumerate() {
-            let Some(&at) = self.payloads.get(r.packet as usize) else {
-                continue;
-            };
-            if at == NOT_DATA {
+            let block = usize::from(r.block);
+            if !frame.fate[i].is_alive() || block >= BLOCKS_PER_PACKET {
                 continue;
             }
             let laser = usize::from(r.laser) & 31;
-            let (raw, value) = if frame.fate[i].is_alive() {
-                match raw_distance(frame.range[i], self.offsets[laser], self.resolution) {
-                    Some(raw) => (raw, intensity.map_or(r.intensity, |v| v[i])),
-                    None => {
-                        lost += 1;
-                        (0, 0)
-                    }
-                }
-            } else {
-                (0, 0)
-            };
-            let at = at as usize;
-            let payload = &mut bytes[at..at + packet::DATA_PACKET_BYTES];
-            write_return_slot(payload, usize::from(r.block), laser, raw, value);
+            match raw_distance(frame.range[i], self.offsets[laser], self.resolution) {
+                Some(raw) => patches.push(Patch {
+                    record: r.packet,
+                    at: (block * BLOCK_LEN + 4 + 3 * laser) as u16,
+                    raw,
+                    intensity: intensity.map_or(r.intensity, |v| v[i]),
+                }),
+                None => lost += 1,
+            }
         }
-        drop(bytes);
+        // Recorded returns come in capture order; added ones (appended) may not.
+        if !patches.is_sorted_by_key(|p| p.record) {
+            patches.sort_by_key(|p| p.record);
+        }
+        self.pending
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(FramePatches {
+                index: frame.index,
+                last,
+                patches,
+            });
         if lost > 0 {
             self.unencodable.fetch_add(lost, Ordering::Relaxed);
         }
     }
 
-    /// The patched capture bytes.
-    pub fn into_bytes(self) -> Vec<u8> {
-        self.bytes.into_inner().unwrap_or_else(|e| e.into_inner())
+    /// Frame `index` and every frame before it are encoded: writes every record before
+    /// its last packet. Call in frame order (`run` does, where it appends the reports).
+    pub fn frame_done(&self, index: u32) -> Result<()> {
+        let bound = {
+            let pending = self.pending.lock().unwrap_or_else(|e| e.into_inner());
+            pending
+                .iter()
+                .find(|f| f.index == index)
+                .and_then(|f| f.last)
+        };
+        match bound {
+            Some(bound) => self.write_until(bound, Some(index)),
+            None => Ok(()),
+        }
     }
 
-    /// Writes the patched capture into `dir` atomically, refusing to overwrite an input.
-    pub fn finish(self, dir: &Path, inputs: &[&Path]) -> Result<u64> {
-        let name = self.file_name();
+    /// Writes the records before `bound` with the patches that fall there; forgets the
+    /// frames up to `done` once they have no patch left.
+    fn write_until(&self, bound: u32, done: Option<u32>) -> Result<()> {
+        let mut ready = Vec::new();
+        {
+            let mut pending = self.pending.lock().unwrap_or_else(|e| e.into_inner());
+            for f in pending.iter_mut() {
+                let k = f.patches.partition_point(|p| p.record < bound);
+                ready.extend(f.patches.drain(..k));
+            }
+            pending.retain(|f| !f.patches.is_empty() || done.is_none_or(|d| f.index > d));
+        }
+        // Several frames' runs (a shared packet); stable, so nearly linear on runs.
+        if !ready.is_sorted_by_key(|p| p.record) {
+            ready.sort_by_key(|p| p.record);
+        }
+        let mut writer = self.writer.lock().unwrap_or_else(|e| e.into_inner());
+        writer.write_until(bound, &ready)
+    }
+
+    /// Writes every remaining record and returns the output (for [`NoisyCapture::new`]).
+    pub fn try_into_bytes(self) -> Result<Vec<u8>> {
+        self.write_until(u32::MAX, None)?;
+        match self
+            .writer
+            .into_inner()
+            .unwrap_or_else(|e| e.into_inner())
+            .sink
+        {
+            Sink::Memory(bytes) => Ok(bytes),
+            Sink::File(f) => bail!(
+                "internal: {} is streamed to a file; use finish",
+                f.path().display()
+            ),
+        }
+    }
+
+    /// The re-encoded capture bytes (for [`NoisyCapture::new`]).
+    ///
+    /// # Panics
+    /// When the capture cannot be read again (it was already read whole by the decoder
+    /// that produced the frames) or was made with [`NoisyCapture::create`]; see
+    /// [`NoisyCapture::try_into_bytes`].
+    pub fn into_bytes(self) -> Vec<u8> {
+        self.try_into_bytes()
+            .unwrap_or_else(|e| panic!("noisy capture: {e:#}"))
+    }
+
+    /// Writes every remaining record and renames the output into place; returns the
+    /// number of unencodable returns (see [`NoisyCapture::unencodable`]).
+    pub fn finish(self) -> Result<u64> {
+        self.write_until(u32::MAX, None)?;
         let unencodable = self.unencodable();
-        let bytes = self.into_bytes();
-        let doc = CaptureBytes {
-            bytes: &bytes,
-            extension: if name.ends_with("pcapng") {
-                "pcapng"
-            } else {
-                "pcap"
-            },
-        };
-        crate::writers::write_file(&doc, &dir.join(name), inputs)?;
+        match self
+            .writer
+            .into_inner()
+            .unwrap_or_else(|e| e.into_inner())
+            .sink
+        {
+            Sink::File(f) => f.commit()?,
+            Sink::Memory(_) => bail!("internal: an in-memory noisy capture; use into_bytes"),
+        }
         Ok(unencodable)
     }
 }

@@ -69,6 +69,27 @@ fn mix(mut z: u64) -> u64 {
 }
 
 impl Emi {
+    /// The stage with these settings (packet-loss key 0 until the chain makes its per-unit
+    /// draws).
+    pub fn new(
+        rate_hz: f64,
+        duration_us: f64,
+        p_drop: f64,
+        p_spur: f64,
+        max_range_m: f64,
+        p_packet: f64,
+    ) -> Emi {
+        Emi {
+            rate_hz,
+            duration_us,
+            p_drop,
+            p_spur,
+            max_range_m,
+            p_packet,
+            key: 0,
+        }
+    }
+
     /// The start times (seconds, ascending) of the bursts touching the frame whose firing
     /// times span [t_first, t_last]: the first draws of the stage's stream.
     pub fn bursts(&self, t_first: f64, t_last: f64, rng: &mut ChaCha8Rng) -> Vec<f64> {
@@ -219,15 +240,14 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
     // The wire holds ranges up to 131.07 m (65535 x 2 mm).
     let max_range_m = number(opts, "max_range_m", 100.0, 1.0, 131.0)?;
     let p_packet = number(opts, "p_packet", 1e-4, 0.0, 1.0)?;
-    Ok(Arc::new(Emi {
+    Ok(Arc::new(Emi::new(
         rate_hz,
         duration_us,
         p_drop,
         p_spur,
         max_range_m,
         p_packet,
-        key: 0,
-    }))
+    )))
 }
 
 /// The registry entry of this stage.

@@ -145,7 +145,7 @@ fn crosstalk_rate_is_within_3_sigma_of_the_binomial_expectation() {
         "fraction = 0.01\nsigma_m = 3.0\nsectors_deg = [[30, 90], [330, 10]]\npower = 1.0",
     );
     let chain = NoiseChain::new(&config(&text));
-    let sector = |a: f32| (30.0..90.0).contains(&a) || a >= 330.0 || a < 10.0;
+    let sector = |a: f32| (30.0..90.0).contains(&a) || !(10.0..330.0).contains(&a);
     let (mut n, mut hit) = (0usize, 0usize);
     let mut deltas = Vec::new();
     for index in 0..4 {

@@ -96,7 +96,7 @@ impl Emi {
         let d = self.duration_us * 1e-6;
         let span = (t_last - t_first).max(0.0) + d;
         let mean = self.rate_hz * span;
-        if !(mean > 0.0) {
+        if mean.is_nan() || mean <= 0.0 {
             return Vec::new();
         }
         let count = match Poisson::new(mean) {
@@ -192,7 +192,7 @@ impl NoiseStage for Emi {
             t0 = t0.min(r.time);
             t1 = t1.max(r.time);
         }
-        if !(t0 <= t1) {
+        if t0.is_nan() || t1.is_nan() || t0 > t1 {
             return;
         }
         let starts = self.bursts(t0, t1, rng);

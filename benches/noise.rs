@@ -106,6 +106,11 @@ fn bench_chain(c: &mut Criterion) {
             |b| b.iter(|| black_box(chain.process(black_box(&frame)))),
         );
     }
+    // Of which the firing-slot table every echo-proposing stage needs (built once per
+    // frame, shared by all of them).
+    c.bench_function("firing-slot table, 50k returns", |b| {
+        b.iter(|| black_box(lidar_noise::noise::Slots::of(black_box(&frame.returns))))
+    });
     // The p-diagram part 2 chain (configs/pdiagram-world.toml) as far as it exists.
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/pdiagram-world.toml");
     let (world, _) = Config::load(Some(&path), &[], None).expect("pdiagram-world.toml");

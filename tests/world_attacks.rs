@@ -206,6 +206,40 @@ fn crosstalk_echoes_lose_to_stronger_returns_and_in_last_mode_to_farther_ones() 
     assert!(within_3_sigma(replaced, 64_000, 0.1), "{replaced}");
 }
 
+#[test]
+fn physical_crosstalk_hits_firing_slots_at_its_rate_including_empty_ones() {
+    // Model B: each slot of the firings in 60..120 deg (the interferer +-30 deg) gets a
+    // false echo with q_x = 0.01 at U(0.9, 100) m; here every proposal wins its slot
+    // (power 1 against unsaturated returns, or an empty slot of the sky).
+    let f = sky_turn(ReturnKind::Strongest);
+    let text = stage(
+        "crosstalk",
+        "model = \"physical\"\nfraction = 0.01\nsectors_deg = [[60, 120]]\nmax_range_m = 100",
+    );
+    let firings = (0..2000u32)
+        .filter(|&k| (60.0..120.0).contains(&(k as f32 * AZ_STEP)))
+        .count();
+    let n = firings * 32;
+    let (mut total, mut added) = (0usize, 0usize);
+    for seed in [5, 6, 7] {
+        let out = run(&text.replace("seed = 5", &format!("seed = {seed}")), &f);
+        for j in 0..out.len() {
+            if !out.fate[j].is_spurious() {
+                assert_eq!(out.range[j], out.clean[j].range);
+                continue;
+            }
+            total += 1;
+            added += usize::from(out.fate[j] == Fate::Added);
+            let r = out.noisy_return(j);
+            assert!((60.0..120.0).contains(&r.azimuth), "{}", r.azimuth);
+            assert!((0.9..=100.0).contains(&out.range[j]), "{}", out.range[j]);
+        }
+    }
+    assert!(within_3_sigma(total, 3 * n, 0.01), "{total} of {}", 3 * n);
+    // The sky (upward lasers, no returns in these azimuths) gets added returns.
+    assert!(added > 0);
+}
+
 // ---------------------------------------------------------------- spoofing (14)
 
 /// The fake object used below, as the test sees it: centre azimuth 90 deg (along -y),
@@ -580,6 +614,7 @@ fn bad_options_name_key_and_line() {
             "sector",
         ),
         ("crosstalk", "sectors = [[0, 10]]", "sectors", "unknown"),
+        ("crosstalk", "model = \"radar\"", "model", "unknown"),
         ("spoofing", "size_m = [0, 2]", "size_m[0]", "outside"),
         ("spoofing", "range_m = 1", "range_m", "sensor"),
         ("spoofing", "max_points = -1", "max_points", "outside"),

@@ -83,6 +83,41 @@ fn bench_chain(c: &mut Criterion) {
     c.bench_function("survivors after the sensor chain, 50k returns", |b| {
         b.iter(|| black_box(black_box(&out).survivors()))
     });
+    // Crosstalk (p-diagram 15) alone at 1 % and 2 % of returns, against the same
+    // configuration without stages: the difference is what crosstalk costs, including
+    // the firing-slot table it makes the frame build and the one resolution of its
+    // echoes (issue 12 target: fog with backscatter plus crosstalk at most 3 ms per
+    // 50k-return frame). It draws the number of false returns (binomial) and then which
+    // ones, not one Bernoulli draw per return.
+    let (bare_default, _) = Config::load(None, &[], None).expect("built-in config");
+    let mut bare_default = bare_default;
+    bare_default.noise.clear();
+    let no_stage = NoiseChain::new(&bare_default);
+    c.bench_function("no stage + filters, 50k returns", |b| {
+        b.iter(|| black_box(no_stage.process(black_box(&frame))))
+    });
+    for fraction in ["0.01", "0.02"] {
+        let text = format!("[[noise]]\ntype = \"crosstalk\"\nfraction = {fraction}\n");
+        let (cfg, _) = Config::from_toml_str(&text, std::path::Path::new("x.toml"), &[], None)
+            .expect("crosstalk config");
+        let chain = NoiseChain::new(&cfg);
+        c.bench_function(
+            &format!("crosstalk {fraction} + filters, 50k returns"),
+            |b| b.iter(|| black_box(chain.process(black_box(&frame)))),
+        );
+    }
+    // Of which the firing-slot table every echo-proposing stage needs (built once per
+    // frame, shared by all of them).
+    c.bench_function("firing-slot table, 50k returns", |b| {
+        b.iter(|| black_box(lidar_noise::noise::Slots::of(black_box(&frame.returns))))
+    });
+    // The p-diagram part 2 chain (configs/pdiagram-world.toml) as far as it exists.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/pdiagram-world.toml");
+    let (world, _) = Config::load(Some(&path), &[], None).expect("pdiagram-world.toml");
+    let world_chain = NoiseChain::new(&world);
+    c.bench_function("pdiagram-world chain + filters, 50k returns", |b| {
+        b.iter(|| black_box(world_chain.process(black_box(&frame))))
+    });
 }
 
 criterion_group!(benches, bench_chain);

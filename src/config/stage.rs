@@ -20,6 +20,9 @@ pub const STAGE_TYPES: &[&str] = &[
     "motion",
     "clock",
     "ambient",
+    "spoofing",
+    "crosstalk",
+    "emi",
 ];
 
 /// One `[[noise]]` entry, not yet built into a stage.

@@ -51,6 +51,9 @@ pub const REGISTRY: &[StageKind] = &[
     sensor::motion::KIND,
     sensor::clock::KIND,
     sensor::ambient::KIND,
+    world::spoofing::KIND,
+    world::crosstalk::KIND,
+    world::emi::KIND,
 ];
 
 /// Builds the stage of one `[[noise]]` entry read through `entry`.

@@ -1,5 +1,8 @@
 //! Stages of the world's noise factors (p-diagram 11, 12, ...): what lies between the
 //! sensor and its targets.
 
+pub mod crosstalk;
+pub mod emi;
 pub mod occlusion;
 pub mod rain;
+pub mod spoofing;

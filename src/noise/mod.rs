@@ -280,7 +280,10 @@ impl<'a> View<'a> {
         }
     }
 
-    #[inline]
+    // Inlined into the loop of `survivors` so the return is built in registers and stored
+    // once into the output (a call wrote it to the stack first and the loop copied it,
+    // stalling on the store forwarding of every return).
+    #[inline(always)]
     fn noisy_return(&self, i: usize) -> Return {
         let r = &self.clean[i];
         let rn = self.range[i];

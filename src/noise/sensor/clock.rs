@@ -81,16 +81,14 @@ impl NoiseStage for Clock {
         if scale != 1.0 || self.time_offset_us != 0.0 {
             let t0 = super::frame_start(frame);
             let offset = self.time_offset_us * 1e-6;
-            let times: Vec<f64> = match frame.moved.time.take() {
-                Some(t) => t,
-                None => frame.clean.iter().map(|r| r.time).collect(),
-            };
-            frame.moved.time = Some(
-                times
-                    .into_iter()
-                    .map(|t| t0 + (t - t0) * scale + offset)
-                    .collect(),
-            );
+            let stretch = |t: f64| t0 + (t - t0) * scale + offset;
+            // One pass: in place over reported times, or straight from the clean ones.
+            match &mut frame.moved.time {
+                Some(times) => times.iter_mut().for_each(|t| *t = stretch(*t)),
+                None => {
+                    frame.moved.time = Some(frame.clean.iter().map(|r| stretch(r.time)).collect())
+                }
+            }
         }
     }
 }

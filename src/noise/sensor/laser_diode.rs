@@ -38,6 +38,9 @@ pub struct LaserDiode {
     pub given: [Option<Vec<f64>>; 4],
     /// Values in use per laser: power factor, range bias m, elevation deg, azimuth deg.
     pub values: [[f64; 32]; 4],
+    /// Intensity bytes scaled by each laser's power factor (`scale_byte`), tabled with
+    /// the unit draws.
+    bytes: Option<Arc<[[u8; 256]; 32]>>,
 }
 
 impl NoiseStage for LaserDiode {
@@ -78,6 +81,7 @@ impl NoiseStage for LaserDiode {
                 }
             }
         }
+        s.bytes = Some(Arc::from(byte_tables(&s.values[0])));
         Some(Arc::new(s))
     }
     fn apply(&self, frame: &mut NoisyFrame, _rng: &mut ChaCha8Rng) {
@@ -85,50 +89,75 @@ impl NoiseStage for LaserDiode {
         let n = frame.len();
         let gains = gain.iter().any(|&g| g != 1.0);
         let biases = bias.iter().any(|&b| b != 0.0);
-        if gains || biases {
-            let clean = &frame.clean;
-            let mut inten = if gains {
-                Some(
-                    frame
-                        .moved
-                        .intensity
-                        .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect()),
-                )
-            } else {
-                None
-            };
-            // One pass over the returns; the laser's values are looked up once.
-            for i in 0..n {
-                if !frame.fate[i].is_alive() {
-                    continue;
-                }
-                let l = usize::from(clean[i].laser) % 32;
-                if let Some(inten) = inten.as_deref_mut() {
-                    let g = gain[l];
-                    frame.power[i] *= g;
-                    inten[i] = scale_byte(inten[i], g);
-                }
-                if biases {
-                    frame.range[i] = (f64::from(frame.range[i]) + bias[l]) as f32;
-                }
-            }
+        let elevs = elev.iter().any(|&v| v != 0.0);
+        let azims = azim.iter().any(|&v| v != 0.0);
+        if !(gains || biases || elevs || azims) {
+            return;
         }
-        for (values, is_azimuth) in [(elev, false), (azim, true)] {
-            if values.iter().all(|&v| v == 0.0) {
+        // One pass over the returns (the 48-byte `Return`s are read once for all four
+        // per-laser values); the pointing offsets apply whatever the fate, the power
+        // and range only to alive returns.
+        let NoisyFrame {
+            clean,
+            fate,
+            power,
+            range,
+            moved,
+            ..
+        } = frame;
+        // The intensity bytes of each laser's gain, tabled once per seed (computed here
+        // when the stage runs without its unit draws).
+        let computed;
+        let bytes: &[[u8; 256]; 32] = match (&self.bytes, gains) {
+            (Some(b), _) => b,
+            (None, true) => {
+                computed = byte_tables(gain);
+                &computed
+            }
+            (None, false) => {
+                computed = Box::new([[0; 256]; 32]);
+                &computed
+            }
+        };
+        let mut inten = gains.then(|| {
+            moved
+                .intensity
+                .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect())
+        });
+        let offsets = [elev, azim].map(|v| v.map(|x| x as f32));
+        let mut de = elevs.then(|| moved.elevation_deg.get_or_insert_with(|| vec![0.0; n]));
+        let mut da = azims.then(|| moved.azimuth_deg.get_or_insert_with(|| vec![0.0; n]));
+        for i in 0..n {
+            let l = usize::from(clean[i].laser) % 32;
+            if let Some(de) = de.as_deref_mut() {
+                de[i] += offsets[0][l];
+            }
+            if let Some(da) = da.as_deref_mut() {
+                da[i] += offsets[1][l];
+            }
+            if !fate[i].is_alive() {
                 continue;
             }
-            let offsets = values.map(|v| v as f32);
-            let clean = &frame.clean;
-            let target = if is_azimuth {
-                frame.moved.azimuth_mut(n)
-            } else {
-                frame.moved.elevation_mut(n)
-            };
-            for (t, r) in target.iter_mut().zip(clean) {
-                *t += offsets[usize::from(r.laser) % 32];
+            if let Some(inten) = inten.as_deref_mut() {
+                power[i] *= gain[l];
+                inten[i] = bytes[l][usize::from(inten[i])];
+            }
+            if biases {
+                range[i] = (f64::from(range[i]) + bias[l]) as f32;
             }
         }
     }
+}
+
+/// `scale_byte(v, g_l)` for every byte v and laser l.
+fn byte_tables(gain: &[f64; 32]) -> Box<[[u8; 256]; 32]> {
+    let mut t = Box::new([[0u8; 256]; 32]);
+    for (row, &g) in t.iter_mut().zip(gain) {
+        for (v, b) in row.iter_mut().enumerate() {
+            *b = scale_byte(v as u8, g);
+        }
+    }
+    t
 }
 
 const GIVEN_KEYS: [&str; 4] = [
@@ -153,6 +182,7 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
         sigma_azimuth_deg: sigma(opts, "sigma_azimuth_deg", 0.01, 5.0)?,
         given,
         values: [[1.0; 32], [0.0; 32], [0.0; 32], [0.0; 32]],
+        bytes: None,
     }))
 }
 

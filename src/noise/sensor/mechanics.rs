@@ -80,14 +80,21 @@ impl NoiseStage for Mechanics {
             || self.eccentricity_deg != 0.0
             || self.jitter_deg != 0.0
             || spin != 0.0;
-        if azimuth_moves {
-            let a_start = frame.clean.first().map_or(0.0, |r| f64::from(r.azimuth));
-            let clean = &frame.clean;
-            let da = frame.moved.azimuth_deg.get_or_insert_with(|| vec![0.0; n]);
-            let mut last_jitter = 0.0;
-            let mut firing = None;
-            let mut shift = 0.0f32;
-            for (i, r) in clean.iter().enumerate() {
+        let wobbles = self.wobble_deg != 0.0;
+        if !(azimuth_moves || wobbles) {
+            return;
+        }
+        let a_start = frame.clean.first().map_or(0.0, |r| f64::from(r.azimuth));
+        let NoisyFrame { clean, moved, .. } = frame;
+        let mut da = azimuth_moves.then(|| moved.azimuth_deg.get_or_insert_with(|| vec![0.0; n]));
+        let mut de = wobbles.then(|| moved.elevation_deg.get_or_insert_with(|| vec![0.0; n]));
+        let mut last_jitter = 0.0;
+        let mut firing = None;
+        let mut shift = 0.0f32;
+        let mut last = (f32::NAN, 0.0f32);
+        // One pass over the returns for the azimuth shift and the wobble.
+        for (i, r) in clean.iter().enumerate() {
+            if let Some(da) = da.as_deref_mut() {
                 // The 32 returns of a firing share its azimuth: one evaluation each.
                 let key = (r.packet, r.block, r.azimuth.to_bits());
                 if firing != Some(key) {
@@ -110,15 +117,7 @@ impl NoiseStage for Mechanics {
                 }
                 da[i] += shift;
             }
-        }
-        if self.wobble_deg != 0.0 {
-            let clean = &frame.clean;
-            let de = frame
-                .moved
-                .elevation_deg
-                .get_or_insert_with(|| vec![0.0; n]);
-            let mut last = (f32::NAN, 0.0f32);
-            for (d, r) in de.iter_mut().zip(clean) {
+            if let Some(de) = de.as_deref_mut() {
                 if r.azimuth.to_bits() != last.0.to_bits() {
                     let a = f64::from(r.azimuth).to_radians();
                     last = (
@@ -126,7 +125,7 @@ impl NoiseStage for Mechanics {
                         (self.wobble_deg * (a + self.phases[1]).sin()) as f32,
                     );
                 }
-                *d += last.1;
+                de[i] += last.1;
             }
         }
     }

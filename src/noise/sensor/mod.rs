@@ -11,6 +11,7 @@ pub mod mechanics;
 pub mod motion;
 pub mod mounting;
 pub mod receiver;
+pub mod ziggurat;
 
 use crate::config::reader::Section;
 use crate::error::Result;
@@ -261,49 +262,12 @@ pub fn scale_byte(v: u8, g: f64) -> u8 {
 /// calls, so the square roots and divisions of successive returns overlap.
 pub const CHUNK: usize = 256;
 
-/// Fills `out` (at most [`CHUNK`] * 2 values) with standard normal draws (ziggurat,
-/// `rand_distr::StandardNormal`). The random words are taken from `rng` in one bulk
-/// fill, one word per draw, and the ziggurat runs on that buffer (its rare rejections
-/// take further words from `rng`): the same distribution and the same stream, in a
-/// different order than one draw at a time, and much cheaper per draw.
+/// Fills `out` with standard normal draws from the stage's stream `rng`: the ziggurat of
+/// [`ziggurat::fill`], one 32-bit word per draw taken in one bulk fill (the rare
+/// rejections take further words from `rng`). Draw `j` of a fill starts from word `j`,
+/// so the per-return draws of a stage do not depend on the fates of the returns.
 pub fn fill_normals(rng: &mut ChaCha8Rng, out: &mut [f64]) {
-    let mut words = [0u64; 2 * CHUNK];
-    let words = &mut words[..out.len()];
-    rng.fill(words);
-    let mut src = Buffered { words, pos: 0, rng };
-    for x in out.iter_mut() {
-        *x = src.sample::<f64, _>(StandardNormal);
-    }
-}
-
-/// Random words from a pre-filled buffer, then from the stream once it is used up.
-struct Buffered<'a> {
-    words: &'a [u64],
-    pos: usize,
-    rng: &'a mut ChaCha8Rng,
-}
-
-impl rand::RngCore for Buffered<'_> {
-    #[inline]
-    fn next_u64(&mut self) -> u64 {
-        match self.words.get(self.pos) {
-            Some(&w) => {
-                self.pos += 1;
-                w
-            }
-            None => self.rng.next_u64(),
-        }
-    }
-    #[inline]
-    fn next_u32(&mut self) -> u32 {
-        self.next_u64() as u32
-    }
-    fn fill_bytes(&mut self, dst: &mut [u8]) {
-        for chunk in dst.chunks_mut(8) {
-            let w = self.next_u64().to_le_bytes();
-            chunk.copy_from_slice(&w[..chunk.len()]);
-        }
-    }
+    ziggurat::fill(rng, out);
 }
 
 /// One standard normal draw.

@@ -38,11 +38,13 @@ print(f"{label}: median {med*1e3:.1f} ms, best {best*1e3:.1f} ms, "
 PY
 }
 bin=target/release/lidar-noise
-for t in 1 2; do
-  RAYON_NUM_THREADS=$t timeit "lidar-noise run, paper config, $t thread(s)" \
-    "$bin" --quiet run -c configs/paper.toml -o "$out/o" "$capture"
-done
-RAYON_NUM_THREADS=2 timeit "lidar-noise convert, 2 threads" \
+# One core: the decoding thread and the one worker pinned to CPU 0 (without the pin the
+# decoder would overlap on the second core). Two: both cores, two workers.
+RAYON_NUM_THREADS=1 timeit "lidar-noise run, paper config, 1 core" \
+  taskset -c 0 "$bin" --quiet run -c configs/paper.toml -o "$out/o" "$capture"
+RAYON_NUM_THREADS=2 timeit "lidar-noise run, paper config, 2 cores" \
+  "$bin" --quiet run -c configs/paper.toml -o "$out/o" "$capture"
+RAYON_NUM_THREADS=2 timeit "lidar-noise convert, 2 cores" \
   "$bin" --quiet convert -o "$out/o" "$capture"
 echo "== Python peer (same machine, same run)"
 for _ in 1 2 3; do

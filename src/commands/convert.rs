@@ -1,6 +1,7 @@
 //! `lidar-noise convert`: one point cloud per frame, no noise.
 
 use crate::cli::Global;
+use crate::frame::Frame;
 use crate::hdl32e::frames::DecoderOptions;
 use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
 use crate::writers::ply::PlyFrame;
@@ -174,22 +175,22 @@ fn convert_one(
     let source = super::capture_label(capture);
     let progress = super::progress(global, "frames");
     let mut written = 0u32;
-    while let Some(frame) = reader.next() {
-        let frame = frame?;
-        if frame.index > *range.end() {
-            break;
-        }
-        if range.contains(&frame.index) {
-            let name = output.file_name(frame.index);
-            crate::writers::atomic::refuse_inputs(&target.join(&name), &[capture])?;
-            let path = dir.join(name);
-            let ply = PlyFrame::new(&frame.returns, &source, frame.index, frame.start_time());
-            write_file(&*output.document(ply), &path, &[capture])?;
-            written += 1;
-            progress.inc(1);
-        }
+    // Decoding on this thread, PLY encoding and writing on the workers, overlapped
+    // (see `run::stream_frames`); the frame's buffer comes back for the decoder to reuse.
+    let work = |frame: Frame| -> Result<Frame> {
+        let name = output.file_name(frame.index);
+        crate::writers::atomic::refuse_inputs(&target.join(&name), &[capture])?;
+        let path = dir.join(name);
+        let ply = PlyFrame::new(&frame.returns, &source, frame.index, frame.start_time());
+        write_file(&*output.document(ply), &path, &[capture])?;
+        Ok(frame)
+    };
+    super::run::stream_frames(&mut reader, range, work, |frame, reader| {
+        written += 1;
+        progress.inc(1);
         reader.recycle(frame);
-    }
+        Ok(())
+    })?;
     progress.finish_and_clear();
     let summary = reader.summary();
     super::warn_truncation(global, capture, &summary);

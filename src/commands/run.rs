@@ -2,6 +2,7 @@
 
 use crate::cli::Global;
 use crate::config::Config;
+use crate::frame::Frame;
 use crate::hdl32e::frames::{CaptureSummary, DecoderOptions, FrameReader};
 use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
 use crate::pipeline::report::{cluster_table, FrameClusters, FrameReport, Totals, FATE_CODES};
@@ -10,7 +11,6 @@ use crate::writers::ply::{PlyColumns, PlyFrame};
 use crate::writers::staging::{self, OutputFolder};
 use crate::writers::{write_file, FrameOutput};
 use anyhow::{Context, Result};
-use rayon::prelude::*;
 use serde::Serialize;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
@@ -343,11 +343,6 @@ fn run_capture(
 ) -> Result<String> {
     let progress = super::progress(global, "frames");
     progress.set_message(source.to_string());
-    // Frames are processed in batches in parallel, each frame's own files (PLY, linkage)
-    // written by the worker that processed it; the next batch is decoded while the current
-    // one is processed, and the reports are written in frame order. Memory stays bounded
-    // by two batches whatever the capture's length.
-    let batch_size = 2 * rayon::current_num_threads().max(1);
     // Per-frame reports are streamed to spool files and joined at the end, so memory
     // does not grow with the capture's length.
     let mut spool = ReportSpool::new(dir)?;
@@ -369,45 +364,33 @@ fn run_capture(
     } else {
         None
     };
-    let mut batch = reader.next_batch(batch_size, &plan.frames)?;
-    while !batch.is_empty() {
-        let (next, results) = rayon::join(
-            || reader.next_batch(batch_size, &plan.frames),
-            || {
-                batch
-                    .into_par_iter()
-                    .map(|f| -> Result<SpoolEntry> {
-                        let result = plan.pipeline.process(f)?;
-                        if let Some(p) = &pcap {
-                            p.encode_frame(&result.noisy);
-                        }
-                        if plan.ply {
-                            write_ply(plan, &result, source, dir, inputs)?;
-                        }
-                        if plan.linkage {
-                            write_linkage(plan, &result, dir, inputs)?;
-                        }
-                        let report = FrameReport::of(&result);
-                        let clusters = FrameClusters {
-                            index: result.noisy.index,
-                            clusters: result.clusters,
-                        };
-                        SpoolEntry::of(report, &clusters)
-                    })
-                    .collect::<Vec<Result<SpoolEntry>>>()
-            },
-        );
-        // Errors in frame order: this batch's before a decoding error in the next.
-        for entry in results {
-            let entry = entry?;
-            if let Some(p) = &pcap {
-                p.frame_done(entry.report.index)?;
-            }
-            spool.add(entry)?;
-            progress.inc(1);
+    let work = |f: Frame| -> Result<SpoolEntry> {
+        let result = plan.pipeline.process(f)?;
+        if let Some(p) = &pcap {
+            p.encode_frame(&result.noisy);
         }
-        batch = next?;
-    }
+        if plan.ply {
+            write_ply(plan, &result, source, dir, inputs)?;
+        }
+        if plan.linkage {
+            write_linkage(plan, &result, dir, inputs)?;
+        }
+        let report = FrameReport::of(&result);
+        let clusters = FrameClusters {
+            index: result.noisy.index,
+            clusters: result.clusters,
+        };
+        SpoolEntry::of(report, &clusters)
+    };
+    stream_frames(&mut reader, &plan.frames, work, |entry, _| {
+        // Frames arrive here in order: the noisy capture can be written up to this one.
+        if let Some(p) = &pcap {
+            p.frame_done(entry.report.index)?;
+        }
+        spool.add(entry)?;
+        progress.inc(1);
+        Ok(())
+    })?;
     progress.finish_and_clear();
     let capture_summary = reader.summary();
     super::warn_truncation(global, Path::new(source), &capture_summary);
@@ -499,6 +482,115 @@ fn run_capture(
         100.0 * t.ground_fraction,
         t.stages.clusters,
     ))
+}
+
+/// Runs `work` on every frame in `frames` as a bounded pipeline: the calling thread
+/// decodes frames and hands them to `rayon::current_num_threads()` workers, and hands
+/// each result to `done` (with the reader, to recycle buffers) in frame order as soon as every earlier frame's is in. Decoding,
+/// processing (with each frame's own files) and the ordered report append overlap, with
+/// no barrier between groups of frames: a slow frame holds back only the report append,
+/// never the workers. At most `2 x workers + 1` frames are in flight (decoded, queued,
+/// processed or waiting for an earlier one), so memory stays bounded whatever the
+/// capture's length. Errors come in frame order: a frame's processing error before a
+/// decoding error further on; after the first error no new frame is started.
+pub(crate) fn stream_frames<T: Send>(
+    reader: &mut FrameReader,
+    frames: &RangeInclusive<u32>,
+    work: impl Fn(Frame) -> Result<T> + Sync,
+    mut done: impl FnMut(T, &mut FrameReader) -> Result<()>,
+) -> Result<()> {
+    use std::collections::BTreeMap;
+    use std::panic::AssertUnwindSafe;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::{mpsc, Mutex};
+    let workers = rayon::current_num_threads().max(1);
+    let window = 2 * workers + 1;
+    let (frame_tx, frame_rx) = mpsc::sync_channel::<(usize, Frame)>(workers);
+    let frame_rx = Mutex::new(frame_rx);
+    // A worker's panic travels to the calling thread and resumes there.
+    type Outcome<T> = std::thread::Result<Result<T>>;
+    let (result_tx, result_rx) = mpsc::channel::<(usize, Outcome<T>)>();
+    // Set on the first error: queued frames are then skipped, not processed.
+    let stop = AtomicBool::new(false);
+    std::thread::scope(|scope| -> Result<()> {
+        for _ in 0..workers {
+            let (frame_rx, result_tx, work, stop) = (&frame_rx, result_tx.clone(), &work, &stop);
+            scope.spawn(move || loop {
+                // The lock is held only while taking one frame off the queue.
+                let next = frame_rx.lock().unwrap_or_else(|e| e.into_inner()).recv();
+                let Ok((seq, frame)) = next else {
+                    return;
+                };
+                if stop.load(Ordering::Relaxed) {
+                    continue;
+                }
+                let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| work(frame)));
+                if result_tx.send((seq, outcome)).is_err() {
+                    return;
+                }
+            });
+        }
+        drop(result_tx);
+        let mut frame_tx = Some(frame_tx);
+        // Results that arrived before an earlier frame's, by sequence number.
+        let mut pending: BTreeMap<usize, Outcome<T>> = BTreeMap::new();
+        let (mut sent, mut finished) = (0usize, 0usize);
+        let mut decode_error: Option<anyhow::Error> = None;
+        // Hands over every result whose predecessors are all in.
+        let mut drain = |pending: &mut BTreeMap<usize, Outcome<T>>,
+                         finished: &mut usize,
+                         reader: &mut FrameReader| {
+            while let Some(outcome) = pending.remove(finished) {
+                *finished += 1;
+                let result = outcome.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+                if let Err(e) = result.and_then(|r| done(r, reader)) {
+                    stop.store(true, Ordering::Relaxed);
+                    return Err(e);
+                }
+            }
+            Ok::<(), anyhow::Error>(())
+        };
+        loop {
+            // Decode ahead while the window has room.
+            while frame_tx.is_some() && sent - finished < window {
+                match reader.next_batch(1, frames) {
+                    Ok(mut batch) => match batch.pop() {
+                        Some(frame) => {
+                            let tx = frame_tx.as_ref().expect("checked above");
+                            // The workers only leave once the queue is closed.
+                            tx.send((sent, frame)).expect("workers are running");
+                            sent += 1;
+                        }
+                        None => frame_tx = None,
+                    },
+                    Err(e) => {
+                        decode_error = Some(e.into());
+                        frame_tx = None;
+                    }
+                }
+                // Reports go out between decodes, not only when the window is full.
+                while let Ok((seq, result)) = result_rx.try_recv() {
+                    pending.insert(seq, result);
+                }
+                if let Err(e) = drain(&mut pending, &mut finished, reader) {
+                    drop(frame_tx.take());
+                    return Err(e);
+                }
+            }
+            if finished == sent {
+                break;
+            }
+            let (seq, result) = result_rx
+                .recv()
+                .expect("a worker holds every unfinished frame");
+            pending.insert(seq, result);
+            if let Err(e) = drain(&mut pending, &mut finished, reader) {
+                drop(frame_tx.take());
+                return Err(e);
+            }
+        }
+        decode_error.map_or(Ok(()), Err)
+    })
 }
 
 /// Per-frame reports written to disk as they come (summary frames, cluster frames and

@@ -115,7 +115,11 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         }
         let ring = r.ring as usize;
         // Nearest bin; the cast saturates and rem_euclid below keeps it in range.
-        let bin = ((f64::from(r.azimuth) - phase[ring]) / width + 0.5).floor() as i64;
+        // `floor` written out (it is a libm call on baseline x86-64); same value for every
+        // finite input, and the azimuth and phase are finite here.
+        let x = (f64::from(r.azimuth) - phase[ring]) / width + 0.5;
+        let t = x as i64;
+        let bin = if (t as f64) > x { t - 1 } else { t };
         let col = bin.rem_euclid(cols as i64) as usize;
         let cell = col * rows + ring;
         cell_of[i] = cell as u32;
@@ -138,10 +142,9 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         (zb - za).abs().atan2((db - da).abs()).to_degrees()
     };
 
-    // Bridged vertical links and angles.
+    // Bridged vertical links; the angles are computed when the growth first reads them.
     let mut up = vec![NONE; cells];
     let mut down = vec![NONE; cells];
-    let mut angle = vec![f32::NAN; cells];
     for col in 0..cols {
         let base = col * rows;
         let mut prev: Option<usize> = None;
@@ -158,20 +161,28 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
             }
             prev = Some(row);
         }
-        for row in 0..rows {
-            let cell = base + row;
-            if rep[cell] == NONE {
-                continue;
-            }
-            angle[cell] = if up[cell] != NONE {
-                slope(cell, up[cell] as usize)
-            } else if down[cell] != NONE {
-                slope(down[cell] as usize, cell)
-            } else {
-                f32::NAN
-            };
-        }
     }
+    // A cell's angle, from its upward link, else its downward one; NaN without either
+    // (empty cells have neither). Computed on first use and cached: the growth reads only
+    // the cells next to the ground, and `atan2` was most of this function's time. Angles
+    // are in [0, 90] or NaN, so -1 marks "not computed yet".
+    const UNKNOWN: f32 = -1.0;
+    let mut angle = vec![UNKNOWN; cells];
+    let mut angle_of = |cell: usize| -> f32 {
+        let cached = angle[cell];
+        if cached != UNKNOWN {
+            return cached;
+        }
+        let a = if up[cell] != NONE {
+            slope(cell, up[cell] as usize)
+        } else if down[cell] != NONE {
+            slope(down[cell] as usize, cell)
+        } else {
+            f32::NAN
+        };
+        angle[cell] = a;
+        a
+    };
 
     // Seeds and growth.
     let initial = initial_angle_deg as f32;
@@ -186,7 +197,7 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
             continue;
         };
         // NaN angles fail this test, so a lone cell never seeds.
-        let seeds = angle[lowest] <= initial;
+        let seeds = angle_of(lowest) <= initial;
         if ground[lowest] || !seeds {
             continue;
         }
@@ -197,15 +208,15 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
             // Same row in the adjacent columns, wrapping around in azimuth.
             let left = if cur >= rows { cur - rows } else { cur + wrap };
             let right = if cur < wrap { cur + rows } else { cur - wrap };
-            let a = angle[cur];
+            let a = angle_of(cur);
             for nb in [up[cur], down[cur], left as u32, right as u32] {
-                if nb == NONE {
+                if nb == NONE || ground[nb as usize] {
                     continue;
                 }
                 let nb = nb as usize;
                 // Empty cells have a NaN angle and fail the comparison.
-                let an = angle[nb];
-                if !ground[nb] && an <= initial && (an - a).abs() < delta {
+                let an = angle_of(nb);
+                if an <= initial && (an - a).abs() < delta {
                     ground[nb] = true;
                     stack.push(nb as u32);
                 }

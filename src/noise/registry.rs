@@ -51,6 +51,8 @@ pub const REGISTRY: &[StageKind] = &[
     sensor::motion::KIND,
     sensor::clock::KIND,
     sensor::ambient::KIND,
+    world::multipath::KIND,
+    world::lens_damage::KIND,
 ];
 
 /// Builds the stage of one `[[noise]]` entry read through `entry`.

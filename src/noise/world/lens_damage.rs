@@ -195,10 +195,15 @@ impl NoiseStage for LensDamage {
             let dual = slots.mode == SlotMode::Dual;
             // Elevation of each laser in this frame (the calibration's).
             let mut elevation = [f32::NAN; 32];
+            let mut found = 0;
             for r in &frame.clean[..frame.clean_len] {
                 let l = usize::from(r.laser) % 32;
                 if elevation[l].is_nan() {
                     elevation[l] = r.elevation;
+                    found += 1;
+                    if found == 32 {
+                        break;
+                    }
                 }
             }
             let mut words = [0u64; CHUNK];
@@ -258,10 +263,17 @@ impl NoiseStage for LensDamage {
                 .moved
                 .intensity
                 .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect());
+            // The intensity bytes after the loss, looked up (one factor for every laser).
+            let mut table = [0u8; 256];
+            for (v, t) in table.iter_mut().enumerate() {
+                *t = scale_byte(v as u8, t2);
+            }
+            // With every laser damaged, skip reading the (large) returns for their laser.
+            let all = self.mask == u32::MAX;
             for i in 0..n {
-                if frame.fate[i].is_alive() && self.damaged(clean[i].laser) {
+                if frame.fate[i].is_alive() && (all || self.damaged(clean[i].laser)) {
                     frame.power[i] *= t2;
-                    inten[i] = scale_byte(inten[i], t2);
+                    inten[i] = table[usize::from(inten[i])];
                 }
             }
         }

@@ -301,10 +301,13 @@ impl NoiseStage for Multipath {
             let (r0, p0) = (frame.range[i], frame.power[i]);
             // The entries of the slot that hold this echo (two in a dual slot whose
             // entries report the same echo).
-            let targets: Vec<usize> = slots
-                .occupants(s)
-                .filter(|&t| t == i || (frame.range[t], frame.power[t]) == (r0, p0))
-                .collect();
+            let mut targets = [usize::MAX; 2];
+            for (k, t) in slots.occupants(s).take(2).enumerate() {
+                if t == i || (frame.range[t], frame.power[t]) == (r0, p0) {
+                    targets[k] = t;
+                }
+            }
+            let targets = targets.into_iter().filter(|&t| t != usize::MAX);
             match m {
                 Mix::Merged { range, power } => {
                     for t in targets {

@@ -105,7 +105,7 @@ fn stage(kind: &str, body: &str) -> String {
 /// band)? Returns the neighbour's range.
 fn edge_neighbour(f: &Frame, i: usize, per_firing: usize) -> Option<f32> {
     let firing = i / per_firing;
-    if firing % 10 == 0 && firing > 0 {
+    if firing.is_multiple_of(10) && firing > 0 {
         Some(f.returns[i - per_firing].range)
     } else if firing % 10 == 9 && firing + 1 < 600 {
         Some(f.returns[i + per_firing].range)

@@ -118,6 +118,27 @@ fn bench_chain(c: &mut Criterion) {
     c.bench_function("pdiagram-world chain + filters, 50k returns", |b| {
         b.iter(|| black_box(world_chain.process(black_box(&frame))))
     });
+    // The geometry world stages (p-diagram 07 and 10) at their defaults, each alone: the
+    // difference with "stages: none" is what the stage costs. The synthetic frame's
+    // ranges are random, so nearly every return is at a depth edge (multipath's worst
+    // case).
+    let none = NoiseChain::new(
+        &Config::from_toml_str("seed = 1\n", std::path::Path::new("b"), &[], None)
+            .expect("bare")
+            .0,
+    );
+    c.bench_function("stages: none + filters, 50k returns", |b| {
+        b.iter(|| black_box(none.process(black_box(&frame))))
+    });
+    for kind in ["multipath", "lens_damage"] {
+        let text = format!("seed = 1\n[[noise]]\ntype = \"{kind}\"\n");
+        let (cfg, _) = Config::from_toml_str(&text, std::path::Path::new("b"), &[], None)
+            .expect("stage config");
+        let chain = NoiseChain::new(&cfg);
+        c.bench_function(&format!("stages: {kind} + filters, 50k returns"), |b| {
+            b.iter(|| black_box(chain.process(black_box(&frame))))
+        });
+    }
 }
 
 criterion_group!(benches, bench_chain);

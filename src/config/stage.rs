@@ -23,6 +23,8 @@ pub const STAGE_TYPES: &[&str] = &[
     "spoofing",
     "crosstalk",
     "emi",
+    "multipath",
+    "lens_damage",
 ];
 
 /// One `[[noise]]` entry, not yet built into a stage.

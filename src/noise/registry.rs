@@ -54,6 +54,8 @@ pub const REGISTRY: &[StageKind] = &[
     world::spoofing::KIND,
     world::crosstalk::KIND,
     world::emi::KIND,
+    world::multipath::KIND,
+    world::lens_damage::KIND,
 ];
 
 /// Builds the stage of one `[[noise]]` entry read through `entry`.

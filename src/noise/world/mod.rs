@@ -3,6 +3,8 @@
 
 pub mod crosstalk;
 pub mod emi;
+pub mod lens_damage;
+pub mod multipath;
 pub mod occlusion;
 pub mod rain;
 pub mod spoofing;

@@ -20,6 +20,8 @@ pub const STAGE_TYPES: &[&str] = &[
     "motion",
     "clock",
     "ambient",
+    "fog",
+    "snow",
 ];
 
 /// One `[[noise]]` entry, not yet built into a stage.

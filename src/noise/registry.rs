@@ -51,6 +51,8 @@ pub const REGISTRY: &[StageKind] = &[
     sensor::motion::KIND,
     sensor::clock::KIND,
     sensor::ambient::KIND,
+    world::fog::KIND,
+    world::snow::KIND,
 ];
 
 /// Builds the stage of one `[[noise]]` entry read through `entry`.
@@ -142,6 +144,8 @@ mod listing_tests {
             match kind {
                 "occlusion" => "lasers = [1]",
                 "rain" => "rate_mm_h = 1.0",
+                "fog" => "visibility_m = 100.0",
+                "snow" => "rate_mm_h = 1.0",
                 _ => "",
             }
         };
@@ -158,7 +162,7 @@ mod listing_tests {
                     k.name
                 );
             }
-            if !matches!(k.name, "occlusion" | "laser_diode") {
+            if !matches!(k.name, "occlusion" | "laser_diode" | "rain") {
                 let set: Vec<&str> = config.noise[0]
                     .settings
                     .iter()

@@ -418,17 +418,17 @@ impl NoiseStage for Fog {
     }
 
     fn apply(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
-        let alpha = self.alpha();
-        if alpha > 0.0 {
-            let two_alpha = 2.0 * alpha;
-            for ((power, &range), fate) in frame.power.iter_mut().zip(&frame.range).zip(&frame.fate)
-            {
-                if fate.is_alive() {
-                    *power *= (-two_alpha * f64::from(range)).exp();
+        let two_alpha = 2.0 * self.alpha();
+        if !self.echoes() {
+            if two_alpha > 0.0 {
+                for ((power, &range), fate) in
+                    frame.power.iter_mut().zip(&frame.range).zip(&frame.fate)
+                {
+                    if fate.is_alive() {
+                        *power *= (-two_alpha * f64::from(range)).exp();
+                    }
                 }
             }
-        }
-        if !self.echoes() {
             return;
         }
         let kappa = frame
@@ -451,33 +451,54 @@ impl NoiseStage for Fog {
                 range
             }
         };
+        // Most targets lie beyond the echo's peak, where the echo does not depend on R0:
+        // decide its detectability once.
+        let (far_r, far_i) = table.far();
+        let far = Echo {
+            range: far_r as f32,
+            power: scale * far_i,
+        };
+        let far_ok = frame.detectable(far.range, far.power);
+        let far_from = table.far_from;
+        let vacant = if self.empty_slots {
+            slots.len().saturating_sub(frame.clean_len)
+        } else {
+            0
+        };
+        frame.candidates.reserve(frame.clean_len + vacant);
         for i in 0..frame.clean_len {
             let r0 = f64::from(frame.range[i]);
-            let (r, integral) = table.lookup(r0);
-            let r = noisy(rng, r, r0);
-            if frame.fate[i] == Fate::Occluded {
-                continue;
+            let fate = frame.fate[i];
+            // Hard target: two-way extinction (alive returns only).
+            if fate.is_alive() {
+                frame.power[i] *= (-two_alpha * r0).exp();
             }
-            let echo = Echo {
-                range: r as f32,
-                power: scale * integral,
+            let echo = if r0 >= far_from && n == 0.0 {
+                if !far_ok {
+                    continue;
+                }
+                far
+            } else {
+                let (r, integral) = table.lookup(r0);
+                Echo {
+                    range: noisy(rng, r, r0) as f32,
+                    power: scale * integral,
+                }
             };
-            // Only detectable echoes can take part in the slot's competition.
-            if frame.detectable(echo.range, echo.power) {
+            // Occlusion removes the beam; only detectable echoes can take part in the
+            // slot's competition.
+            if fate != Fate::Occluded && frame.detectable(echo.range, echo.power) {
                 frame.propose_slot(slots.slot_of(i), echo);
             }
         }
         if self.empty_slots {
-            let (r, integral) = table.far();
-            let power = scale * integral;
             for slot in 0..slots.len() as u32 {
                 if !slots.is_vacant(slot) {
                     continue;
                 }
-                let r = noisy(rng, r, EMPTY_SLOT_RANGE_M);
                 let echo = Echo {
-                    range: r as f32,
-                    power,
+                    range: noisy(rng, far_r, EMPTY_SLOT_RANGE_M) as f32,
+                    power: far.power,
                 };
                 if frame.detectable(echo.range, echo.power) {
                     frame.propose_slot(slot, echo);

@@ -521,3 +521,69 @@ fn weather_stages_are_sweepable_and_toggleable() {
     .unwrap();
     assert_eq!(c.noise[0].kind(), "fog");
 }
+
+#[test]
+fn dual_mode_reports_the_fog_echo_and_the_target() {
+    // A dual slot holding one target (both entries, as the sensor reports a single echo
+    // twice): a stronger fog echo becomes the strongest return, the target stays the last.
+    let mut last = ret(3, 25.0, 10, 0, ReturnKind::DualLast);
+    let mut strongest = last;
+    strongest.kind = ReturnKind::DualStrongest;
+    last.block = 0;
+    strongest.block = 1;
+    let f = Frame {
+        index: 0,
+        partial: false,
+        returns: vec![last, strongest],
+    };
+    let out = run(&stage("fog", "visibility_m = 300\nempty_slots = false"), &f);
+    assert_eq!(out.fate, vec![Fate::Kept, Fate::Replaced]);
+    assert_eq!(out.range[0], 25.0);
+    assert!(out.range[1] < 2.0, "{}", out.range[1]);
+}
+
+#[test]
+fn fog_range_noise_follows_hahner_v1() {
+    // Echo range x R0 / U(R0 - n, R0 + n): within the bounds, both sides, mean near
+    // E[R0 / U] (about 1 for n << R0).
+    let r0 = 40.0f64;
+    let n = 5.0f64;
+    let returns: Vec<Return> = (0..3000u32)
+        .map(|k| ret((k % 32) as u8, r0 as f32, 0, k / 32, ReturnKind::Strongest))
+        .collect();
+    let plain = proposals(
+        &stage("fog", "visibility_m = 100\nempty_slots = false"),
+        returns.clone(),
+    );
+    let noisy = proposals(
+        &stage(
+            "fog",
+            &format!("visibility_m = 100\nempty_slots = false\nrange_noise_m = {n}"),
+        ),
+        returns,
+    );
+    let base = f64::from(plain.candidates[0].echo.range);
+    assert!(plain
+        .candidates
+        .iter()
+        .all(|c| f64::from(c.echo.range) == base));
+    let (lo, hi) = (base * r0 / (r0 + n), base * r0 / (r0 - n));
+    let mut below = 0;
+    let mut sum = 0.0;
+    for c in &noisy.candidates {
+        let r = f64::from(c.echo.range);
+        assert!(r >= lo - 1e-5 && r <= hi + 1e-5, "{r} not in [{lo}, {hi}]");
+        below += usize::from(r < base);
+        sum += r / base;
+    }
+    let m = noisy.candidates.len();
+    assert_eq!(m, 3000);
+    // E[R0/U] for U uniform on [R0 - n, R0 + n] = R0 / (2 n) ln((R0 + n)/(R0 - n)).
+    let want = r0 / (2.0 * n) * ((r0 + n) / (r0 - n)).ln();
+    assert!(
+        (sum / m as f64 - want).abs() < 0.003,
+        "{} vs {want}",
+        sum / m as f64
+    );
+    assert!(below > 1300 && below < 1700, "{below}");
+}

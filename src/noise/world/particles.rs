@@ -129,11 +129,25 @@ impl Particles {
         let count = whole as u64 + u64::from(u < expected - whole);
         let tail = 1.0 - (-self.lambda_per_mm * (self.d_max_mm - D_MIN_MM)).exp();
         let lo = MIN_RANGE_M.max(min_range);
+        // Cheap rejections first (they only skip particles the exact test would reject
+        // too): u below (lo / R)^3 (with a margin for rounding) puts the particle nearer
+        // than lo; the power without extinction bounds the power with it.
+        let a_lo = (lo / r_cone).powi(3) * (1.0 - 1e-9);
+        let k = kappa_m2 * self.fresnel;
+        let t2 = self.tan_divergence * self.tan_divergence;
         for _ in 0..count {
             let (a, b): (f64, f64) = (rng.random(), rng.random());
+            if a < a_lo {
+                continue;
+            }
             let r = r_cone * a.cbrt();
-            let d = D_MIN_MM - (1.0 - b * tail).ln() / self.lambda_per_mm;
             if r < lo {
+                continue;
+            }
+            let d = D_MIN_MM - (1.0 - b * tail).ln() / self.lambda_per_mm;
+            let d_m = d * 1e-3;
+            let r2 = r * r;
+            if k * (d_m * d_m / (t2 * r2)).min(1.0) < threshold * r2 {
                 continue;
             }
             let p = self.power(r, d, alpha, kappa_m2);

@@ -135,17 +135,29 @@ impl Particles {
         let a_lo = (lo / r_cone).powi(3) * (1.0 - 1e-9);
         let k = kappa_m2 * self.fresnel;
         let t2 = self.tan_divergence * self.tan_divergence;
+        // Farthest range at which a particle of diameter d_m could reach the threshold
+        // (the bound below, solved for r); beyond it, no cube root is needed.
+        let near = (k / threshold).sqrt();
+        let r3 = r_cone * r_cone * r_cone;
         for _ in 0..count {
             let (a, b): (f64, f64) = (rng.random(), rng.random());
             if a < a_lo {
+                continue;
+            }
+            let d = D_MIN_MM - (1.0 - b * tail).ln() / self.lambda_per_mm;
+            let d_m = d * 1e-3;
+            let r_max = if near * self.tan_divergence <= d_m {
+                near
+            } else {
+                (k * d_m * d_m / (t2 * threshold)).sqrt().sqrt()
+            };
+            if a * r3 > r_max * r_max * r_max * (1.0 + 1e-9) {
                 continue;
             }
             let r = r_cone * a.cbrt();
             if r < lo {
                 continue;
             }
-            let d = D_MIN_MM - (1.0 - b * tail).ln() / self.lambda_per_mm;
-            let d_m = d * 1e-3;
             let r2 = r * r;
             if k * (d_m * d_m / (t2 * r2)).min(1.0) < threshold * r2 {
                 continue;

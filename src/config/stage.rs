@@ -25,6 +25,8 @@ pub const STAGE_TYPES: &[&str] = &[
     "emi",
     "multipath",
     "lens_damage",
+    "fog",
+    "snow",
 ];
 
 /// One `[[noise]]` entry, not yet built into a stage.

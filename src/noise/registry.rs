@@ -56,6 +56,8 @@ pub const REGISTRY: &[StageKind] = &[
     world::emi::KIND,
     world::multipath::KIND,
     world::lens_damage::KIND,
+    world::fog::KIND,
+    world::snow::KIND,
 ];
 
 /// Builds the stage of one `[[noise]]` entry read through `entry`.
@@ -147,6 +149,8 @@ mod listing_tests {
             match kind {
                 "occlusion" => "lasers = [1]",
                 "rain" => "rate_mm_h = 1.0",
+                "fog" => "visibility_m = 100.0",
+                "snow" => "rate_mm_h = 1.0",
                 _ => "",
             }
         };
@@ -163,7 +167,7 @@ mod listing_tests {
                     k.name
                 );
             }
-            if !matches!(k.name, "occlusion" | "laser_diode") {
+            if !matches!(k.name, "occlusion" | "laser_diode" | "rain") {
                 let set: Vec<&str> = config.noise[0]
                     .settings
                     .iter()

@@ -151,6 +151,17 @@ fn bench_chain(c: &mut Criterion) {
     c.bench_function("fog with backscatter + filters, 50k returns", |b| {
         b.iter(|| black_box(fog_chain.process(black_box(&frame))))
     });
+    // The issue's pair: fog with backscatter and crosstalk (1 %) in one chain.
+    let pair_text = "seed = 42\n[[noise]]\ntype = \"fog\"\nvisibility_m = 150.0\n\
+                     [[noise]]\ntype = \"crosstalk\"\nfraction = 0.01\n";
+    let (pair, _) = Config::from_toml_str(pair_text, std::path::Path::new("pair.toml"), &[], None)
+        .expect("fog + crosstalk config");
+    let pair_chain = NoiseChain::new(&pair);
+    let _ = pair_chain.process(&frame);
+    c.bench_function(
+        "fog with backscatter + crosstalk + filters, 50k returns",
+        |b| b.iter(|| black_box(pair_chain.process(black_box(&frame)))),
+    );
     let mut clear = fog.clone();
     clear.noise.clear();
     let clear_chain = NoiseChain::new(&clear);

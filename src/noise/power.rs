@@ -119,11 +119,8 @@ impl IdealPower {
         let c = &self.constants;
         let q = f64::from(range) / c.reference_range_m;
         let rho = power / c.threshold * c.reference_reflectance * q * q;
-        let level = (rho.clamp(0.0, 1.0) * c.intensity_full_scale).round();
-        if level.is_finite() {
-            level as u8
-        } else {
-            0
-        }
+        // Non-negative after the clamp (NaN gives 0), so adding one half and truncating
+        // rounds half up without the libm call `round` is here.
+        (rho.clamp(0.0, 1.0) * c.intensity_full_scale + 0.5) as u8
     }
 }

@@ -93,7 +93,11 @@ impl Slots {
     pub fn of(returns: &[Return]) -> Slots {
         // A dual capture decoded with one of its two returns behaves like that single
         // mode: its slots hold one return of that kind.
-        let has = |k: ReturnKind| returns.iter().any(|r| r.kind == k);
+        let mut kinds = 0u8;
+        for r in returns {
+            kinds |= 1 << (r.kind as u8);
+        }
+        let has = |k: ReturnKind| kinds & (1 << (k as u8)) != 0;
         let mode = match (has(ReturnKind::DualLast), has(ReturnKind::DualStrongest)) {
             (true, true) => SlotMode::Dual,
             (true, false) => SlotMode::Last,
@@ -303,6 +307,10 @@ impl NoisyFrame {
 
     /// Proposes an echo in a firing slot (occupied or vacant).
     pub fn propose_slot(&mut self, slot: SlotId, echo: Echo) {
+        if self.candidates.capacity() == 0 {
+            // Scatter stages often propose for most returns: grow once, not by doubling.
+            self.candidates.reserve(self.len());
+        }
         if echo.range.is_finite() && echo.power.is_finite() {
             self.candidates.push(Candidate {
                 slot,
@@ -382,23 +390,63 @@ pub fn resolve(frame: &mut NoisyFrame) {
     }
     let slots = frame.slots();
     let mut candidates = std::mem::take(&mut frame.candidates);
-    // Group by slot; a stable sort keeps proposal order inside a slot.
-    candidates.sort_by_key(|c| c.slot);
+    // Group by slot; a stable sort keeps proposal order inside a slot (stages mostly
+    // propose in slot order, which the sort only checks).
+    if !candidates.is_sorted_by_key(|c| c.slot) {
+        candidates.sort_by_key(|c| c.slot);
+    }
+    let mut contenders: Vec<Contender> = Vec::with_capacity(8);
     let mut start = 0;
     while start < candidates.len() {
         let slot = candidates[start].slot;
-        let mut end = start;
+        let mut end = start + 1;
         while end < candidates.len() && candidates[end].slot == slot {
             end += 1;
         }
-        resolve_slot(frame, &slots, slot, &candidates[start..end]);
+        resolve_slot(
+            frame,
+            &slots,
+            slot,
+            &candidates[start..end],
+            &mut contenders,
+        );
         start = end;
     }
+    // Hand the (cleared) buffer back so a later chain run on this frame reuses it.
+    candidates.clear();
+    frame.candidates = candidates;
 }
 
-fn resolve_slot(frame: &mut NoisyFrame, slots: &Slots, slot: SlotId, group: &[Candidate]) {
-    let occupants: Vec<usize> = slots.occupants(slot).collect();
+fn resolve_slot(
+    frame: &mut NoisyFrame,
+    slots: &Slots,
+    slot: SlotId,
+    group: &[Candidate],
+    contenders: &mut Vec<Contender>,
+) {
+    let pair = slots.occupants[slot as usize];
+    let n_occ = pair.iter().filter(|&&i| i != NONE).count();
+    let occupants = [pair[0] as usize, pair[1] as usize];
+    let occupants = &occupants[..n_occ];
     let vacant = occupants.is_empty();
+    // The common case (one recorded return, one echo, single-return mode) without the
+    // general machinery below; it makes the same choice.
+    if let ([i], [c], SlotMode::Strongest | SlotMode::Last) = (occupants, group, slots.mode) {
+        let i = *i;
+        if frame.fate[i] == Fate::Occluded || !frame.detectable(c.echo.range, c.echo.power) {
+            return;
+        }
+        let alive = frame.fate[i].is_alive() && frame.detectable(frame.range[i], frame.power[i]);
+        let wins = !alive
+            || match slots.mode {
+                SlotMode::Last => c.echo.range > frame.range[i],
+                _ => c.echo.power > frame.power[i],
+            };
+        if wins {
+            frame.replace(i, c.echo, c.stage);
+        }
+        return;
+    }
     // Occlusion removes the beam: no echo in an occluded slot.
     let occluded = if vacant {
         let (firing, laser) = Slots::split(slot);
@@ -411,8 +459,8 @@ fn resolve_slot(frame: &mut NoisyFrame, slots: &Slots, slot: SlotId, group: &[Ca
     if occluded {
         return;
     }
-    let mut contenders: Vec<Contender> = Vec::with_capacity(group.len() + 2);
-    for &i in &occupants {
+    contenders.clear();
+    for &i in occupants {
         let (range, power) = (frame.range[i], frame.power[i]);
         // Dual: both entries may hold the same echo (the only one); count it once.
         let same = contenders
@@ -458,20 +506,23 @@ fn resolve_slot(frame: &mut NoisyFrame, slots: &Slots, slot: SlotId, group: &[Ca
         }
         best
     };
-    let strongest = strongest_of(&contenders, None).expect("non-empty");
+    let strongest = strongest_of(contenders, None).expect("non-empty");
     // What each entry of the slot reports: (entry kind, contender).
-    let picks: Vec<(Option<ReturnKind>, usize)> = match slots.mode {
-        SlotMode::Strongest => vec![(None, strongest)],
-        SlotMode::Last => vec![(None, farthest)],
+    let (picks, n_picks): ([(Option<ReturnKind>, usize); 2], usize) = match slots.mode {
+        SlotMode::Strongest => ([(None, strongest), (None, strongest)], 1),
+        SlotMode::Last => ([(None, farthest), (None, farthest)], 1),
         SlotMode::Dual => {
-            let second = strongest_of(&contenders, Some(farthest)).unwrap_or(farthest);
-            vec![
-                (Some(ReturnKind::DualLast), farthest),
-                (Some(ReturnKind::DualStrongest), second),
-            ]
+            let second = strongest_of(contenders, Some(farthest)).unwrap_or(farthest);
+            (
+                [
+                    (Some(ReturnKind::DualLast), farthest),
+                    (Some(ReturnKind::DualStrongest), second),
+                ],
+                2,
+            )
         }
     };
-    for (kind, pick) in picks {
+    for &(kind, pick) in &picks[..n_picks] {
         let c = contenders[pick];
         // The entry of the slot this pick goes to.
         let entry = match kind {

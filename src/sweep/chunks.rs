@@ -39,7 +39,10 @@ pub fn chunk_ranges(
             s.frames.end()
         )));
     }
-    Ok((ranges_of(&indexes, frames_per_chunk as usize), indexes.len()))
+    Ok((
+        ranges_of(&indexes, frames_per_chunk as usize),
+        indexes.len(),
+    ))
 }
 
 /// Splits ascending frame indexes into ranges of `m` frames (the last may be shorter).
@@ -89,7 +92,9 @@ pub fn check_parts(dir: &Path, m: Option<u32>) -> Result<()> {
     for name in names {
         if let Some(found) = part_chunk_size(&name) {
             if Some(found) != m {
-                let given = m.map_or("no --chunk-frames".into(), |m| format!("--chunk-frames {m}"));
+                let given = m.map_or("no --chunk-frames".into(), |m| {
+                    format!("--chunk-frames {m}")
+                });
                 return Err(Error::Invalid(format!(
                     "{}: a part of a cell computed with --chunk-frames {found}, and this sweep \
                      has {given}: give --chunk-frames {found} to every shard, the merge and \

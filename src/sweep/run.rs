@@ -473,7 +473,8 @@ fn join_parts(
         - CHECKSUM_PLACEHOLDER.len();
     bytes[value_at..value_at + sum.len()].copy_from_slice(sum.as_bytes());
     file.checksum = sum;
-    verify_cell(&bytes).map_err(|e| Error::Invalid(format!("internal: {}: {e}", path.display())))?;
+    verify_cell(&bytes)
+        .map_err(|e| Error::Invalid(format!("internal: {}: {e}", path.display())))?;
     crate::writers::atomic::write_atomically(path, protected, |out| out.write_all(&bytes))?;
     for part in parts {
         let _ = std::fs::remove_file(part);

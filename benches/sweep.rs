@@ -40,6 +40,7 @@ fn bench(c: &mut Criterion) {
                     frames: 0..=u32::MAX,
                     output: dir.path().to_path_buf(),
                     bands: lidar_noise::sweep::metrics::DEFAULT_BANDS.to_vec(),
+                    chunk_frames: None,
                 };
                 let outcome = run(&settings, &captures, &Silent).unwrap();
                 assert_eq!(outcome.computed, 42);

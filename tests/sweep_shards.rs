@@ -296,3 +296,95 @@ fn a_killed_shard_leaves_nothing_a_merge_trusts() {
         );
     }
 }
+
+/// `--chunk-frames M` (frame ranges of long captures): two captures with their partial
+/// frames (3 and 2 frames) x 4 cells.
+fn chunked(out: &Path, extra: &[&str]) -> Output {
+    bin()
+        .arg("sweep")
+        .arg(common::fixtures().join("crossroad.pcap"))
+        .arg(common::fixtures().join("parking.pcap"))
+        .args([
+            "--vary",
+            "rain.rate_mm_h=0,3",
+            "--seeds",
+            "1..2",
+            "--keep-partial",
+            "-o",
+        ])
+        .arg(out)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+fn parts(dir: &Path) -> BTreeSet<PathBuf> {
+    if !dir.exists() {
+        return BTreeSet::new();
+    }
+    cells(dir)
+        .into_iter()
+        .filter(|p| p.to_string_lossy().contains(".chunk"))
+        .collect()
+}
+
+#[test]
+fn chunked_shards_partition_the_parts_and_merge_to_the_single_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let single = tmp.path().join("single");
+    ok(chunked(&single, &[]));
+    let expected = common::files(&single);
+    for (m, units) in [(1usize, 20usize), (2, 12)] {
+        let mf = m.to_string();
+        // Disjoint and complete for N = 1..7 (parts are left unjoined by shards).
+        for n in [1usize, 2, 3, 7] {
+            let out = tmp.path().join(format!("m{m}n{n}"));
+            let mut union = BTreeSet::new();
+            for k in (0..n).rev() {
+                let before = parts(&out);
+                ok(chunked(
+                    &out,
+                    &["--shard", &format!("{k}/{n}"), "--chunk-frames", &mf],
+                ));
+                let mine: BTreeSet<PathBuf> = parts(&out).difference(&before).cloned().collect();
+                assert!(
+                    mine.len() == units / n || mine.len() == units / n + 1,
+                    "M {m}, shard {k}/{n}: {} parts",
+                    mine.len()
+                );
+                union.extend(mine);
+            }
+            assert_eq!(union.len(), units, "M {m}, N {n}");
+            // A shard run twice adds nothing and changes nothing.
+            let again = common::files(&out);
+            ok(chunked(&out, &["--shard", "0/1", "--chunk-frames", &mf]));
+            assert_eq!(common::files(&out), again);
+            ok(chunked(&out, &["--merge", "--chunk-frames", &mf]));
+            assert_eq!(common::files(&out), expected, "M {m}, N {n}");
+        }
+    }
+}
+
+#[test]
+fn chunked_merge_lists_missing_parts_and_refuses_another_chunk_size() {
+    let tmp = tempfile::tempdir().unwrap();
+    let single = tmp.path().join("single");
+    ok(chunked(&single, &[]));
+    let out = tmp.path().join("out");
+    ok(chunked(&out, &["--shard", "1/2", "--chunk-frames", "1"]));
+    let o = chunked(&out, &["--merge", "--chunk-frames", "1"]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("10 cell parts are missing"), "{err}");
+    assert!(err.contains(".chunk1-00000.json"), "{err}");
+    assert!(!out.join("sweep.csv").exists());
+    for other in [&["--merge"][..], &["--merge", "--chunk-frames", "2"]] {
+        let o = chunked(&out, other);
+        assert!(!o.status.success(), "{other:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("give --chunk-frames 1"), "{err}");
+    }
+    // A plain rerun computes the missing parts and joins them.
+    ok(chunked(&out, &["--chunk-frames", "1"]));
+    assert_eq!(common::files(&out), common::files(&single));
+}

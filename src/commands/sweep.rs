@@ -70,6 +70,11 @@ pub struct Args {
     /// or fail listing the cells that are missing.
     #[arg(long)]
     pub merge: bool,
+    /// Split each capture into chunks of M frames, so that the units shards deal are
+    /// (cell, chunk) rather than cells: for long captures and more nodes than cells. Give
+    /// the same value to every shard, the merge and reruns (a different one is refused).
+    #[arg(long, value_name = "M", value_parser = clap::value_parser!(u32).range(1..))]
+    pub chunk_frames: Option<u32>,
     /// Decoder settings shared by the commands that read captures.
     #[command(flatten)]
     pub decoder: DecoderArgs,
@@ -81,10 +86,11 @@ struct Bars {
     frames: ProgressBar,
     _multi: MultiProgress,
     global: Global,
+    chunked: bool,
 }
 
 impl Bars {
-    fn new(global: Global, total_cells: u64) -> Bars {
+    fn new(global: Global, total_cells: u64, chunked: bool) -> Bars {
         use std::io::IsTerminal;
         let visible = !global.quiet && std::io::stderr().is_terminal();
         let multi = MultiProgress::with_draw_target(if visible {
@@ -105,12 +111,17 @@ impl Bars {
             frames,
             _multi: multi,
             global,
+            chunked,
         }
     }
 }
 
 impl Observer for Bars {
-    fn capture(&self, name: &str, _cells: u64) {
+    fn capture(&self, name: &str, cells: u64) {
+        if self.chunked {
+            // With chunks the units are known capture by capture (frames are counted).
+            self.cells.inc_length(cells);
+        }
         self.cells.set_message(name.to_string());
         self.frames.set_position(0);
         self.frames.set_length(0);
@@ -197,6 +208,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         },
         output: args.output.clone(),
         bands: crate::sweep::plan::parse_bands(&args.bands)?,
+        chunk_frames: args.chunk_frames,
     };
     // Every cell configuration is built (and so checked) before any work starts.
     for cell in crate::sweep::plan::cells(&settings.varies, &settings.seeds) {
@@ -238,7 +250,14 @@ pub fn run(args: Args, global: Global) -> Result<()> {
                 ));
             }
         }
-        staging::remove_results(&args.output, &old, &|f| keep.contains(f));
+        // Parts of this plan's cells stay too (checked against their settings likewise).
+        let part_of_kept = |f: &str| {
+            f.rsplit_once('/').is_some_and(|(folder, name)| {
+                crate::sweep::chunks::part_chunk_size(name).is_some()
+                    && keep.iter().any(|k| k.starts_with(&format!("{folder}/")))
+            })
+        };
+        staging::remove_results(&args.output, &old, &|f| keep.contains(f) || part_of_kept(f));
     }
     if staging::read_manifest(&args.output)
         .is_none_or(|m| m.command != "sweep" || m.settings != plan)
@@ -256,18 +275,20 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         Some(shard) => (0..total).filter(|&i| shard.owns(i)).count(),
         None => total,
     };
-    let bars = Bars::new(global, own as u64);
+    let chunked = args.chunk_frames.is_some();
+    let bars = Bars::new(global, if chunked { 0 } else { own as u64 }, chunked);
     let outcome = run_sweep(&settings, &captures, &bars, mode)?;
     bars.frames.finish_and_clear();
     bars.cells.finish_and_clear();
     if let Some(shard) = args.shard {
         if !global.quiet {
+            let units = if chunked { "cell parts" } else { "cells" };
             eprintln!(
-                "sweep --shard {shard}: {own} of {total} cells fall to this shard ({} computed, \
+                "sweep --shard {shard}: {} of {} {units} fall to this shard ({} computed, \
                  {} already done); a shard writes no tables, plots or page: run \
                  `lidar-noise sweep ... --merge` (or the same sweep without --shard) once \
                  every shard is done",
-                outcome.computed, outcome.loaded
+                outcome.owned, outcome.total, outcome.computed, outcome.loaded
             );
         }
         return Ok(());

@@ -4,6 +4,7 @@
 //! - [`plan`]: cells from `--vary` and `--seeds`, and each cell's configuration;
 //! - [`metrics`]: pure metric functions (the object matching rule is documented there);
 //! - [`run`]: parallel, resumable execution writing one result file per cell;
+//! - [`chunks`]: frame ranges of long captures as units of sharded sweeps;
 //! - [`tables`]: tidy CSV/JSON and the aggregate CSV;
 //! - [`outputs`]: every final file (tables, plots, bird's-eye figure, `index.html`).
 //!
@@ -11,6 +12,7 @@
 //! type + occurrence (see [`crate::noise`]), so cells differing only in a rain rate or in
 //! the presence of the occlusion reuse the same draws.
 
+pub mod chunks;
 pub mod interactions;
 pub mod metrics;
 pub mod outputs;

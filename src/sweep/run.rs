@@ -8,6 +8,7 @@
 //! that produced them; a later run loads a cell whose file records the same settings
 //! instead of computing it again. The tables are always rebuilt from the cell files.
 
+use super::chunks;
 use super::metrics::{self, ClassMetrics, FrameMetrics, MatchRule, ReturnState, Tally};
 use super::plan::{BaseConfig, Cell, Vary};
 use crate::config::Config;
@@ -53,6 +54,8 @@ pub struct SweepSettings {
     pub output: PathBuf,
     /// Distance band edges in metres, ascending (see [`metrics::band_index`]).
     pub bands: Vec<f64>,
+    /// Frames per chunk (`--chunk-frames`): units become (cell, chunk), see [`chunks`].
+    pub chunk_frames: Option<u32>,
 }
 
 /// Receives progress events (from several threads).
@@ -95,6 +98,10 @@ pub struct Outcome {
     pub loaded: usize,
     /// Every row, read back from the cell files, in canonical order.
     pub rows: Vec<Row>,
+    /// Units (cells, or cells x chunks) of the whole sweep.
+    pub total: usize,
+    /// Units that fall to this call (all but for a shard, none for a merge).
+    pub owned: usize,
 }
 
 /// A cell result file.
@@ -142,7 +149,8 @@ struct Labels {
 pub enum Mode {
     /// Every cell not done yet; every row is read back.
     All,
-    /// Only the cells that fall to this shard (see [`shard_index`]); no rows.
+    /// Only the cells (or cell parts, see [`chunks`]) that fall to this shard (see
+    /// [`chunks::unit_index`]); no rows.
     Shard(crate::options::Shard),
     /// No cell is computed: every cell must be done (else an error lists the missing).
     Merge,
@@ -173,24 +181,51 @@ pub fn run_mode(
     let mut outcome = Outcome::default();
     let canonical = canonical_cells(s);
     let mut missing = Vec::new();
-    for (capture_index, capture) in captures.iter().enumerate() {
+    // Units (cells, or cells x chunks) of the captures before this one.
+    let mut offset = 0usize;
+    for capture in captures {
         let dir = s.output.join("cells").join(&capture.name);
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        chunks::check_parts(&dir, s.chunk_frames)?;
         let protected = protected_paths(capture);
         let protected: Vec<&Path> = protected.iter().map(PathBuf::as_path).collect();
         // Cells are keyed on the content of every input, not on names and sizes.
         let content = content_key(s, capture)?;
+        // With --chunk-frames, the frames are counted first (decoding only) so that the
+        // list of units, and so the deal of the shards, is known before any work.
         let mut expected_frames = None;
+        let ranges = match s.chunk_frames {
+            Some(m) => {
+                let (ranges, n) = chunks::chunk_ranges(s, &capture.path, m)?;
+                expected_frames = Some(n);
+                Some(ranges)
+            }
+            None => None,
+        };
+        let n_chunks = ranges.as_ref().map_or(1, Vec::len);
         // Execution order: seeds outermost so cells sharing a baseline run together.
-        let mut pending = Vec::new();
+        // Pending units by chunk (one group without chunks), each group sharing decoding.
+        let mut pending: BTreeMap<usize, Vec<Pending>> = BTreeMap::new();
+        // Cells whose parts are all there and verify, to be joined.
+        let mut joins: Vec<(PathBuf, serde_json::Value, Vec<PathBuf>)> = Vec::new();
         let mut loaded = 0usize;
         let all_cells = super::plan::cells(&s.varies, &s.seeds);
         let per_capture = all_cells.len();
         for (cell_index, cell) in all_cells.into_iter().enumerate() {
-            if let Mode::Shard(shard) = mode {
-                if !shard.owns(shard_index(capture_index, cell_index, per_capture)) {
-                    continue;
-                }
+            let owned: Vec<usize> = (0..n_chunks)
+                .filter(|&j| {
+                    let i = chunks::unit_index(offset, cell_index, j, n_chunks);
+                    outcome.total += 1;
+                    match mode {
+                        Mode::Shard(shard) => shard.owns(i),
+                        Mode::All => true,
+                        Mode::Merge => false,
+                    }
+                })
+                .collect();
+            outcome.owned += owned.len();
+            if owned.is_empty() && mode != Mode::Merge {
+                continue;
             }
             let config = s.base.cell_config(&s.varies, &cell)?;
             let mut baseline = config.clone();
@@ -205,7 +240,8 @@ pub fn run_mode(
                 unseeded.effective_toml()
             };
             let settings = cell_settings(s, capture, &content, &cell, &config, &baseline);
-            let path = dir.join(cell.file_name(&s.varies));
+            let file_name = cell.file_name(&s.varies);
+            let path = dir.join(&file_name);
             match read_cell(&path) {
                 Some(Ok(f)) if f.settings == settings => {
                     let expected = match expected_frames {
@@ -232,25 +268,71 @@ pub fn run_mode(
                 }
                 _ => {}
             }
-            pending.push(Pending {
-                path,
-                settings,
-                pipeline: Pipeline::new(&config),
-                baseline_key,
-                baseline,
-                min_points: config.cluster.min_points,
-            });
+            let (Some(m), Some(ranges)) = (s.chunk_frames, &ranges) else {
+                if mode == Mode::Merge {
+                    missing.push(path.display().to_string());
+                    continue;
+                }
+                pending.entry(0).or_default().push(Pending {
+                    path,
+                    settings,
+                    pipeline: Pipeline::new(&config),
+                    baseline_key,
+                    baseline,
+                    min_points: config.cluster.min_points,
+                });
+                continue;
+            };
+            let parts = chunks::part_paths(&dir, &file_name, m, n_chunks);
+            let mut complete = true;
+            for (j, part) in parts.iter().enumerate() {
+                let part_settings = part_settings(&settings, m, j, n_chunks, &ranges[j]);
+                let want = (ranges[j].clone(), part_settings);
+                let done = match read_cell(part) {
+                    Some(Ok(f)) if f.settings == want.1 => {
+                        // The part holds exactly its chunk's frames, in order.
+                        f.frames.len() <= m as usize
+                            && f.frames.first().map(|x| x.frame) == Some(*want.0.start())
+                            && f.frames.last().map(|x| x.frame) == Some(*want.0.end())
+                    }
+                    Some(Err(why)) => {
+                        observer.warn(&format!("{}: {why}; recomputing it", part.display()));
+                        false
+                    }
+                    _ => false,
+                };
+                if done {
+                    continue;
+                }
+                complete = false;
+                if mode == Mode::Merge {
+                    missing.push(part.display().to_string());
+                } else if owned.contains(&j) {
+                    pending.entry(j).or_default().push(Pending {
+                        path: part.clone(),
+                        settings: want.1,
+                        pipeline: Pipeline::new(&config),
+                        baseline_key: baseline_key.clone(),
+                        baseline: baseline.clone(),
+                        min_points: config.cluster.min_points,
+                    });
+                }
+            }
+            if complete || mode == Mode::All {
+                joins.push((path, settings, parts));
+            }
         }
-        if mode == Mode::Merge && !pending.is_empty() {
-            missing.extend(pending.iter().map(|p| p.path.display().to_string()));
+        offset += per_capture * n_chunks;
+        if mode == Mode::Merge && !missing.is_empty() {
             continue;
         }
-        observer.capture(&capture.name, pending.len() as u64);
+        let n_pending: usize = pending.values().map(Vec::len).sum();
+        observer.capture(&capture.name, n_pending as u64);
         for _ in 0..loaded {
             observer.cell_done();
         }
         outcome.loaded += loaded;
-        if !pending.is_empty() {
+        if n_pending > 0 {
             let truth = match &capture.labels {
                 Some(p) => Some(Labels {
                     frames: group_labels(read_labels_file(p)?),
@@ -260,21 +342,31 @@ pub fn run_mode(
             };
             let chunk = (4 * rayon::current_num_threads()).max(8);
             let mut first = true;
-            for cells in pending.chunks(chunk) {
-                compute_chunk(
-                    s,
-                    capture,
-                    cells,
-                    truth.as_ref(),
-                    &protected,
-                    observer,
-                    &mut first,
-                )?;
+            for (j, units) in &pending {
+                // A chunk's units read only the chunk's frames.
+                let mut range = s.clone();
+                if let Some(r) = &ranges {
+                    range.frames = r[*j].clone();
+                }
+                for cells in units.chunks(chunk) {
+                    compute_chunk(
+                        &range,
+                        capture,
+                        cells,
+                        truth.as_ref(),
+                        &protected,
+                        observer,
+                        &mut first,
+                    )?;
+                }
             }
         }
-        outcome.computed += pending.len();
+        outcome.computed += n_pending;
         if matches!(mode, Mode::Shard(_)) {
             continue;
+        }
+        for (path, settings, parts) in joins {
+            join_parts(&path, settings, &parts, &protected)?;
         }
         for cell in &canonical {
             let path = dir.join(cell.file_name(&s.varies));
@@ -295,8 +387,13 @@ pub fn run_mode(
     if !missing.is_empty() {
         let n = missing.len();
         let shown: Vec<&str> = missing.iter().take(10).map(String::as_str).collect();
+        let what = if s.chunk_frames.is_some() {
+            "cell part"
+        } else {
+            "cell"
+        };
         return Err(Error::Invalid(format!(
-            "sweep --merge: {n} cell{} missing, unfinished or computed with other settings \
+            "sweep --merge: {n} {what}{} missing, unfinished or computed with other settings \
              (run the shards that own them, or rerun without --merge to compute them here): \
              {}{}",
             if n == 1 { " is" } else { "s are" },
@@ -309,6 +406,80 @@ pub fn run_mode(
         )));
     }
     Ok(outcome)
+}
+
+/// A part's settings: its cell's, plus the chunk (size, index, count and frame range).
+fn part_settings(
+    cell: &serde_json::Value,
+    m: u32,
+    j: usize,
+    n: usize,
+    range: &RangeInclusive<u32>,
+) -> serde_json::Value {
+    let mut v = cell.clone();
+    v["chunk"] = serde_json::json!({
+        "frames_per_chunk": m,
+        "index": j,
+        "of": n,
+        "frames": [range.start(), range.end()],
+    });
+    v
+}
+
+/// Joins a cell's parts (which must all verify) in frame order into the cell file a sweep
+/// without chunks writes, then deletes the parts (only exclusive runs join: no shard is
+/// writing them). The frames are joined as text: parsing and writing the metrics again
+/// could change the last digit of a float (serde_json's default parser is not exact).
+fn join_parts(
+    path: &Path,
+    settings: serde_json::Value,
+    parts: &[PathBuf],
+    protected: &[&Path],
+) -> Result<()> {
+    const OPEN: &str = "\n  \"frames\": [\n";
+    const CLOSE: &str = "\n  ],\n  \"checksum\"";
+    let mut elements = Vec::new();
+    for part in parts {
+        let bad = || Error::Invalid(format!("{}: part missing or unreadable", part.display()));
+        let bytes = std::fs::read(part).map_err(|_| bad())?;
+        verify_cell(&bytes).map_err(|_| bad())?;
+        let text = String::from_utf8(bytes).map_err(|_| bad())?;
+        let start = text.find(OPEN).ok_or_else(bad)? + OPEN.len();
+        let end = text.rfind(CLOSE).filter(|&e| e >= start).ok_or_else(bad)?;
+        elements.push(text[start..end].to_string());
+    }
+    let mut file = CellFile {
+        tool: format!("lidar-noise {}", env!("CARGO_PKG_VERSION")),
+        settings,
+        frames: Vec::new(),
+        checksum: CHECKSUM_PLACEHOLDER.into(),
+    };
+    let head = serde_json::to_string_pretty(&file).map_err(|e| Error::Invalid(e.to_string()))?;
+    let empty = "\n  \"frames\": [],\n";
+    let at = head
+        .rfind(empty)
+        .ok_or_else(|| Error::Invalid("internal: the cell file has no frames array".into()))?;
+    let text = format!(
+        "{}{OPEN}{}\n  ],\n{}\n",
+        &head[..at],
+        elements.join(",\n"),
+        &head[at + empty.len()..]
+    );
+    let mut bytes = text.into_bytes();
+    let sum = format!("{:016x}", xxhash_rust::xxh3::xxh3_64(&bytes));
+    let field = format!("\"checksum\": \"{CHECKSUM_PLACEHOLDER}\"");
+    let value_at = String::from_utf8_lossy(&bytes).rfind(&field).unwrap_or(0) + field.len()
+        - 1
+        - CHECKSUM_PLACEHOLDER.len();
+    bytes[value_at..value_at + sum.len()].copy_from_slice(sum.as_bytes());
+    file.checksum = sum;
+    verify_cell(&bytes)
+        .map_err(|e| Error::Invalid(format!("internal: {}: {e}", path.display())))?;
+    crate::writers::atomic::write_atomically(path, protected, |out| out.write_all(&bytes))?;
+    for part in parts {
+        let _ = std::fs::remove_file(part);
+    }
+    Ok(())
 }
 
 /// Cells in table order: `--vary` values (first key slowest), then seed.

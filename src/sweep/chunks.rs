@@ -1,0 +1,168 @@
+//! Frame ranges of long captures as units of a sharded sweep (`--chunk-frames M`).
+//!
+//! With chunks, a sweep's work units are (cell, chunk j), chunk j being the capture's
+//! frames at positions [j*M, (j+1)*M) of those in `--frames`. Each unit writes a part of
+//! its cell, `cells/<capture>/.<cell>.chunk<M>-<j>.json`, in the cell file format
+//! (atomic rename, checksum, the cell's settings plus the chunk's); the merge (or a plain
+//! rerun) joins the parts of a cell in frame order into the cell file a sweep without
+//! chunks writes, byte for byte, and deletes them. Baselines are per frame, so a part
+//! needs nothing from other frames. The chunk size is in every part's name and settings:
+//! a sweep whose `--chunk-frames` differs from the parts found is refused.
+
+use super::run::SweepSettings;
+use crate::error::{Error, Result};
+use crate::hdl32e::frames::FrameReader;
+use std::ops::RangeInclusive;
+use std::path::{Path, PathBuf};
+
+/// Frame-index ranges of the chunks of `M` frames of a capture within `s.frames`, and
+/// the number of frames (decoding only); errors when the capture has no frame in range.
+pub fn chunk_ranges(
+    s: &SweepSettings,
+    path: &Path,
+    frames_per_chunk: u32,
+) -> Result<(Vec<RangeInclusive<u32>>, usize)> {
+    let mut reader = FrameReader::open(path, &s.decoder)?;
+    let mut indexes = Vec::new();
+    loop {
+        let batch = reader.next_batch(16, &s.frames)?;
+        if batch.is_empty() {
+            break;
+        }
+        indexes.extend(batch.iter().map(|f| f.index));
+    }
+    if indexes.is_empty() {
+        return Err(Error::Invalid(format!(
+            "{}: no frame to process in the range {}..{} (partial sweeps need --keep-partial)",
+            path.display(),
+            s.frames.start(),
+            s.frames.end()
+        )));
+    }
+    Ok((
+        ranges_of(&indexes, frames_per_chunk as usize),
+        indexes.len(),
+    ))
+}
+
+/// Splits ascending frame indexes into ranges of `m` frames (the last may be shorter).
+/// The reader yields indexes in ascending order, so a range's first and last index select
+/// exactly its frames.
+pub fn ranges_of(indexes: &[u32], m: usize) -> Vec<RangeInclusive<u32>> {
+    indexes
+        .chunks(m.max(1))
+        .map(|c| c[0]..=c[c.len() - 1])
+        .collect()
+}
+
+/// Index of unit (cell, chunk) in the sweep's list of units, which `--shard K/N` deals
+/// round-robin: `offset` units come before this capture's, whose cells each have
+/// `chunks` chunks. Without chunks (`chunks` 1) this is the cell's index.
+pub fn unit_index(offset: usize, cell: usize, chunk: usize, chunks: usize) -> usize {
+    offset + cell * chunks + chunk
+}
+
+/// File name of part `chunk` of the cell file `cell_file` with chunks of `m` frames.
+pub fn part_name(cell_file: &str, m: u32, chunk: usize) -> String {
+    let stem = cell_file.strip_suffix(".json").unwrap_or(cell_file);
+    format!(".{stem}.chunk{m}-{chunk:05}.json")
+}
+
+/// Chunk size of a part file name (None for other names).
+pub fn part_chunk_size(name: &str) -> Option<u32> {
+    let rest = name.strip_prefix('.')?.strip_suffix(".json")?;
+    let (_, tail) = rest.rsplit_once(".chunk")?;
+    let (m, j) = tail.split_once('-')?;
+    (j.len() >= 5 && j.bytes().all(|b| b.is_ascii_digit())).then_some(())?;
+    m.parse().ok()
+}
+
+/// Refuses a sweep whose `--chunk-frames` (`m`, None without) differs from the chunk size
+/// of a part found in `dir`: joining parts of other ranges would be wrong, and mixing
+/// sizes would compute frames twice.
+pub fn check_parts(dir: &Path, m: Option<u32>) -> Result<()> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
+    let mut names: Vec<String> = entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    for name in names {
+        if let Some(found) = part_chunk_size(&name) {
+            if Some(found) != m {
+                let given = m.map_or("no --chunk-frames".into(), |m| {
+                    format!("--chunk-frames {m}")
+                });
+                return Err(Error::Invalid(format!(
+                    "{}: a part of a cell computed with --chunk-frames {found}, and this sweep \
+                     has {given}: give --chunk-frames {found} to every shard, the merge and \
+                     reruns of this sweep (or delete the parts to start over)",
+                    dir.join(&name).display()
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Part paths of a cell, in chunk order.
+pub fn part_paths(dir: &Path, cell_file: &str, m: u32, chunks: usize) -> Vec<PathBuf> {
+    (0..chunks)
+        .map(|j| dir.join(part_name(cell_file, m, j)))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_cover_the_indexes_in_order() {
+        let idx: Vec<u32> = (1..=11).collect();
+        assert_eq!(ranges_of(&idx, 4), vec![1..=4, 5..=8, 9..=11]);
+        assert_eq!(ranges_of(&idx, 20), vec![1..=11]);
+        assert_eq!(ranges_of(&[3, 5, 9], 2), vec![3..=5, 9..=9]);
+    }
+
+    #[test]
+    fn part_names_round_trip_their_chunk_size() {
+        let n = part_name("rain.rate_mm_h=3_seed=1-0a1b2c3d.json", 40, 7);
+        assert_eq!(n, ".rain.rate_mm_h=3_seed=1-0a1b2c3d.chunk40-00007.json");
+        assert_eq!(part_chunk_size(&n), Some(40));
+        for other in [
+            "rain-0a1b2c3d.json",
+            ".rain.json.a1b2.tmp",
+            ".x.chunkA-00001.json",
+            ".x.chunk4-1.json",
+        ] {
+            assert_eq!(part_chunk_size(other), None, "{other}");
+        }
+    }
+
+    #[test]
+    fn units_are_dealt_disjointly_and_completely() {
+        // Two captures of 3 and 1 chunks, 4 cells each: 16 units.
+        let caps = [(4usize, 3usize), (4, 1)];
+        for n in 1..=7u32 {
+            let mut owner = vec![None; 16];
+            for k in 0..n {
+                let shard = crate::options::Shard { k, n };
+                let mut offset = 0;
+                for &(cells, chunks) in &caps {
+                    for c in 0..cells {
+                        for j in 0..chunks {
+                            let i = unit_index(offset, c, j, chunks);
+                            if shard.owns(i) {
+                                assert!(owner[i].replace(k).is_none(), "unit {i} twice");
+                            }
+                        }
+                    }
+                    offset += cells * chunks;
+                }
+            }
+            assert!(owner.iter().all(Option::is_some), "{n}: {owner:?}");
+        }
+    }
+}

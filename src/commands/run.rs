@@ -469,12 +469,22 @@ fn run_capture(
     }
     spool.finish(&summary, &clusters, dir, inputs)?;
     let t = &summary.totals;
+    let sp = t.noise.spurious;
+    // Spurious echoes are reported apart, so "kept" never exceeds the recorded returns.
+    let echoes = if sp.is_empty() {
+        String::new()
+    } else {
+        format!(
+            ", plus {} replaced by and {} added as spurious echoes",
+            sp.replaced, sp.added
+        )
+    };
     Ok(format!(
         "{source}: {} frame{}, {} of {} returns kept ({} occluded, {} below power, {} below \
-         min range), {:.1} % ground, {} clusters",
+         min range){echoes}, {:.1} % ground, {} clusters",
         frames,
         if frames == 1 { "" } else { "s" },
-        t.noise.returns_out,
+        t.noise.returns_out - sp.replaced - sp.added,
         t.noise.returns_in,
         t.noise.dropped.occluded,
         t.noise.dropped.below_power,

@@ -60,14 +60,6 @@ pub struct Emi {
     key: u64,
 }
 
-/// A 64-bit mix (splitmix64's finaliser): the packet-loss hash.
-fn mix(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
 impl Emi {
     /// The stage with these settings (packet-loss key 0 until the chain makes its per-unit
     /// draws).
@@ -112,7 +104,7 @@ impl Emi {
 
     /// True if packet `packet` is lost.
     pub fn packet_lost(&self, packet: u32) -> bool {
-        let u = (mix(self.key ^ u64::from(packet)) >> 11) as f64 * (1.0 / (1u64 << 53) as f64);
+        let u = super::unit(super::splitmix(self.key ^ u64::from(packet)));
         u < self.p_packet
     }
 

@@ -26,7 +26,8 @@
 //! two normals from a SplitMix64 hash of it (Box-Muller) give the deflection. No draws
 //! when p_s = 0. In dual captures a slot's entries share the draw of its last return.
 
-use super::multipath::{az_diff, splitmix, unit};
+use super::multipath::az_diff;
+use super::{splitmix, unit};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;

@@ -41,6 +41,7 @@ use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
 use crate::noise::sensor::{float, number, scale_byte, C_M_PER_S};
+use crate::noise::world::{splitmix, unit};
 use crate::noise::{Echo, Fate, NoiseStage, NoisyFrame, StageKind};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -141,22 +142,6 @@ pub fn mix(r_own: f32, p_own: f64, r_other: f32, p_other: f64, g: f64, merge_m: 
             },
         }
     }
-}
-
-/// A uniform number in [0, 1) from the top 53 bits of a word.
-#[inline]
-pub(crate) fn unit(w: u64) -> f64 {
-    (w >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
-}
-
-/// SplitMix64 finaliser: a second, independent-looking word from one draw, so a return
-/// spends one word of its stream whatever it needs.
-#[inline]
-pub(crate) fn splitmix(w: u64) -> u64 {
-    let mut z = w.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 /// Signed azimuth difference b - a in degrees, wrapped to (-180, 180].
@@ -370,6 +355,7 @@ pub const KIND: StageKind = StageKind {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use super::{splitmix, unit};
 
     #[test]
     fn merge_distance_of_10_ns_is_1_5_m() {

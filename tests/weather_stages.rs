@@ -4,6 +4,8 @@
 
 mod common;
 
+use common::{config, err, run, stage};
+
 use assert_cmd::Command;
 use lidar_noise::calibration::Calibration;
 use lidar_noise::config::Config;
@@ -58,27 +60,6 @@ fn turn(index: u32) -> Frame {
         index,
         partial: false,
         returns: v,
-    }
-}
-
-fn config(text: &str) -> Config {
-    Config::from_toml_str(text, Path::new("test.toml"), &[], None)
-        .unwrap_or_else(|e| panic!("config should load: {e}"))
-        .0
-}
-
-fn run(text: &str, f: &Frame) -> NoisyFrame {
-    NoiseChain::new(&config(text)).process(f)
-}
-
-fn stage(kind: &str, body: &str) -> String {
-    format!("seed = 5\n[[noise]]\ntype = \"{kind}\"\n{body}\n")
-}
-
-fn err(text: &str) -> String {
-    match Config::from_toml_str(text, Path::new("bad.toml"), &[], None) {
-        Ok(_) => panic!("should fail: {text}"),
-        Err(e) => e.to_string(),
     }
 }
 

@@ -4,6 +4,8 @@
 
 mod common;
 
+use common::{config, run, stage};
+
 use assert_cmd::Command;
 use lidar_noise::calibration::Calibration;
 use lidar_noise::config::Config;
@@ -85,20 +87,6 @@ fn turn(index: u32) -> Frame {
         partial: false,
         returns: v,
     }
-}
-
-fn config(text: &str) -> Config {
-    Config::from_toml_str(text, Path::new("test.toml"), &[], None)
-        .unwrap_or_else(|e| panic!("config should load: {e}"))
-        .0
-}
-
-fn run(text: &str, f: &Frame) -> NoisyFrame {
-    NoiseChain::new(&config(text)).process(f)
-}
-
-fn stage(kind: &str, body: &str) -> String {
-    format!("seed = 5\n[[noise]]\ntype = \"{kind}\"\n{body}\n")
 }
 
 /// Is return `i` of a `bands` frame next to a depth edge (neighbour firing in the other

@@ -43,3 +43,33 @@ pub fn files(dir: &std::path::Path) -> std::collections::BTreeMap<PathBuf, Vec<u
     }
     out
 }
+
+/// A configuration from TOML text (panics with the text when it does not load).
+pub fn config(text: &str) -> lidar_noise::config::Config {
+    lidar_noise::config::Config::from_toml_str(text, std::path::Path::new("test.toml"), &[], None)
+        .unwrap_or_else(|e| panic!("config should load: {e}\n{text}"))
+        .0
+}
+
+/// The noise chain of `text` run on a frame.
+pub fn run(text: &str, f: &lidar_noise::frame::Frame) -> lidar_noise::noise::NoisyFrame {
+    lidar_noise::noise::NoiseChain::new(&config(text)).process(f)
+}
+
+/// A configuration of one `[[noise]]` stage of type `kind` with option lines `body`.
+pub fn stage(kind: &str, body: &str) -> String {
+    format!("seed = 5\n[[noise]]\ntype = \"{kind}\"\n{body}\n")
+}
+
+/// The error message of a configuration that must not load.
+pub fn err(text: &str) -> String {
+    match lidar_noise::config::Config::from_toml_str(
+        text,
+        std::path::Path::new("bad.toml"),
+        &[],
+        None,
+    ) {
+        Ok(_) => panic!("should fail: {text}"),
+        Err(e) => e.to_string(),
+    }
+}

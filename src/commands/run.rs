@@ -823,7 +823,8 @@ fn write_ply(
             .collect();
         // Chains that can report spurious echoes say which points are echoes; the
         // columns depend on the configuration only, never on the data.
-        let (fate, cause): (Vec<u8>, Vec<u8>) = if plan.pipeline.chain().proposes_echoes() {
+        let echoes = plan.pipeline.chain().proposes_echoes();
+        let (fate, cause): (Vec<u8>, Vec<u8>) = if echoes {
             r.kept
                 .iter()
                 .map(|&k| (r.noisy.fate[k as usize] as u8, r.noisy.cause[k as usize]))
@@ -831,7 +832,6 @@ fn write_ply(
         } else {
             (Vec::new(), Vec::new())
         };
-        let echoes = plan.pipeline.chain().proposes_echoes();
         let ply = PlyFrame {
             columns: PlyColumns {
                 range_clean: Some(&range_clean),

@@ -253,6 +253,17 @@ fn check_folder(
     Ok(())
 }
 
+/// True when `dir` holds the complete results of this run (merged, or written by one
+/// run): its manifest has these settings and every file it lists is there. Its units are
+/// then done, for shards run again after the merge as for the merge.
+fn merged(dir: &Path, settings: &serde_json::Value) -> bool {
+    staging::read_manifest(dir).is_some_and(|m| {
+        m.command == "run"
+            && m.settings == *settings
+            && m.files.iter().all(|f| dir.join(f).is_file())
+    })
+}
+
 /// Runs `run --chunk-frames m` (as a shard, a merge, or both in one process).
 pub(super) fn run(
     args: &Args,
@@ -338,11 +349,15 @@ pub(super) fn run(
         for ((job, chunks), settings) in jobs.iter().zip(&plans).zip(&settings) {
             let n = chunks.ranges.len();
             let dir = args.output.join(&job.name);
+            let done = merged(&dir, settings);
             for j in 0..n {
                 if args.shard.is_some_and(|s| !s.owns(offset + j)) {
                     continue;
                 }
                 owned += 1;
+                if done {
+                    continue;
+                }
                 std::fs::create_dir_all(&dir).map_err(|e| crate::error::Error::io(&dir, e))?;
                 let path = dir.join(part_name(m, j));
                 let want = part_settings(settings, m, j, n, &chunks.ranges[j]);
@@ -463,6 +478,9 @@ fn merge(
     for ((job, chunks), settings) in jobs.iter().zip(plans).zip(settings) {
         let dir = args.output.join(&job.name);
         let n = chunks.ranges.len();
+        if merged(&dir, settings) {
+            continue;
+        }
         for j in 0..n {
             let path = dir.join(part_name(m, j));
             let want = part_settings(settings, m, j, n, &chunks.ranges[j]);
@@ -496,6 +514,10 @@ fn merge(
     for ((job, chunks), settings) in jobs.iter().zip(plans).zip(settings) {
         let dir = args.output.join(&job.name);
         let names: Vec<String> = (0..chunks.ranges.len()).map(|j| part_name(m, j)).collect();
+        if merged(&dir, settings) {
+            lines.push(format!("{}: already merged", job.source));
+            continue;
+        }
         lines.push(join_capture(
             args, plan, job, &dir, &names, settings, inputs, global,
         )?);

@@ -327,6 +327,21 @@ mod tests {
     use super::*;
 
     #[test]
+    fn range_change_state_round_trips_exactly_through_json() {
+        let mut r = RangeChange::default();
+        assert_eq!(RangeChange::from_state(&r.state()), Some(r.clone()));
+        for d in [0.0123456789, -3.5, 120.0, 1e-7, -0.049999] {
+            r.add(d);
+        }
+        let json = serde_json::to_string(&r.state()).unwrap();
+        let back: RangeChangeState = serde_json::from_str(&json).unwrap();
+        assert_eq!(RangeChange::from_state(&back), Some(r.clone()));
+        let mut bad = r.state();
+        bad.abs_hist.push((BINS as u32, 1));
+        assert_eq!(RangeChange::from_state(&bad), None);
+    }
+
+    #[test]
     fn bins_tile_the_axis() {
         assert_eq!(bin_of(0), 0);
         assert_eq!(bin_of(99_999), 0);

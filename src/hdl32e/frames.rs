@@ -237,10 +237,13 @@ impl FrameReader {
         open: impl Fn() -> Result<CaptureReader>,
         options: &DecoderOptions,
     ) -> Result<Self> {
-        let identity = identify_in(open()?)?;
-        let capture = open()?;
+        Ok(Self::from_parts(identify_in(open()?)?, open()?, options))
+    }
+
+    /// A reader of `capture`, a capture identified as `identity`.
+    fn from_parts(identity: Identity, capture: CaptureReader, options: &DecoderOptions) -> Self {
         let cut = ((options.cut_angle_deg.rem_euclid(360.0) * 100.0).round() as u32) % 36000;
-        Ok(FrameReader {
+        FrameReader {
             capture,
             decoder: PacketDecoder::new(
                 &options.calibration,
@@ -288,7 +291,7 @@ impl FrameReader {
             spare: Vec::new(),
             past_range: false,
             skip_before: 0,
-        })
+        }
     }
 
     /// Opens a capture at a frame found by [`super::index::FrameScan`]: the frames it
@@ -297,8 +300,9 @@ impl FrameReader {
     /// Its [`Self::summary`] counts only the packets read from there (the record numbers
     /// and container counters in it are the whole capture's).
     pub fn open_at(path: &Path, options: &DecoderOptions, at: &FrameSeek) -> Result<Self> {
-        let mut reader = Self::with_source(|| CaptureReader::open(path), options)?;
-        reader.capture = CaptureReader::open_at(path, &at.capture)?;
+        let identity = identify_in(CaptureReader::open(path)?)?;
+        let capture = CaptureReader::open_at(path, &at.capture)?;
+        let mut reader = Self::from_parts(identity, capture, options);
         reader.resume(at);
         Ok(reader)
     }

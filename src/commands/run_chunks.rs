@@ -337,8 +337,28 @@ pub(super) fn run(
     } else {
         OutputFolder::lock(&args.output)?
     };
+    let result = units(args, plan, m, &jobs, &plans, total, inputs, global);
+    if result.is_err() {
+        // A folder this (exclusive) run created, with nothing in it, goes again.
+        folder.abandon();
+    }
+    result
+}
+
+/// Computes the units that fall to this process and merges (unless a shard).
+#[allow(clippy::too_many_arguments)]
+fn units(
+    args: &Args,
+    plan: &Plan,
+    m: u32,
+    jobs: &[Job],
+    plans: &[Chunks],
+    total: usize,
+    inputs: &[&Path],
+    global: Global,
+) -> Result<()> {
     let mut settings = Vec::new();
-    for job in &jobs {
+    for job in jobs {
         let s = single::run_settings(plan, &job.source);
         check_folder(&args.output.join(&job.name), &s, m, inputs)?;
         settings.push(s);
@@ -346,7 +366,7 @@ pub(super) fn run(
     if !args.merge {
         let mut offset = 0usize;
         let (mut owned, mut computed) = (0usize, 0usize);
-        for ((job, chunks), settings) in jobs.iter().zip(&plans).zip(&settings) {
+        for ((job, chunks), settings) in jobs.iter().zip(plans).zip(&settings) {
             let n = chunks.ranges.len();
             let dir = args.output.join(&job.name);
             let done = merged(&dir, settings);
@@ -393,9 +413,7 @@ pub(super) fn run(
             return Ok(());
         }
     }
-    merge(
-        args, plan, m, &jobs, &plans, &settings, inputs, global, folder,
-    )
+    merge(args, plan, m, jobs, plans, &settings, inputs, global)
 }
 
 /// Processes one chunk: its frames' files into `dir`, its report pieces into the part.
@@ -471,7 +489,6 @@ fn merge(
     settings: &[serde_json::Value],
     inputs: &[&Path],
     global: Global,
-    folder: OutputFolder,
 ) -> Result<()> {
     // Every part of every capture is checked before anything is written.
     let mut missing = Vec::new();
@@ -522,7 +539,6 @@ fn merge(
             args, plan, job, &dir, &names, settings, inputs, global,
         )?);
     }
-    drop(folder);
     if !global.quiet {
         for (line, job) in lines.iter().zip(jobs) {
             eprintln!(

@@ -36,9 +36,7 @@ pub enum Command {
     #[command(after_help = "Examples:
   lidar-noise run                                   # the built-in crossroad scan -> lidar-noise-out/
   lidar-noise run scan.pcap -c configs/rain.toml --set rain.rate_mm_h=3 --seed 7 -o out
-  lidar-noise run scan.pcap --keep-dropped --format laz --frames 0..9
-  lidar-noise run drive.pcap --chunk-frames 600 --shard 0/4 -o out   # shards 0..3, any node
-  lidar-noise run drive.pcap --chunk-frames 600 --merge -o out       # then the reports")]
+  lidar-noise run scan.pcap --keep-dropped --format laz --frames 0..9")]
     Run(commands::run::Args),
     /// Describe a capture: format, packets, sensor, frames, returns.
     #[command(after_help = "Examples:

@@ -502,7 +502,17 @@ fn merge(
             let path = dir.join(part_name(m, j));
             let want = part_settings(settings, m, j, n, &chunks.ranges[j]);
             match read_part(&path) {
-                Some(Ok(p)) if p.settings == want && p.frames <= m as usize => {}
+                Some(Ok(p)) if p.settings == want && p.frames <= m as usize => {
+                    // A frame file deleted since: the unit is to be computed again.
+                    if let Some(f) = p.files.iter().find(|f| !dir.join(f).is_file()) {
+                        global.warn(&format!(
+                            "{}: {} it wrote is gone",
+                            path.display(),
+                            dir.join(f).display()
+                        ));
+                        missing.push(path.display().to_string());
+                    }
+                }
                 Some(Err(why)) => {
                     global.warn(&format!("{}: {why}", path.display()));
                     missing.push(path.display().to_string());

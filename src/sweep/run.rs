@@ -550,17 +550,11 @@ pub fn hash_file(path: &Path) -> Result<String> {
     Ok(format!("{:016x}", hasher.digest()))
 }
 
-/// Frames of the capture in the sweep's range: the number every cell file must hold.
+/// Frames of the capture in the sweep's range: the number every cell file must hold
+/// (counted from the frame index, without decoding returns).
 fn count_frames(s: &SweepSettings, capture: &CaptureInput) -> Result<usize> {
-    let mut reader = FrameReader::open(&capture.path, &s.decoder)?;
-    let mut n = 0;
-    loop {
-        let batch = reader.next_batch(16, &s.frames)?;
-        if batch.is_empty() {
-            return Ok(n);
-        }
-        n += batch.len();
-    }
+    let scan = crate::hdl32e::index::FrameScan::open(&capture.path, &s.decoder)?;
+    Ok(chunks::chunk_plan(scan, &s.frames, s.decoder.keep_partial, u32::MAX)?.2)
 }
 
 fn cell_settings(

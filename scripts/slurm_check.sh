@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Runs a sharded sweep through a real one-node Slurm cluster started here, and checks that
-# the merged result is byte-identical to the same sweep run on one machine.
+# Runs a sharded sweep, and a run sharded over frame ranges (--chunk-frames), through a real
+# one-node Slurm cluster started here, and checks that each merged result is byte-identical
+# to the same sweep or run on one machine.
 #
 # Installs Debian's slurm-wlm and munge when missing (apt-get, with sudo -n when not root);
 # prints "SKIPPED: <reason>" and exits 0 when they cannot be installed or the cluster
@@ -138,4 +139,34 @@ if diff -r "$work/single" "$out"; then
   echo "slurm_check: OK: the Slurm array + merge output is byte-identical to the single-machine sweep ($(find "$out" -type f | wc -l) files)"
 else
   echo "slurm_check: FAILED: the merged output differs from the single-machine sweep"; exit 1
+fi
+
+# The run: two captures with their partial sweeps (3 + 2 frames) in chunks of one frame,
+# five units over three tasks, then the dependent merge.
+rargs=("$root/fixtures/crossroad.pcap" "$root/fixtures/parking.pcap" --keep-partial)
+"$bin" --quiet run "${rargs[@]}" -o "$work/run-single"
+rout="$work/run-sharded"
+rjid=$(sbatch --parsable --export=ALL,CHUNK_FRAMES=1 --chdir="$work" --array=0-2 \
+  "$root/scripts/slurm/run.sbatch" "${rargs[@]}" -o "$rout")
+rmid=$(sbatch --parsable --export=ALL,CHUNK_FRAMES=1 --chdir="$work" \
+  --dependency=afterok:"$rjid" "$root/scripts/slurm/run-merge.sbatch" "${rargs[@]}" -o "$rout")
+echo "slurm_check: submitted run array job $rjid (3 shards, --chunk-frames 1) and merge job $rmid (afterok)"
+for _ in $(seq 1 180); do
+  [ -z "$(squeue -h -j "$rjid,$rmid" 2>/dev/null)" ] && break
+  sleep 0.5
+done
+if [ -n "$(squeue -h -j "$rjid,$rmid" 2>/dev/null)" ]; then
+  squeue; scancel "$rjid" "$rmid" || true
+  echo "slurm_check: FAILED: the run jobs did not finish within 90 s"; exit 1
+fi
+for f in "$work"/lidar-noise-run-*.out; do echo "--- $(basename "$f")"; cat "$f"; done
+for k in 0 1 2; do
+  grep -q "run --shard $k/3" "$work/lidar-noise-run-${rjid}_$k.out" \
+    || { echo "slurm_check: FAILED: run shard $k/3 did not run"; exit 1; }
+done
+[ -f "$rout/parking/summary.json" ] || { echo "slurm_check: FAILED: the run merge job wrote no summary.json"; exit 1; }
+if diff -r "$work/run-single" "$rout"; then
+  echo "slurm_check: OK: the Slurm run array (--chunk-frames 1) + merge output is byte-identical to the single-machine run ($(find "$rout" -type f | wc -l) files)"
+else
+  echo "slurm_check: FAILED: the merged run output differs from the single-machine run"; exit 1
 fi

@@ -11,7 +11,7 @@ use pcap_parser::traits::PcapReaderIterator;
 use pcap_parser::{PcapBlockOwned, PcapError};
 use serde::Serialize;
 use std::fs::File;
-use std::io::Read;
+use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 use link::Parsed;
@@ -83,6 +83,26 @@ pub struct CaptureReader {
     position: u64,
     finished: bool,
     stats: CaptureStats,
+    /// Byte offset and size of the blocks that set up the records after them (the pcap
+    /// file header; pcapng section headers and interface descriptions of the current
+    /// section), so that a reader can resume mid-capture (see [`CapturePoint`]).
+    headers: Vec<(u64, usize)>,
+    /// Blocks before this offset are a resumed reader's replayed header blocks: they are
+    /// already in `headers`.
+    resumed_at: u64,
+}
+
+/// Where a reader can resume: just before a packet record, with the header blocks that
+/// set up its decoding and the counters of everything before it. A reader resumed here
+/// numbers records and byte offsets (in messages too) as one that read from the start.
+#[derive(Clone, Debug)]
+pub struct CapturePoint {
+    /// Byte offset of the record.
+    pub offset: u64,
+    /// Header blocks (offset, size) replayed before the record.
+    headers: Vec<(u64, usize)>,
+    /// Counters of the records before it.
+    stats: CaptureStats,
 }
 
 /// Where a datagram sits in the reader's buffer, found before the buffer is re-borrowed.
@@ -139,7 +159,60 @@ impl CaptureReader {
             position: 0,
             finished: false,
             stats: CaptureStats::default(),
+            headers: Vec::new(),
+            resumed_at: 0,
         })
+    }
+
+    /// Opens a capture file at `point` (taken from a reader of the same file).
+    pub fn open_at(path: &Path, point: &CapturePoint) -> Result<Self> {
+        let file = File::open(path).map_err(|e| Error::io(path, e))?;
+        Self::from_reader_at(file, path, point)
+    }
+
+    /// Reads a capture from a seekable byte stream at `point`: the header blocks are
+    /// replayed, then reading goes on at the point's record, without reading what lies
+    /// between.
+    pub fn from_reader_at(
+        mut reader: impl Read + Seek + Send + 'static,
+        path: &Path,
+        point: &CapturePoint,
+    ) -> Result<Self> {
+        let mut prefix = Vec::new();
+        for &(offset, size) in &point.headers {
+            let start = prefix.len();
+            prefix.resize(start + size, 0);
+            reader
+                .seek(SeekFrom::Start(offset))
+                .and_then(|_| reader.read_exact(&mut prefix[start..]))
+                .map_err(|e| Error::io(path, e))?;
+        }
+        reader
+            .seek(SeekFrom::Start(point.offset))
+            .map_err(|e| Error::io(path, e))?;
+        let replayed = prefix.len() as u64;
+        let mut capture = Self::from_reader(std::io::Cursor::new(prefix).chain(reader), path)?;
+        // The replayed blocks count as lying just before the record, so that offsets
+        // from the record on are the file's.
+        capture.position = point.offset.saturating_sub(replayed);
+        capture.stats = point.stats.clone();
+        capture.headers = point.headers.clone();
+        capture.resumed_at = point.offset;
+        Ok(capture)
+    }
+
+    /// Where to resume to read the record of the datagram just returned by
+    /// [`Self::next_datagram`] (at byte `offset`) again.
+    pub fn point_before_last(&self, offset: u64) -> CapturePoint {
+        let mut stats = self.stats.clone();
+        // The datagram's own record: one record, one UDP datagram.
+        stats.records -= 1;
+        stats.udp -= 1;
+        CapturePoint {
+            offset,
+            headers: self.headers.clone(),
+            stats,
+        }
     }
 
     /// The capture's path as given.
@@ -219,8 +292,12 @@ impl CaptureReader {
         let outcome = match self.inner.next() {
             Ok((size, block)) => {
                 let mut packet: Option<(i32, u64, &[u8])> = None;
+                let replayed = offset < self.resumed_at;
                 match block {
                     PcapBlockOwned::LegacyHeader(header) => {
+                        if !replayed {
+                            self.headers = vec![(offset, size)];
+                        }
                         self.format = Format::Pcap;
                         self.nanosecond = header.is_nanosecond_precision();
                         self.linktypes = vec![header.network.0];
@@ -239,12 +316,18 @@ impl CaptureReader {
                     }
                     PcapBlockOwned::NG(Block::SectionHeader(_)) => {
                         self.format = Format::Pcapng;
+                        if !replayed {
+                            self.headers = vec![(offset, size)];
+                        }
                         // Interface ids restart in each section.
                         self.linktypes.clear();
                         self.ts_units.clear();
                     }
                     PcapBlockOwned::NG(Block::InterfaceDescription(idb)) => {
                         self.format = Format::Pcapng;
+                        if !replayed {
+                            self.headers.push((offset, size));
+                        }
                         self.linktypes.push(idb.linktype.0);
                         let units = idb.ts_resolution().unwrap_or(1_000_000);
                         self.ts_units.push((units, idb.ts_offset().max(0) as u64));

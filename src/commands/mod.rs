@@ -4,6 +4,7 @@ pub mod compare;
 pub mod convert;
 pub mod info;
 pub mod run;
+mod run_chunks;
 pub mod stages;
 pub mod sweep;
 pub mod synth;

@@ -65,6 +65,18 @@ pub struct Args {
     /// captures in the order given), e.g. --shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT.
     #[arg(long, value_name = "K/N", value_parser = crate::options::Shard::parse)]
     pub shard: Option<crate::options::Shard>,
+    /// Split each capture into chunks of M frames, so that the units shards deal are
+    /// (capture, chunk) rather than captures: for long captures and more nodes than
+    /// captures. Each unit writes its frames' files and a part; `--merge` (or the same run
+    /// without --shard) writes the reports. Give the same value to every shard and the
+    /// merge (a different one is refused). Not with --pcap-out or standard input.
+    #[arg(long, value_name = "M", value_parser = clap::value_parser!(u32).range(1..))]
+    pub chunk_frames: Option<u32>,
+    /// Compute nothing: join the parts the shards of `--chunk-frames` wrote into the
+    /// reports of each capture (as one run writes them) and delete the parts, or fail
+    /// listing the parts that are missing.
+    #[arg(long, requires = "chunk_frames", conflicts_with = "shard")]
+    pub merge: bool,
     /// Also write the capture re-encoded from the noisy returns as DIR/<name>/noisy.pcap
     /// (see README "Noisy capture out").
     #[arg(long)]
@@ -75,21 +87,21 @@ pub struct Args {
 }
 
 /// Validated settings of a run.
-struct Plan {
-    config: Config,
-    pipeline: Pipeline,
-    decoder: DecoderOptions,
-    frames: RangeInclusive<u32>,
-    keep_dropped: bool,
-    ply: bool,
-    output: FrameOutput,
-    linkage: bool,
-    pcap_out: bool,
+pub(super) struct Plan {
+    pub(super) config: Config,
+    pub(super) pipeline: Pipeline,
+    pub(super) decoder: DecoderOptions,
+    pub(super) frames: RangeInclusive<u32>,
+    pub(super) keep_dropped: bool,
+    pub(super) ply: bool,
+    pub(super) output: FrameOutput,
+    pub(super) linkage: bool,
+    pub(super) pcap_out: bool,
 }
 
 /// The per-capture summary written as summary.json.
 #[derive(Serialize)]
-struct Summary<'a> {
+pub(super) struct Summary<'a> {
     tool: &'static str,
     version: &'static str,
     capture: String,
@@ -99,13 +111,13 @@ struct Summary<'a> {
     decoder: DecoderSettings,
     fate_codes: [&'static str; 6],
     capture_summary: &'a CaptureSummary,
-    totals: Totals,
+    pub(super) totals: Totals,
     frames: &'a [FrameReport],
 }
 
 /// The cluster report written as clusters.json.
 #[derive(Serialize)]
-struct ClusterReport<'a> {
+pub(super) struct ClusterReport<'a> {
     tool: &'static str,
     version: &'static str,
     capture: String,
@@ -157,6 +169,9 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     let mut inputs: Vec<&Path> = args.captures.iter().map(PathBuf::as_path).collect();
     if let Some(c) = &args.config {
         inputs.push(c);
+    }
+    if let Some(m) = args.chunk_frames {
+        return super::run_chunks::run(&args, &plan, m, &inputs, global);
     }
     // Every input and target is checked before anything is written.
     let mut jobs: Vec<(FrameReader, String, String, Option<&Path>)> = Vec::new();
@@ -273,7 +288,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
 
 /// What decides a capture folder's results: a rerun with the same settings replaces it
 /// with the same bytes, other settings are another run (see `staging::check_replace`).
-fn run_settings(plan: &Plan, source: &str) -> serde_json::Value {
+pub(super) fn run_settings(plan: &Plan, source: &str) -> serde_json::Value {
     serde_json::json!({
         "capture": source,
         "config": plan.config.provenance(),
@@ -294,7 +309,7 @@ fn run_settings(plan: &Plan, source: &str) -> serde_json::Value {
 }
 
 /// True for the names `run` writes in a capture folder (for folders without a manifest).
-fn is_run_output(name: &str) -> bool {
+pub(super) fn is_run_output(name: &str) -> bool {
     matches!(name, "summary.json" | "clusters.json" | "clusters.csv")
         || numbered(name, "frame_", &[".ply", ".las", ".laz"])
         || numbered(name, "linkage_", &[".csv"])
@@ -312,7 +327,7 @@ pub(crate) fn numbered(name: &str, prefix: &str, exts: &[&str]) -> bool {
 }
 
 /// Refuses a target folder that is an input, holds an input or is a file.
-fn check_target(dir: &Path, inputs: &[&Path]) -> Result<()> {
+pub(super) fn check_target(dir: &Path, inputs: &[&Path]) -> Result<()> {
     crate::writers::atomic::refuse_inputs(dir, inputs)?;
     if dir.exists() && !dir.is_dir() {
         anyhow::bail!("{}: the output is a file, not a folder", dir.display());
@@ -369,18 +384,7 @@ fn run_capture(
         if let Some(p) = &pcap {
             p.encode_frame(&result.noisy);
         }
-        if plan.ply {
-            write_ply(plan, &result, source, dir, inputs)?;
-        }
-        if plan.linkage {
-            write_linkage(plan, &result, dir, inputs)?;
-        }
-        let report = FrameReport::of(&result);
-        let clusters = FrameClusters {
-            index: result.noisy.index,
-            clusters: result.clusters,
-        };
-        SpoolEntry::of(report, &clusters)
+        frame_outputs(plan, result, source, dir, inputs)
     };
     stream_frames(&mut reader, &plan.frames, work, |entry, _| {
         // Frames arrive here in order: the noisy capture can be written up to this one.
@@ -431,6 +435,30 @@ fn run_capture(
             }
         );
     }
+    let (summary, clusters) = documents(plan, source, &capture_summary, spool.totals.clone());
+    let frames = spool.frames;
+    if let Some(p) = pcap {
+        let name = p.file_name();
+        let lost = p.finish()?;
+        if lost > 0 {
+            global.warn(&format!(
+                "{source}: {lost} kept returns lie outside the range a packet can hold \
+                 (0 to 131.07 m) and are written as no return in {name}"
+            ));
+        }
+    }
+    spool.finish(&summary, &clusters, dir, inputs)?;
+    Ok(report_line(source, frames, &summary.totals))
+}
+
+/// The capture's summary.json and clusters.json, with empty `frames` arrays (the frames
+/// are spooled and joined in, see [`join_document`]).
+pub(super) fn documents<'a>(
+    plan: &'a Plan,
+    source: &str,
+    capture_summary: &'a CaptureSummary,
+    totals: Totals,
+) -> (Summary<'a>, ClusterReport<'a>) {
     let summary = Summary {
         tool: "lidar-noise",
         version: env!("CARGO_PKG_VERSION"),
@@ -446,8 +474,8 @@ fn run_capture(
             keep_partial: plan.decoder.keep_partial,
         },
         fate_codes: FATE_CODES,
-        capture_summary: &capture_summary,
-        totals: spool.totals.clone(),
+        capture_summary,
+        totals,
         frames: &[],
     };
     let clusters = ClusterReport {
@@ -456,19 +484,11 @@ fn run_capture(
         capture: source.to_string(),
         frames: &[],
     };
-    let frames = spool.frames;
-    if let Some(p) = pcap {
-        let name = p.file_name();
-        let lost = p.finish()?;
-        if lost > 0 {
-            global.warn(&format!(
-                "{source}: {lost} kept returns lie outside the range a packet can hold \
-                 (0 to 131.07 m) and are written as no return in {name}"
-            ));
-        }
-    }
-    spool.finish(&summary, &clusters, dir, inputs)?;
-    let t = &summary.totals;
+    (summary, clusters)
+}
+
+/// The line a run prints for a capture.
+pub(super) fn report_line(source: &str, frames: usize, t: &Totals) -> String {
     let sp = t.noise.spurious;
     // Spurious echoes are reported apart, so "kept" never exceeds the recorded returns.
     let echoes = if sp.is_empty() {
@@ -479,7 +499,7 @@ fn run_capture(
             sp.replaced, sp.added
         )
     };
-    Ok(format!(
+    format!(
         "{source}: {} frame{}, {} of {} returns kept ({} occluded, {} below power, {} below \
          min range){echoes}, {:.1} % ground, {} clusters",
         frames,
@@ -491,7 +511,30 @@ fn run_capture(
         t.noise.dropped.below_min_range,
         100.0 * t.ground_fraction,
         t.stages.clusters,
-    ))
+    )
+}
+
+/// Writes a processed frame's own files (point cloud, linkage) into `dir` and returns its
+/// report pieces.
+pub(super) fn frame_outputs(
+    plan: &Plan,
+    result: FrameResult,
+    source: &str,
+    dir: &Path,
+    inputs: &[&Path],
+) -> Result<SpoolEntry> {
+    if plan.ply {
+        write_ply(plan, &result, source, dir, inputs)?;
+    }
+    if plan.linkage {
+        write_linkage(plan, &result, dir, inputs)?;
+    }
+    let report = FrameReport::of(&result);
+    let clusters = FrameClusters {
+        index: result.noisy.index,
+        clusters: result.clusters,
+    };
+    SpoolEntry::of(report, &clusters)
 }
 
 /// Runs `work` on every frame in `frames` as a bounded pipeline: the calling thread
@@ -615,11 +658,11 @@ struct ReportSpool {
 
 /// One frame's report pieces, serialised by the worker that processed the frame so that
 /// only the writing is left to the thread that keeps frame order.
-struct SpoolEntry {
-    report: FrameReport,
-    summary: Vec<u8>,
-    clusters: Vec<u8>,
-    csv: Vec<u8>,
+pub(super) struct SpoolEntry {
+    pub(super) report: FrameReport,
+    pub(super) summary: Vec<u8>,
+    pub(super) clusters: Vec<u8>,
+    pub(super) csv: Vec<u8>,
 }
 
 impl SpoolEntry {
@@ -738,6 +781,21 @@ fn write_element<T: Serialize>(out: &mut impl std::io::Write, sep: &str, value: 
 /// Writes `doc` (whose last field is an empty `frames` array) with the spooled elements
 /// put into that array, then deletes the spool file.
 fn join_document<T: Serialize>(doc: &T, spool: &Path, path: &Path, inputs: &[&Path]) -> Result<()> {
+    join_with(doc, path, inputs, |out| {
+        std::io::copy(&mut std::fs::File::open(spool)?, out).map(|_| ())
+    })?;
+    std::fs::remove_file(spool).ok();
+    Ok(())
+}
+
+/// Writes `doc` (whose last field is an empty `frames` array) with the elements `body`
+/// writes put into that array.
+pub(super) fn join_with<T: Serialize>(
+    doc: &T,
+    path: &Path,
+    inputs: &[&Path],
+    body: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>,
+) -> Result<()> {
     let head = serde_json::to_string_pretty(doc)?;
     let Some(stem) = head.strip_suffix("[]\n}") else {
         anyhow::bail!("internal: the report does not end with its frames array");
@@ -745,10 +803,9 @@ fn join_document<T: Serialize>(doc: &T, spool: &Path, path: &Path, inputs: &[&Pa
     crate::writers::atomic::write_atomically(path, inputs, |out| {
         out.write_all(stem.as_bytes())?;
         out.write_all(b"[\n")?;
-        std::io::copy(&mut std::fs::File::open(spool)?, out)?;
+        body(out)?;
         out.write_all(b"\n  ]\n}\n")
     })?;
-    std::fs::remove_file(spool).ok();
     Ok(())
 }
 

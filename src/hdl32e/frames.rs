@@ -7,6 +7,7 @@
 
 use super::decode::{first_firing_us, DecodeCounts, DualSelect, PacketDecoder};
 use super::identify::{self, Identity, Sample};
+use super::index::FrameSeek;
 use super::packet::{self, ReturnMode};
 use crate::calibration::Calibration;
 use crate::capture::{CaptureReader, CaptureStats, Format};
@@ -170,6 +171,9 @@ pub struct FrameReader {
     spare: Vec<Vec<crate::frame::Return>>,
     /// Set by [`FrameReader::next_batch`] once a frame beyond its range was seen.
     past_range: bool,
+    /// Frames below this index are dropped uncounted: a reader resumed at a frame (see
+    /// [`super::index`]) decodes the tail of the frame before it in the resume packet.
+    skip_before: u32,
 }
 
 /// Reads up to [`identify::SAMPLE_PACKETS`] data packets and identifies the sensor.
@@ -177,7 +181,7 @@ pub fn identify_capture(path: &Path) -> Result<Identity> {
     identify_in(CaptureReader::open(path)?)
 }
 
-fn identify_in(mut capture: CaptureReader) -> Result<Identity> {
+pub(super) fn identify_in(mut capture: CaptureReader) -> Result<Identity> {
     let path = capture.path().to_path_buf();
     let mut sample = Sample::default();
     while let Some(d) = capture.next_datagram()? {
@@ -206,7 +210,7 @@ fn identify_in(mut capture: CaptureReader) -> Result<Identity> {
 }
 
 /// Shared bytes usable as a `Cursor` source.
-struct ArcBytes(Arc<[u8]>);
+pub(super) struct ArcBytes(pub(super) Arc<[u8]>);
 
 impl AsRef<[u8]> for ArcBytes {
     fn as_ref(&self) -> &[u8] {
@@ -233,10 +237,13 @@ impl FrameReader {
         open: impl Fn() -> Result<CaptureReader>,
         options: &DecoderOptions,
     ) -> Result<Self> {
-        let identity = identify_in(open()?)?;
-        let capture = open()?;
+        Ok(Self::from_parts(identify_in(open()?)?, open()?, options))
+    }
+
+    /// A reader of `capture`, a capture identified as `identity`.
+    fn from_parts(identity: Identity, capture: CaptureReader, options: &DecoderOptions) -> Self {
         let cut = ((options.cut_angle_deg.rem_euclid(360.0) * 100.0).round() as u32) % 36000;
-        Ok(FrameReader {
+        FrameReader {
             capture,
             decoder: PacketDecoder::new(
                 &options.calibration,
@@ -283,7 +290,63 @@ impl FrameReader {
             packet: Vec::with_capacity(packet::DATA_PACKET_BYTES),
             spare: Vec::new(),
             past_range: false,
-        })
+            skip_before: 0,
+        }
+    }
+
+    /// Opens a capture at a frame found by [`super::index::FrameScan`]: the frames it
+    /// yields (numbering, boundaries, returns, partial flags) and its errors are those a
+    /// reader from the start yields from that frame on, without decoding what lies before.
+    /// Its [`Self::summary`] counts only the packets read from there (the record numbers
+    /// and container counters in it are the whole capture's).
+    pub fn open_at(path: &Path, options: &DecoderOptions, at: &FrameSeek) -> Result<Self> {
+        let identity = identify_in(CaptureReader::open(path)?)?;
+        let capture = CaptureReader::open_at(path, &at.capture)?;
+        let mut reader = Self::from_parts(identity, capture, options);
+        reader.resume(at);
+        Ok(reader)
+    }
+
+    /// [`Self::open_at`] for a capture held in memory.
+    pub fn from_bytes_at(
+        bytes: Arc<[u8]>,
+        name: &Path,
+        options: &DecoderOptions,
+        at: &FrameSeek,
+    ) -> Result<Self> {
+        let mut reader = Self::from_bytes(bytes.clone(), name, options)?;
+        reader.capture = CaptureReader::from_reader_at(
+            std::io::Cursor::new(ArcBytes(bytes)),
+            name,
+            &at.capture,
+        )?;
+        reader.resume(at);
+        Ok(reader)
+    }
+
+    /// Sets the frame state a reader from the start has just before the resume packet.
+    fn resume(&mut self, at: &FrameSeek) {
+        self.next_index = at.next_index;
+        self.prev_rel = at.prev_rel;
+        self.prev_azimuth = at.prev_azimuth;
+        self.prev_ts = at.prev_ts;
+        self.hour_offset_us = at.hour_offset_us;
+        self.first_time_us = at.first_time_us;
+        self.unwrapped_centideg = at.unwrapped_centideg;
+        self.skip_before = at.frame;
+        // The frame open before the resume packet: only its tail is seen, and it is
+        // dropped (its index is below `skip_before`).
+        self.building = at.open.then(|| Building {
+            frame: Frame {
+                index: at.next_index.wrapping_sub(1),
+                partial: false,
+                returns: Vec::new(),
+            },
+            first_rel: 0,
+            first_step: 0,
+            last_rel: 0,
+            last_step: 0,
+        });
     }
 
     /// Up to `max` next frames whose index lies in `frames`; empty once the capture (or
@@ -332,6 +395,9 @@ impl FrameReader {
     }
 
     fn finish_frame(&mut self, mut b: Building, last: bool) {
+        if b.frame.index < self.skip_before {
+            return;
+        }
         let first_ok = b.frame.index > 0 || b.first_rel <= b.first_step.max(1);
         let last_ok = !last || b.last_rel + b.last_step.max(1) >= 36000;
         b.frame.partial = !(first_ok && last_ok);

@@ -4,4 +4,5 @@ pub mod decode;
 pub mod encode;
 pub mod frames;
 pub mod identify;
+pub mod index;
 pub mod packet;

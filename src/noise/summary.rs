@@ -11,7 +11,7 @@
 
 use crate::noise::{Fate, NoisyFrame};
 use serde::ser::SerializeStruct;
-use serde::{Serialize, Serializer};
+use serde::{Deserialize, Serialize, Serializer};
 
 /// Decades of the absolute-change histogram: (upper end in nm, bin width in nm).
 const DECADES: [(u64, u64); 4] = [
@@ -54,7 +54,7 @@ fn bin_upper_nm(bin: usize) -> u64 {
 }
 
 /// Removed returns by cause.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct DropCounts {
     /// Removed by occlusion.
     pub occluded: u64,
@@ -65,7 +65,7 @@ pub struct DropCounts {
 }
 
 /// Removed returns by cause and laser id (index = laser id).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct DropsByLaser {
     /// Removed by occlusion.
     pub occluded: [u64; 32],
@@ -162,6 +162,58 @@ impl RangeChange {
     }
 }
 
+/// The exact state of a [`RangeChange`] (its sums and histogram), which carries it
+/// between processes without the rounding of its report form: the parts of a sharded
+/// `run` merge into the totals of the run on one machine, bit for bit.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RangeChangeState {
+    /// Changes counted.
+    pub count: u64,
+    /// Sum of the changes in nm (an i128 in decimal: JSON numbers stop at 64 bits).
+    pub sum_nm: String,
+    /// Sum of the squared changes in nm² (i128 in decimal).
+    pub sum_sq_nm2: String,
+    /// Largest absolute change in nm.
+    pub max_abs_nm: u64,
+    /// Non-empty histogram bins as (bin, count).
+    pub abs_hist: Vec<(u32, u64)>,
+}
+
+impl RangeChange {
+    /// The exact state.
+    pub fn state(&self) -> RangeChangeState {
+        RangeChangeState {
+            count: self.count,
+            sum_nm: self.sum_nm.to_string(),
+            sum_sq_nm2: self.sum_sq_nm2.to_string(),
+            max_abs_nm: self.max_abs_nm,
+            abs_hist: (self.abs_hist.iter().enumerate())
+                .filter(|(_, &n)| n > 0)
+                .map(|(b, &n)| (b as u32, n))
+                .collect(),
+        }
+    }
+
+    /// Rebuilds the statistic from its exact state (None when the state is malformed).
+    pub fn from_state(s: &RangeChangeState) -> Option<Self> {
+        let mut abs_hist = Vec::new();
+        // An empty histogram stays empty, as before the first change.
+        if s.count > 0 {
+            abs_hist = vec![0; BINS];
+            for &(b, n) in &s.abs_hist {
+                *abs_hist.get_mut(b as usize)? = n;
+            }
+        }
+        Some(RangeChange {
+            count: s.count,
+            sum_nm: s.sum_nm.parse().ok()?,
+            sum_sq_nm2: s.sum_sq_nm2.parse().ok()?,
+            max_abs_nm: s.max_abs_nm,
+            abs_hist,
+        })
+    }
+}
+
 impl Serialize for RangeChange {
     fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
         let mut s = serializer.serialize_struct("RangeChange", 5)?;
@@ -196,7 +248,7 @@ pub struct NoiseSummary {
 }
 
 /// Reported returns that are spurious echoes, by kind.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SpuriousCounts {
     /// Recorded returns replaced by an echo that won their firing slot (fate 4).
     pub replaced: u64,
@@ -273,6 +325,21 @@ impl NoiseSummary {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn range_change_state_round_trips_exactly_through_json() {
+        let mut r = RangeChange::default();
+        assert_eq!(RangeChange::from_state(&r.state()), Some(r.clone()));
+        for d in [0.0123456789, -3.5, 120.0, 1e-7, -0.049999] {
+            r.add(d);
+        }
+        let json = serde_json::to_string(&r.state()).unwrap();
+        let back: RangeChangeState = serde_json::from_str(&json).unwrap();
+        assert_eq!(RangeChange::from_state(&back), Some(r.clone()));
+        let mut bad = r.state();
+        bad.abs_hist.push((BINS as u32, 1));
+        assert_eq!(RangeChange::from_state(&bad), None);
+    }
 
     #[test]
     fn bins_tile_the_axis() {

@@ -25,7 +25,7 @@ pub struct Pipeline {
 }
 
 /// Counts of one frame (or, merged, of a capture) after every stage.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, serde::Deserialize)]
 pub struct StageCounts {
     /// Returns kept by the noise chain and the detection filters.
     pub kept: u64,

@@ -11,27 +11,26 @@
 
 use super::run::SweepSettings;
 use crate::error::{Error, Result};
-use crate::hdl32e::frames::FrameReader;
+use crate::hdl32e::index::{FrameScan, FrameSeek};
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
-/// Frame-index ranges of the chunks of `M` frames of a capture within `s.frames`, and
-/// the number of frames (decoding only); errors when the capture has no frame in range.
+/// Frame-index ranges of the chunks of `M` frames of a capture within `s.frames`, where
+/// each chunk's first frame starts (to resume a reader there, see
+/// [`crate::hdl32e::index`]), and the number of frames; errors when the capture has no
+/// frame in range. Scans the capture without decoding returns, in bounded memory.
 pub fn chunk_ranges(
     s: &SweepSettings,
     path: &Path,
     frames_per_chunk: u32,
-) -> Result<(Vec<RangeInclusive<u32>>, usize)> {
-    let mut reader = FrameReader::open(path, &s.decoder)?;
-    let mut indexes = Vec::new();
-    loop {
-        let batch = reader.next_batch(16, &s.frames)?;
-        if batch.is_empty() {
-            break;
-        }
-        indexes.extend(batch.iter().map(|f| f.index));
-    }
-    if indexes.is_empty() {
+) -> Result<(Vec<RangeInclusive<u32>>, Vec<FrameSeek>, usize)> {
+    let (ranges, seeks, n) = chunk_plan(
+        FrameScan::open(path, &s.decoder)?,
+        &s.frames,
+        s.decoder.keep_partial,
+        frames_per_chunk,
+    )?;
+    if n == 0 {
         return Err(Error::Invalid(format!(
             "{}: no frame to process in the range {}..{} (partial sweeps need --keep-partial)",
             path.display(),
@@ -39,20 +38,36 @@ pub fn chunk_ranges(
             s.frames.end()
         )));
     }
-    Ok((
-        ranges_of(&indexes, frames_per_chunk as usize),
-        indexes.len(),
-    ))
+    Ok((ranges, seeks, n))
 }
 
-/// Splits ascending frame indexes into ranges of `m` frames (the last may be shorter).
-/// The reader yields indexes in ascending order, so a range's first and last index select
-/// exactly its frames.
-pub fn ranges_of(indexes: &[u32], m: usize) -> Vec<RangeInclusive<u32>> {
-    indexes
-        .chunks(m.max(1))
-        .map(|c| c[0]..=c[c.len() - 1])
-        .collect()
+/// Chunks of `m` frames among the frames a reader yields in `frames` (partial sweeps only
+/// with `keep_partial`), from a scan: ranges, each chunk's seek point, frame count.
+pub fn chunk_plan(
+    scan: FrameScan,
+    frames: &RangeInclusive<u32>,
+    keep_partial: bool,
+    m: u32,
+) -> Result<(Vec<RangeInclusive<u32>>, Vec<FrameSeek>, usize)> {
+    let m = m.max(1) as usize;
+    let (mut ranges, mut seeks, mut n) = (Vec::new(), Vec::new(), 0usize);
+    for found in scan {
+        let found = found?;
+        if found.index > *frames.end() {
+            break;
+        }
+        if !frames.contains(&found.index) || (found.partial && !keep_partial) {
+            continue;
+        }
+        if n % m == 0 {
+            ranges.push(found.index..=found.index);
+            seeks.push(found.seek);
+        } else if let Some(last) = ranges.last_mut() {
+            *last = *last.start()..=found.index;
+        }
+        n += 1;
+    }
+    Ok((ranges, seeks, n))
 }
 
 /// Index of unit (cell, chunk) in the sweep's list of units, which `--shard K/N` deals
@@ -119,11 +134,36 @@ mod tests {
     use super::*;
 
     #[test]
-    fn ranges_cover_the_indexes_in_order() {
-        let idx: Vec<u32> = (1..=11).collect();
-        assert_eq!(ranges_of(&idx, 4), vec![1..=4, 5..=8, 9..=11]);
-        assert_eq!(ranges_of(&idx, 20), vec![1..=11]);
-        assert_eq!(ranges_of(&[3, 5, 9], 2), vec![3..=5, 9..=9]);
+    fn chunk_plans_cut_the_frames_the_reader_yields() {
+        use crate::hdl32e::frames::{DecoderOptions, FrameReader};
+        let path = Path::new("fixtures/crossroad.pcap");
+        for keep in [false, true] {
+            let opts = DecoderOptions {
+                keep_partial: keep,
+                ..DecoderOptions::default()
+            };
+            let read: Vec<u32> = FrameReader::open(path, &opts)
+                .unwrap()
+                .map(|f| f.unwrap().index)
+                .collect();
+            for range in [0..=u32::MAX, 1..=1, 0..=0] {
+                for m in 1..=3u32 {
+                    let scan = FrameScan::open(path, &opts).unwrap();
+                    let (ranges, seeks, n) = chunk_plan(scan, &range, keep, m).unwrap();
+                    let want: Vec<u32> =
+                        read.iter().copied().filter(|i| range.contains(i)).collect();
+                    let expected: Vec<RangeInclusive<u32>> = want
+                        .chunks(m as usize)
+                        .map(|c| c[0]..=c[c.len() - 1])
+                        .collect();
+                    assert_eq!(n, want.len());
+                    assert_eq!(ranges, expected, "keep {keep}, {range:?}, m {m}");
+                    let starts: Vec<u32> = seeks.iter().map(|s| s.frame).collect();
+                    let first: Vec<u32> = expected.iter().map(|r| *r.start()).collect();
+                    assert_eq!(starts, first);
+                }
+            }
+        }
     }
 
     #[test]

@@ -15,6 +15,7 @@ use crate::config::Config;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::hdl32e::frames::{DecoderOptions, FrameReader};
+use crate::hdl32e::index::FrameSeek;
 use crate::pipeline::{FrameResult, Pipeline};
 use crate::synth::labels::{check_frame, read_labels_file, LabelRow};
 use rayon::prelude::*;
@@ -194,10 +195,12 @@ pub fn run_mode(
         // With --chunk-frames, the frames are counted first (decoding only) so that the
         // list of units, and so the deal of the shards, is known before any work.
         let mut expected_frames = None;
+        let mut seeks = Vec::new();
         let ranges = match s.chunk_frames {
             Some(m) => {
-                let (ranges, n) = chunks::chunk_ranges(s, &capture.path, m)?;
+                let (ranges, at, n) = chunks::chunk_ranges(s, &capture.path, m)?;
                 expected_frames = Some(n);
+                seeks = at;
                 Some(ranges)
             }
             None => None,
@@ -343,7 +346,7 @@ pub fn run_mode(
             let chunk = (4 * rayon::current_num_threads()).max(8);
             let mut first = true;
             for (j, units) in &pending {
-                // A chunk's units read only the chunk's frames.
+                // A chunk's units read only the chunk's frames, from where the chunk starts.
                 let mut range = s.clone();
                 if let Some(r) = &ranges {
                     range.frames = r[*j].clone();
@@ -352,6 +355,7 @@ pub fn run_mode(
                     compute_chunk(
                         &range,
                         capture,
+                        seeks.get(*j),
                         cells,
                         truth.as_ref(),
                         &protected,
@@ -546,17 +550,11 @@ pub fn hash_file(path: &Path) -> Result<String> {
     Ok(format!("{:016x}", hasher.digest()))
 }
 
-/// Frames of the capture in the sweep's range: the number every cell file must hold.
+/// Frames of the capture in the sweep's range: the number every cell file must hold
+/// (counted from the frame index, without decoding returns).
 fn count_frames(s: &SweepSettings, capture: &CaptureInput) -> Result<usize> {
-    let mut reader = FrameReader::open(&capture.path, &s.decoder)?;
-    let mut n = 0;
-    loop {
-        let batch = reader.next_batch(16, &s.frames)?;
-        if batch.is_empty() {
-            return Ok(n);
-        }
-        n += batch.len();
-    }
+    let scan = crate::hdl32e::index::FrameScan::open(&capture.path, &s.decoder)?;
+    Ok(chunks::chunk_plan(scan, &s.frames, s.decoder.keep_partial, u32::MAX)?.2)
 }
 
 fn cell_settings(
@@ -876,6 +874,7 @@ fn frame_metrics(
 fn compute_chunk(
     s: &SweepSettings,
     capture: &CaptureInput,
+    seek: Option<&FrameSeek>,
     cells: &[Pending],
     labels: Option<&Labels>,
     protected: &[&Path],
@@ -898,7 +897,10 @@ fn compute_chunk(
     }
     let empty = BTreeMap::new();
     let classes = labels.map_or(&empty, |l| &l.classes);
-    let mut reader = FrameReader::open(&capture.path, &s.decoder)?;
+    let mut reader = match seek {
+        Some(at) => FrameReader::open_at(&capture.path, &s.decoder, at)?,
+        None => FrameReader::open(&capture.path, &s.decoder)?,
+    };
     let batch_size = (2 * rayon::current_num_threads()).max(4);
     let mut results: Vec<Vec<FrameMetrics>> = vec![Vec::new(); cells.len()];
     let mut n_frames = 0u64;

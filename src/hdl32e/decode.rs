@@ -51,6 +51,9 @@ struct LaserTable {
 #[derive(Clone, Debug)]
 pub struct PacketDecoder {
     table: LaserTable,
+    /// `(sin, cos)` of the per-laser azimuth step for each firing step in hundredths of
+    /// a degree up to [`MAX_STEP_CENTIDEG`] (the same computation as for one block).
+    step_sin_cos: Vec<(f64, f64)>,
     resolution: f32,
     interpolate: bool,
     dual: DualSelect,
@@ -106,11 +109,25 @@ impl PacketDecoder {
             t.dist_off[j] = cal.distance_offset_m as f32;
             t.has_offsets |= cal.azimuth_offset_deg != 0.0;
         }
+        let step_sin_cos = (0..=MAX_STEP_CENTIDEG)
+            .map(|step| Self::step_deg(interpolate, step).to_radians().sin_cos())
+            .collect();
         PacketDecoder {
             table: t,
+            step_sin_cos,
             resolution: calibration.distance_resolution_m as f32,
             interpolate,
             dual,
+        }
+    }
+
+    /// Azimuth step in degrees from one laser to the next in a firing.
+    #[inline]
+    fn step_deg(interpolate: bool, step_centideg: u32) -> f64 {
+        if interpolate {
+            f64::from(step_centideg) * 0.01 / 40.0
+        } else {
+            0.0
         }
     }
 
@@ -219,14 +236,13 @@ impl PacketDecoder {
             return;
         };
         let az_deg = f64::from(firing.azimuth) * 0.01;
-        let step_deg = if self.interpolate {
-            f64::from(firing.step) * 0.01 / 40.0
-        } else {
-            0.0
-        };
+        let step_deg = Self::step_deg(self.interpolate, firing.step);
         // Rotate (cos, sin) laser by laser instead of calling sin_cos 32 times.
         let (s0, c0) = az_deg.to_radians().sin_cos();
-        let (sd, cd) = step_deg.to_radians().sin_cos();
+        let (sd, cd) = match self.step_sin_cos.get(firing.step as usize) {
+            Some(&sc) => sc,
+            None => step_deg.to_radians().sin_cos(),
+        };
         let (mut c, mut s) = (c0, s0);
         let (az0, step) = (az_deg as f32, step_deg as f32);
         let fire_us = time0_us + firing.index as f64 * packet::FIRING_US;

@@ -280,6 +280,10 @@ impl<'a> PlyFrame<'a> {
         let header = self.header();
         let stride = self.stride();
         let total = header.len() + stride * self.returns.len();
+        if buf.capacity() < total {
+            // A fresh buffer with headroom: growing the old one would copy its bytes.
+            *buf = Vec::with_capacity(total + total / 8);
+        }
         if buf.len() < total {
             buf.resize(total, 0);
         } else {

@@ -5,7 +5,9 @@ use crate::config::Config;
 use crate::frame::Frame;
 use crate::hdl32e::frames::{CaptureSummary, DecoderOptions, FrameReader};
 use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
-use crate::pipeline::report::{cluster_table, FrameClusters, FrameReport, Totals, FATE_CODES};
+use crate::pipeline::report::{
+    write_cluster_csv, write_pretty_nested, FrameClusters, FrameReport, Totals, FATE_CODES,
+};
 use crate::pipeline::{FrameResult, Pipeline};
 use crate::writers::ply::{PlyColumns, PlyFrame};
 use crate::writers::staging::{self, OutputFolder};
@@ -624,13 +626,12 @@ struct SpoolEntry {
 
 impl SpoolEntry {
     fn of(report: FrameReport, clusters: &FrameClusters) -> Result<Self> {
-        use crate::writers::Output;
         let mut summary = Vec::new();
         write_element(&mut summary, "", &report)?;
         let mut cluster_bytes = Vec::new();
         write_element(&mut cluster_bytes, "", clusters)?;
         let mut csv = Vec::new();
-        cluster_table(std::slice::from_ref(clusters)).write_to(&mut csv)?;
+        write_cluster_csv(&mut csv, std::slice::from_ref(clusters));
         Ok(SpoolEntry {
             report,
             summary,
@@ -723,15 +724,9 @@ impl ReportSpool {
 
 /// One array element as `to_writer_pretty` lays it out two levels deep.
 fn write_element<T: Serialize>(out: &mut impl std::io::Write, sep: &str, value: &T) -> Result<()> {
-    let text = serde_json::to_string_pretty(value)?;
     out.write_all(sep.as_bytes())?;
-    for (i, line) in text.lines().enumerate() {
-        if i > 0 {
-            out.write_all(b"\n")?;
-        }
-        out.write_all(b"    ")?;
-        out.write_all(line.as_bytes())?;
-    }
+    out.write_all(b"    ")?;
+    write_pretty_nested(out, 2, value)?;
     Ok(())
 }
 
@@ -745,7 +740,17 @@ fn join_document<T: Serialize>(doc: &T, spool: &Path, path: &Path, inputs: &[&Pa
     crate::writers::atomic::write_atomically(path, inputs, |out| {
         out.write_all(stem.as_bytes())?;
         out.write_all(b"[\n")?;
-        std::io::copy(&mut std::fs::File::open(spool)?, out)?;
+        // Large chunks: few read and write calls (the writer passes them by its buffer).
+        let mut spooled = std::fs::File::open(spool)?;
+        let mut chunk = vec![0u8; 256 << 10];
+        loop {
+            match std::io::Read::read(&mut spooled, &mut chunk) {
+                Ok(0) => break,
+                Ok(n) => out.write_all(&chunk[..n])?,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
         out.write_all(b"\n  ]\n}\n")
     })?;
     std::fs::remove_file(spool).ok();

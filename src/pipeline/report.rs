@@ -393,7 +393,7 @@ pub fn cluster_table(frames: &[FrameClusters]) -> CsvTable {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cluster::describe::OrientedBox;
+    use crate::cluster::OrientedBox;
     use crate::writers::Output;
     use rand::{Rng, SeedableRng};
 

@@ -299,6 +299,8 @@ impl FrameReader {
                         self.past_range = true;
                     } else if frames.contains(&frame.index) {
                         batch.push(frame);
+                    } else {
+                        self.recycle(frame);
                     }
                 }
             }
@@ -343,6 +345,9 @@ impl FrameReader {
         }
         if !b.frame.partial || self.keep_partial {
             self.ready.push_back(b.frame);
+        } else {
+            // Its buffer serves the next frame: a fresh one costs page faults.
+            self.recycle(b.frame);
         }
     }
 

@@ -253,18 +253,36 @@ impl PacketDecoder {
         let Ok(slots) = <&mut [Return; LASERS]>::try_from(&mut out[start..]) else {
             return;
         };
-        let mut kept = 0usize;
-        for j in 0..LASERS {
-            let raw = u16::from_le_bytes([data[j * 3], data[j * 3 + 1]]);
-            let intensity = data[j * 3 + 2];
-            let (cj, sj) = (c as f32, s as f32);
+        // Per-laser quantities in passes without stores into the frame (the rotation is
+        // sequential, the rest vectorises); the last pass assembles the returns.
+        let mut dir = [[0f32; 2]; LASERS];
+        for d in &mut dir {
+            *d = [c as f32, s as f32];
             // Advance to the next laser's firing azimuth.
             let next_c = c * cd - s * sd;
             s = s * cd + c * sd;
             c = next_c;
+        }
+        let mut azimuth = [0f32; LASERS];
+        for (j, a) in azimuth.iter_mut().enumerate() {
             let mut az = az0 + step * t.index_f32[j];
-            let (ca, sa) = if OFFSETS {
+            if OFFSETS {
                 az += t.offset_deg[j];
+            }
+            // Offsets and interpolation move an azimuth at most a few degrees past a turn.
+            if az >= 360.0 {
+                az -= 360.0;
+            } else if az < 0.0 {
+                az += 360.0;
+            }
+            *a = az;
+        }
+        let mut kept = 0usize;
+        for j in 0..LASERS {
+            let raw = u16::from_le_bytes([data[j * 3], data[j * 3 + 1]]);
+            let intensity = data[j * 3 + 2];
+            let [cj, sj] = dir[j];
+            let (ca, sa) = if OFFSETS {
                 (
                     cj * t.cos_off[j] - sj * t.sin_off[j],
                     sj * t.cos_off[j] + cj * t.sin_off[j],
@@ -272,12 +290,6 @@ impl PacketDecoder {
             } else {
                 (cj, sj)
             };
-            // Offsets and interpolation move an azimuth at most a few degrees past a turn.
-            if az >= 360.0 {
-                az -= 360.0;
-            } else if az < 0.0 {
-                az += 360.0;
-            }
             let range = f32::from(raw) * self.resolution + t.dist_off[j];
             let xy = range * t.cos_elev[j];
             // `kept <= j < LASERS`, so the mask never changes the index.
@@ -286,7 +298,7 @@ impl PacketDecoder {
                 y: -xy * sa,
                 z: range * t.sin_elev[j],
                 range,
-                azimuth: az,
+                azimuth: azimuth[j],
                 elevation: t.elevation[j],
                 time: (fire_us + t.laser_us[j]) * 1e-6,
                 packet: record,

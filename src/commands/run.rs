@@ -366,7 +366,7 @@ fn run_capture(
     } else {
         None
     };
-    let work = |f: Frame| -> Result<SpoolEntry> {
+    let work = |f: Frame| -> Result<(SpoolEntry, Vec<crate::frame::Return>)> {
         let result = plan.pipeline.process(f)?;
         if let Some(p) = &pcap {
             p.encode_frame(&result.noisy);
@@ -382,17 +382,27 @@ fn run_capture(
             index: result.noisy.index,
             clusters: result.clusters,
         };
-        SpoolEntry::of(report, &clusters)
+        // The frame's buffer goes back to the reader for the next frame.
+        Ok((SpoolEntry::of(report, &clusters)?, result.noisy.clean))
     };
-    stream_frames(&mut reader, &plan.frames, work, |entry, _| {
-        // Frames arrive here in order: the noisy capture can be written up to this one.
-        if let Some(p) = &pcap {
-            p.frame_done(entry.report.index)?;
-        }
-        spool.add(entry)?;
-        progress.inc(1);
-        Ok(())
-    })?;
+    stream_frames(
+        &mut reader,
+        &plan.frames,
+        work,
+        |(entry, returns), reader| {
+            // Frames arrive here in order: the noisy capture can be written up to this one.
+            if let Some(p) = &pcap {
+                p.frame_done(entry.report.index)?;
+            }
+            reader.recycle(Frame {
+                returns,
+                ..Frame::default()
+            });
+            spool.add(entry)?;
+            progress.inc(1);
+            Ok(())
+        },
+    )?;
     progress.finish_and_clear();
     let capture_summary = reader.summary();
     super::warn_truncation(global, Path::new(source), &capture_summary);

@@ -5,7 +5,9 @@ use crate::config::Config;
 use crate::frame::Frame;
 use crate::hdl32e::frames::{CaptureSummary, DecoderOptions, FrameReader};
 use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
-use crate::pipeline::report::{cluster_table, FrameClusters, FrameReport, Totals, FATE_CODES};
+use crate::pipeline::report::{
+    write_cluster_csv, write_pretty_nested, FrameClusters, FrameReport, Totals, FATE_CODES,
+};
 use crate::pipeline::{FrameResult, Pipeline};
 use crate::writers::ply::{PlyColumns, PlyFrame};
 use crate::writers::staging::{self, OutputFolder};
@@ -379,22 +381,31 @@ fn run_capture(
     } else {
         None
     };
-    let work = |f: Frame| -> Result<SpoolEntry> {
+    let work = |f: Frame| -> Result<(SpoolEntry, Vec<crate::frame::Return>)> {
         let result = plan.pipeline.process(f)?;
         if let Some(p) = &pcap {
             p.encode_frame(&result.noisy);
         }
         frame_outputs(plan, result, source, dir, inputs)
     };
-    stream_frames(&mut reader, &plan.frames, work, |entry, _| {
-        // Frames arrive here in order: the noisy capture can be written up to this one.
-        if let Some(p) = &pcap {
-            p.frame_done(entry.report.index)?;
-        }
-        spool.add(entry)?;
-        progress.inc(1);
-        Ok(())
-    })?;
+    stream_frames(
+        &mut reader,
+        &plan.frames,
+        work,
+        |(entry, returns), reader| {
+            // Frames arrive here in order: the noisy capture can be written up to this one.
+            if let Some(p) = &pcap {
+                p.frame_done(entry.report.index)?;
+            }
+            reader.recycle(Frame {
+                returns,
+                ..Frame::default()
+            });
+            spool.add(entry)?;
+            progress.inc(1);
+            Ok(())
+        },
+    )?;
     progress.finish_and_clear();
     let capture_summary = reader.summary();
     super::warn_truncation(global, Path::new(source), &capture_summary);
@@ -515,14 +526,14 @@ pub(super) fn report_line(source: &str, frames: usize, t: &Totals) -> String {
 }
 
 /// Writes a processed frame's own files (point cloud, linkage) into `dir` and returns its
-/// report pieces.
+/// report pieces and the frame's return buffer (for the reader to reuse).
 pub(super) fn frame_outputs(
     plan: &Plan,
     result: FrameResult,
     source: &str,
     dir: &Path,
     inputs: &[&Path],
-) -> Result<SpoolEntry> {
+) -> Result<(SpoolEntry, Vec<crate::frame::Return>)> {
     if plan.ply {
         write_ply(plan, &result, source, dir, inputs)?;
     }
@@ -534,7 +545,8 @@ pub(super) fn frame_outputs(
         index: result.noisy.index,
         clusters: result.clusters,
     };
-    SpoolEntry::of(report, &clusters)
+    // The frame's buffer goes back to the reader for the next frame.
+    Ok((SpoolEntry::of(report, &clusters)?, result.noisy.clean))
 }
 
 /// Runs `work` on every frame in `frames` as a bounded pipeline: the calling thread
@@ -667,13 +679,12 @@ pub(super) struct SpoolEntry {
 
 impl SpoolEntry {
     fn of(report: FrameReport, clusters: &FrameClusters) -> Result<Self> {
-        use crate::writers::Output;
         let mut summary = Vec::new();
         write_element(&mut summary, "", &report)?;
         let mut cluster_bytes = Vec::new();
         write_element(&mut cluster_bytes, "", clusters)?;
         let mut csv = Vec::new();
-        cluster_table(std::slice::from_ref(clusters)).write_to(&mut csv)?;
+        write_cluster_csv(&mut csv, std::slice::from_ref(clusters));
         Ok(SpoolEntry {
             report,
             summary,
@@ -766,15 +777,9 @@ impl ReportSpool {
 
 /// One array element as `to_writer_pretty` lays it out two levels deep.
 fn write_element<T: Serialize>(out: &mut impl std::io::Write, sep: &str, value: &T) -> Result<()> {
-    let text = serde_json::to_string_pretty(value)?;
     out.write_all(sep.as_bytes())?;
-    for (i, line) in text.lines().enumerate() {
-        if i > 0 {
-            out.write_all(b"\n")?;
-        }
-        out.write_all(b"    ")?;
-        out.write_all(line.as_bytes())?;
-    }
+    out.write_all(b"    ")?;
+    write_pretty_nested(out, 2, value)?;
     Ok(())
 }
 
@@ -782,7 +787,17 @@ fn write_element<T: Serialize>(out: &mut impl std::io::Write, sep: &str, value: 
 /// put into that array, then deletes the spool file.
 fn join_document<T: Serialize>(doc: &T, spool: &Path, path: &Path, inputs: &[&Path]) -> Result<()> {
     join_with(doc, path, inputs, |out| {
-        std::io::copy(&mut std::fs::File::open(spool)?, out).map(|_| ())
+        // Large chunks: few read and write calls (the writer passes them by its buffer).
+        let mut spooled = std::fs::File::open(spool)?;
+        let mut chunk = vec![0u8; 256 << 10];
+        loop {
+            match std::io::Read::read(&mut spooled, &mut chunk) {
+                Ok(0) => return Ok(()),
+                Ok(n) => out.write_all(&chunk[..n])?,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
     })?;
     std::fs::remove_file(spool).ok();
     Ok(())

@@ -442,7 +442,11 @@ fn compute_unit(
         let result = plan.pipeline.process(f)?;
         single::frame_outputs(plan, result, &job.source, dir, inputs)
     };
-    single::stream_frames(&mut reader, range, work, |entry, _| {
+    single::stream_frames(&mut reader, range, work, |(entry, returns), reader| {
+        reader.recycle(crate::frame::Frame {
+            returns,
+            ..crate::frame::Frame::default()
+        });
         // As the run's report spool: elements comma-separated, one CSV header.
         let sep: &[u8] = if part.frames == 0 { b"" } else { b",\n" };
         summary.extend_from_slice(sep);

@@ -40,6 +40,10 @@ struct LaserTable {
     offset_deg: [f32; LASERS],
     dist_off: [f32; LASERS],
     ring: [u8; LASERS],
+    /// `j as f32` for laser `j` (interpolation factor).
+    index_f32: [f32; LASERS],
+    /// `j as f64 * LASER_US`: laser `j`'s delay in its firing, in microseconds.
+    laser_us: [f64; LASERS],
     has_offsets: bool,
 }
 
@@ -47,6 +51,9 @@ struct LaserTable {
 #[derive(Clone, Debug)]
 pub struct PacketDecoder {
     table: LaserTable,
+    /// `(sin, cos)` of the per-laser azimuth step for each firing step in hundredths of
+    /// a degree up to [`MAX_STEP_CENTIDEG`] (the same computation as for one block).
+    step_sin_cos: Vec<(f64, f64)>,
     resolution: f32,
     interpolate: bool,
     dual: DualSelect,
@@ -86,6 +93,8 @@ impl PacketDecoder {
             offset_deg: [0.0; LASERS],
             dist_off: [0.0; LASERS],
             ring: rings,
+            index_f32: std::array::from_fn(|j| j as f32),
+            laser_us: std::array::from_fn(|j| j as f64 * packet::LASER_US),
             has_offsets: false,
         };
         for (j, cal) in calibration.lasers.iter().enumerate() {
@@ -100,11 +109,25 @@ impl PacketDecoder {
             t.dist_off[j] = cal.distance_offset_m as f32;
             t.has_offsets |= cal.azimuth_offset_deg != 0.0;
         }
+        let step_sin_cos = (0..=MAX_STEP_CENTIDEG)
+            .map(|step| Self::step_deg(interpolate, step).to_radians().sin_cos())
+            .collect();
         PacketDecoder {
             table: t,
+            step_sin_cos,
             resolution: calibration.distance_resolution_m as f32,
             interpolate,
             dual,
+        }
+    }
+
+    /// Azimuth step in degrees from one laser to the next in a firing.
+    #[inline]
+    fn step_deg(interpolate: bool, step_centideg: u32) -> f64 {
+        if interpolate {
+            f64::from(step_centideg) * 0.01 / 40.0
+        } else {
+            0.0
         }
     }
 
@@ -162,7 +185,8 @@ impl PacketDecoder {
 
     /// Decodes the 32 returns of one block into `out`; distance 0 is counted, not emitted.
     ///
-    /// `time0_us` is the first firing's time in microseconds past the hour.
+    /// `time0_us` is the first firing's time in microseconds past the hour. Each emitted
+    /// return is also tallied in `tally` (per laser id and per intensity byte).
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub fn decode_block(
@@ -174,6 +198,33 @@ impl PacketDecoder {
         time0_us: f64,
         record: u32,
         counts: &mut DecodeCounts,
+        tally: &mut ReturnTally<'_>,
+        out: &mut Vec<Return>,
+    ) {
+        // One loop per calibration kind, so the per-return test is decided once.
+        if self.table.has_offsets {
+            self.decode_block_with::<true>(
+                payload, block, kind, firing, time0_us, record, counts, tally, out,
+            );
+        } else {
+            self.decode_block_with::<false>(
+                payload, block, kind, firing, time0_us, record, counts, tally, out,
+            );
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn decode_block_with<const OFFSETS: bool>(
+        &self,
+        payload: &[u8],
+        block: usize,
+        kind: ReturnKind,
+        firing: &Firing,
+        time0_us: f64,
+        record: u32,
+        counts: &mut DecodeCounts,
+        tally: &mut ReturnTally<'_>,
         out: &mut Vec<Return>,
     ) {
         if packet::block_azimuth(payload, block) >= 36000 {
@@ -181,35 +232,57 @@ impl PacketDecoder {
         }
         let t = &self.table;
         let base = block * BLOCK_BYTES + 4;
-        let data = &payload[base..base + LASERS * 3];
-        let az_deg = f64::from(firing.azimuth) * 0.01;
-        let step_deg = if self.interpolate {
-            f64::from(firing.step) * 0.01 / 40.0
-        } else {
-            0.0
+        let Ok(data) = <&[u8; LASERS * 3]>::try_from(&payload[base..base + LASERS * 3]) else {
+            return;
         };
+        let az_deg = f64::from(firing.azimuth) * 0.01;
+        let step_deg = Self::step_deg(self.interpolate, firing.step);
         // Rotate (cos, sin) laser by laser instead of calling sin_cos 32 times.
         let (s0, c0) = az_deg.to_radians().sin_cos();
-        let (sd, cd) = step_deg.to_radians().sin_cos();
+        let (sd, cd) = match self.step_sin_cos.get(firing.step as usize) {
+            Some(&sc) => sc,
+            None => step_deg.to_radians().sin_cos(),
+        };
         let (mut c, mut s) = (c0, s0);
         let (az0, step) = (az_deg as f32, step_deg as f32);
         let fire_us = time0_us + firing.index as f64 * packet::FIRING_US;
-        out.reserve(LASERS);
-        for j in 0..LASERS {
-            let raw = u16::from_le_bytes([data[j * 3], data[j * 3 + 1]]);
-            let intensity = data[j * 3 + 2];
-            let (cj, sj) = (c as f32, s as f32);
+        // Every slot is written in place and kept only when its distance is non-zero, so
+        // the loop has no branch on the data (a zero return is overwritten or cut off).
+        let start = out.len();
+        out.resize(start + LASERS, BLANK);
+        let Ok(slots) = <&mut [Return; LASERS]>::try_from(&mut out[start..]) else {
+            return;
+        };
+        // Per-laser quantities in passes without stores into the frame (the rotation is
+        // sequential, the rest vectorises); the last pass assembles the returns.
+        let mut dir = [[0f32; 2]; LASERS];
+        for d in &mut dir {
+            *d = [c as f32, s as f32];
             // Advance to the next laser's firing azimuth.
             let next_c = c * cd - s * sd;
             s = s * cd + c * sd;
             c = next_c;
-            if raw == 0 {
-                counts.zero_distance += 1;
-                continue;
-            }
-            let mut az = az0 + step * j as f32;
-            let (ca, sa) = if t.has_offsets {
+        }
+        let mut azimuth = [0f32; LASERS];
+        for (j, a) in azimuth.iter_mut().enumerate() {
+            let mut az = az0 + step * t.index_f32[j];
+            if OFFSETS {
                 az += t.offset_deg[j];
+            }
+            // Offsets and interpolation move an azimuth at most a few degrees past a turn.
+            if az >= 360.0 {
+                az -= 360.0;
+            } else if az < 0.0 {
+                az += 360.0;
+            }
+            *a = az;
+        }
+        let mut kept = 0usize;
+        for j in 0..LASERS {
+            let raw = u16::from_le_bytes([data[j * 3], data[j * 3 + 1]]);
+            let intensity = data[j * 3 + 2];
+            let [cj, sj] = dir[j];
+            let (ca, sa) = if OFFSETS {
                 (
                     cj * t.cos_off[j] - sj * t.sin_off[j],
                     sj * t.cos_off[j] + cj * t.sin_off[j],
@@ -217,22 +290,17 @@ impl PacketDecoder {
             } else {
                 (cj, sj)
             };
-            // Offsets and interpolation move an azimuth at most a few degrees past a turn.
-            if az >= 360.0 {
-                az -= 360.0;
-            } else if az < 0.0 {
-                az += 360.0;
-            }
             let range = f32::from(raw) * self.resolution + t.dist_off[j];
             let xy = range * t.cos_elev[j];
-            out.push(Return {
+            // `kept <= j < LASERS`, so the mask never changes the index.
+            slots[kept & (LASERS - 1)] = Return {
                 x: xy * ca,
                 y: -xy * sa,
                 z: range * t.sin_elev[j],
                 range,
-                azimuth: az,
+                azimuth: azimuth[j],
                 elevation: t.elevation[j],
-                time: (fire_us + j as f64 * packet::LASER_US) * 1e-6,
+                time: (fire_us + t.laser_us[j]) * 1e-6,
                 packet: record,
                 raw_distance: raw,
                 intensity,
@@ -240,10 +308,43 @@ impl PacketDecoder {
                 ring: t.ring[j],
                 block: block as u8,
                 kind,
-            });
+            };
+            let hit = u64::from(raw != 0);
+            kept += hit as usize;
+            tally.per_laser[j] += hit;
+            tally.intensity[usize::from(intensity)] += hit;
         }
+        counts.zero_distance += (LASERS - kept) as u64;
+        out.truncate(start + kept);
     }
 }
+
+/// Per-return counts of a capture, kept by [`PacketDecoder::decode_block`].
+#[derive(Debug)]
+pub struct ReturnTally<'a> {
+    /// Returns per laser id.
+    pub per_laser: &'a mut [u64; LASERS],
+    /// Returns per intensity byte value.
+    pub intensity: &'a mut [u64; 256],
+}
+
+/// Filler for the slots of a block before they are decoded (every field is overwritten).
+const BLANK: Return = Return {
+    x: 0.0,
+    y: 0.0,
+    z: 0.0,
+    range: 0.0,
+    azimuth: 0.0,
+    elevation: 0.0,
+    time: 0.0,
+    packet: 0,
+    raw_distance: 0,
+    intensity: 0,
+    laser: 0,
+    ring: 0,
+    block: 0,
+    kind: ReturnKind::Strongest,
+};
 
 /// Time of a packet's first firing in microseconds past the hour.
 ///

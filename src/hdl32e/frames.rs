@@ -5,7 +5,7 @@
 //! within one firing step of the cut angle, the last when it ends within one step of
 //! it; partial sweeps are numbered like the others but left out unless asked for.
 
-use super::decode::{first_firing_us, DecodeCounts, DualSelect, PacketDecoder};
+use super::decode::{first_firing_us, DecodeCounts, DualSelect, PacketDecoder, ReturnTally};
 use super::identify::{self, Identity, Sample};
 use super::index::FrameSeek;
 use super::packet::{self, ReturnMode};
@@ -362,6 +362,8 @@ impl FrameReader {
                         self.past_range = true;
                     } else if frames.contains(&frame.index) {
                         batch.push(frame);
+                    } else {
+                        self.recycle(frame);
                     }
                 }
             }
@@ -409,6 +411,9 @@ impl FrameReader {
         }
         if !b.frame.partial || self.keep_partial {
             self.ready.push_back(b.frame);
+        } else {
+            // Its buffer serves the next frame: a fresh one costs page faults.
+            self.recycle(b.frame);
         }
     }
 
@@ -510,6 +515,19 @@ impl FrameReader {
                 continue;
             };
             let before = b.frame.returns.len();
+            let s = &mut self.summary;
+            let mut tally = ReturnTally {
+                per_laser: s
+                    .returns_per_laser
+                    .as_mut_slice()
+                    .try_into()
+                    .expect("one count per laser"),
+                intensity: s
+                    .intensity_histogram
+                    .as_mut_slice()
+                    .try_into()
+                    .expect("one count per intensity byte"),
+            };
             for &(block, kind) in &blocks[..count] {
                 self.decoder.decode_block(
                     payload,
@@ -518,17 +536,12 @@ impl FrameReader {
                     firing,
                     time0,
                     record,
-                    &mut self.summary.decode,
+                    &mut s.decode,
+                    &mut tally,
                     &mut b.frame.returns,
                 );
             }
-            self.summary.returns += (b.frame.returns.len() - before) as u64;
-            for r in &b.frame.returns[before..] {
-                if let Some(n) = self.summary.returns_per_laser.get_mut(usize::from(r.laser)) {
-                    *n += 1;
-                }
-                self.summary.intensity_histogram[usize::from(r.intensity)] += 1;
-            }
+            s.returns += (b.frame.returns.len() - before) as u64;
         }
     }
 }

@@ -134,6 +134,220 @@ pub(crate) fn fixed4(v: f64) -> String {
     format!("{v:.4}")
 }
 
+/// Appends `format!("{v:.4}")` to `out`, byte for byte (the digits of [`fixed4`] without
+/// a `String` per value).
+pub(crate) fn push_fixed4(out: &mut Vec<u8>, v: f64) {
+    use std::io::Write as _;
+    let a = v.abs();
+    if a < 1e6 {
+        let s = a * 1e4;
+        let whole = s as u64;
+        let frac = s - whole as f64;
+        if (frac - 0.5).abs() > 1e-3 {
+            let n = whole + u64::from(frac > 0.5);
+            if n > 0 || !v.is_sign_negative() {
+                if v.is_sign_negative() {
+                    out.push(b'-');
+                }
+                push_u64(out, n / 10_000);
+                let f = n % 10_000;
+                out.extend_from_slice(&[
+                    b'.',
+                    b'0' + (f / 1000) as u8,
+                    b'0' + (f / 100 % 10) as u8,
+                    b'0' + (f / 10 % 10) as u8,
+                    b'0' + (f % 10) as u8,
+                ]);
+                return;
+            }
+        }
+    }
+    let _ = write!(out, "{v:.4}");
+}
+
+/// Appends the decimal digits of `n` (as `{}` prints it).
+fn push_u64(out: &mut Vec<u8>, mut n: u64) {
+    let mut digits = [0u8; 20];
+    let mut at = digits.len();
+    loop {
+        at -= 1;
+        digits[at] = b'0' + (n % 10) as u8;
+        n /= 10;
+        if n == 0 {
+            break;
+        }
+    }
+    out.extend_from_slice(&digits[at..]);
+}
+
+/// Appends `n` as `{}` prints it.
+fn push_i64(out: &mut Vec<u8>, n: i64) {
+    if n < 0 {
+        out.push(b'-');
+    }
+    push_u64(out, n.unsigned_abs());
+}
+
+/// Appends the cluster CSV of `frames` (header line, then one row per cluster): the bytes
+/// `cluster_table(frames).write_to` writes, without a table of strings in between. No
+/// cell needs quotes (numbers, and laser ids separated by spaces), so the CSV writer
+/// would add none.
+pub fn write_cluster_csv(out: &mut Vec<u8>, frames: &[FrameClusters]) {
+    out.extend_from_slice(CLUSTER_COLUMNS.join(",").as_bytes());
+    out.push(b'\n');
+    for frame in frames {
+        for c in &frame.clusters {
+            let b = &c.oriented_box;
+            push_u64(out, u64::from(frame.index));
+            out.push(b',');
+            push_i64(out, i64::from(c.id));
+            out.push(b',');
+            push_u64(out, u64::from(c.object));
+            out.push(b',');
+            push_u64(out, c.n_points as u64);
+            for v in [
+                c.centroid[0],
+                c.centroid[1],
+                c.centroid[2],
+                c.aabb_min[0],
+                c.aabb_min[1],
+                c.aabb_min[2],
+                c.aabb_max[0],
+                c.aabb_max[1],
+                c.aabb_max[2],
+                c.extent[0],
+                c.extent[1],
+                c.extent[2],
+                b.center[0],
+                b.center[1],
+                b.length,
+                b.width,
+                b.yaw_deg,
+                b.z_min,
+                b.z_max,
+                c.min_range,
+                c.mean_range,
+                c.mean_intensity,
+            ] {
+                out.push(b',');
+                push_fixed4(out, v);
+            }
+            out.push(b',');
+            for (i, &l) in c.lasers.iter().enumerate() {
+                if i > 0 {
+                    out.push(b' ');
+                }
+                push_u64(out, u64::from(l));
+            }
+            out.push(b'\n');
+        }
+    }
+}
+
+/// Writes `value` as serde_json's pretty printer lays it out `level` levels deep inside a
+/// pretty document: the bytes of `to_string_pretty(value)` with `2 * level` spaces after
+/// each line break (JSON text has no other line breaks: strings escape them), serialised
+/// straight into `out` instead of re-indented line by line.
+pub fn write_pretty_nested<W: std::io::Write, T: Serialize + ?Sized>(
+    out: W,
+    level: usize,
+    value: &T,
+) -> serde_json::Result<()> {
+    let mut ser = serde_json::Serializer::with_formatter(
+        out,
+        NestedPretty {
+            level,
+            has_value: false,
+        },
+    );
+    value.serialize(&mut ser)
+}
+
+/// serde_json's `PrettyFormatter` with a two-space indent, starting `level` levels deep.
+struct NestedPretty {
+    level: usize,
+    has_value: bool,
+}
+
+impl NestedPretty {
+    fn newline<W: ?Sized + std::io::Write>(
+        &self,
+        w: &mut W,
+        text: &[u8],
+        level: usize,
+    ) -> std::io::Result<()> {
+        const SPACES: [u8; 64] = [b' '; 64];
+        w.write_all(text)?;
+        let mut n = 2 * level;
+        while n > 0 {
+            let k = n.min(SPACES.len());
+            w.write_all(&SPACES[..k])?;
+            n -= k;
+        }
+        Ok(())
+    }
+}
+
+impl serde_json::ser::Formatter for NestedPretty {
+    fn begin_array<W: ?Sized + std::io::Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        self.level += 1;
+        self.has_value = false;
+        w.write_all(b"[")
+    }
+
+    fn end_array<W: ?Sized + std::io::Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        self.level -= 1;
+        if self.has_value {
+            self.newline(w, b"\n", self.level)?;
+        }
+        w.write_all(b"]")
+    }
+
+    fn begin_array_value<W: ?Sized + std::io::Write>(
+        &mut self,
+        w: &mut W,
+        first: bool,
+    ) -> std::io::Result<()> {
+        self.newline(w, if first { b"\n" } else { b",\n" }, self.level)
+    }
+
+    fn end_array_value<W: ?Sized + std::io::Write>(&mut self, _w: &mut W) -> std::io::Result<()> {
+        self.has_value = true;
+        Ok(())
+    }
+
+    fn begin_object<W: ?Sized + std::io::Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        self.level += 1;
+        self.has_value = false;
+        w.write_all(b"{")
+    }
+
+    fn end_object<W: ?Sized + std::io::Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        self.level -= 1;
+        if self.has_value {
+            self.newline(w, b"\n", self.level)?;
+        }
+        w.write_all(b"}")
+    }
+
+    fn begin_object_key<W: ?Sized + std::io::Write>(
+        &mut self,
+        w: &mut W,
+        first: bool,
+    ) -> std::io::Result<()> {
+        self.newline(w, if first { b"\n" } else { b",\n" }, self.level)
+    }
+
+    fn begin_object_value<W: ?Sized + std::io::Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        w.write_all(b": ")
+    }
+
+    fn end_object_value<W: ?Sized + std::io::Write>(&mut self, _w: &mut W) -> std::io::Result<()> {
+        self.has_value = true;
+        Ok(())
+    }
+}
+
 /// The cluster report as one CSV table, one row per cluster.
 pub fn cluster_table(frames: &[FrameClusters]) -> CsvTable {
     let mut t = CsvTable::new(&CLUSTER_COLUMNS);
@@ -178,11 +392,16 @@ pub fn cluster_table(frames: &[FrameClusters]) -> CsvTable {
 
 #[cfg(test)]
 mod tests {
-    use super::fixed4;
+    use super::*;
+    use crate::cluster::OrientedBox;
+    use crate::writers::Output;
     use rand::{Rng, SeedableRng};
 
     fn check(v: f64) {
         assert_eq!(fixed4(v), format!("{v:.4}"), "{v:e} ({:#x})", v.to_bits());
+        let mut pushed = b"x".to_vec();
+        push_fixed4(&mut pushed, v);
+        assert_eq!(pushed[1..], *format!("{v:.4}").as_bytes(), "{v:e}");
     }
 
     #[test]
@@ -230,6 +449,108 @@ mod tests {
             check(v as f32 as f64);
             // Values one 1e-4 step apart land on every fraction of the scaled value.
             check((v * 1e4).round() / 1e4 + 5e-5);
+        }
+    }
+
+    fn cluster(rng: &mut impl Rng, id: i32) -> ClusterInfo {
+        let mut v = || -> f64 {
+            match rng.random_range(0..12) {
+                0 => f64::NAN,
+                1 => -0.0,
+                2 => -0.00004,
+                3 => 1e7 * rng.random_range(-1.0..1.0),
+                4 => f64::INFINITY,
+                5 => 0.00005,
+                _ => rng.random_range(-50.0..50.0),
+            }
+        };
+        let mut a3 = || [v(), v(), v()];
+        let (centroid, aabb_min, aabb_max, extent) = (a3(), a3(), a3(), a3());
+        let mut v = || rng.random_range(-100.0..100.0);
+        ClusterInfo {
+            id,
+            n_points: (id as usize) * 37,
+            centroid,
+            aabb_min,
+            aabb_max,
+            extent,
+            oriented_box: OrientedBox {
+                center: [v(), v()],
+                length: v(),
+                width: v(),
+                yaw_deg: v(),
+                z_min: v(),
+                z_max: v(),
+            },
+            min_range: v(),
+            mean_range: v(),
+            mean_intensity: v(),
+            lasers: (0..(id as u8 % 5) * 7).collect(),
+            object: id % 3 == 0,
+        }
+    }
+
+    fn frames(seed: u64) -> Vec<FrameClusters> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        (0..4)
+            .map(|f| FrameClusters {
+                index: f * 1000 + 7,
+                clusters: (0..f as i32 * 5).map(|i| cluster(&mut rng, i)).collect(),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn cluster_csv_matches_the_table_writer() {
+        let frames = frames(3);
+        assert!(frames
+            .iter()
+            .any(|f| f.clusters.iter().any(|c| c.lasers.is_empty())));
+        for set in [&frames[..], &frames[..1], &frames[2..3]] {
+            let mut table = Vec::new();
+            cluster_table(set).write_to(&mut table).unwrap();
+            let mut direct = Vec::new();
+            write_cluster_csv(&mut direct, set);
+            assert_eq!(
+                String::from_utf8(direct).unwrap(),
+                String::from_utf8(table).unwrap()
+            );
+        }
+    }
+
+    #[test]
+    fn nested_pretty_json_matches_reindented_pretty_text() {
+        #[derive(Serialize)]
+        struct Doc {
+            name: String,
+            empty: Vec<u8>,
+            empty_map: std::collections::BTreeMap<String, u8>,
+            nested: Vec<Vec<f64>>,
+            frames: Vec<FrameClusters>,
+            text: &'static str,
+        }
+        let doc = Doc {
+            name: "a \"quoted\"\nline".into(),
+            empty: vec![],
+            empty_map: Default::default(),
+            nested: vec![vec![], vec![1.5, -0.0, 1e300]],
+            frames: frames(5)
+                .into_iter()
+                .map(|mut f| {
+                    // JSON has no NaN: serde_json writes null for it, as before.
+                    f.clusters.truncate(3);
+                    f
+                })
+                .collect(),
+            text: "end",
+        };
+        for level in [0, 1, 2, 5] {
+            let text = serde_json::to_string_pretty(&doc).unwrap();
+            let pad = " ".repeat(2 * level);
+            let expected = text.replace('\n', &format!("\n{pad}"));
+            let mut out = Vec::new();
+            write_pretty_nested(&mut out, level, &doc).unwrap();
+            assert_eq!(String::from_utf8(out).unwrap(), expected, "level {level}");
         }
     }
 }

@@ -44,6 +44,9 @@ pub const BASE_PROPERTIES: [(&str, &str); 9] = [
     ("time", "float"),
 ];
 
+/// Bytes per point of the base properties in the binary encoding.
+const BASE_STRIDE: usize = 27;
+
 /// The optional properties, in the order they are written when present, as (name, PLY type).
 pub const OPTIONAL_PROPERTIES: [(&str, &str); 6] = [
     ("range_clean", "float"),
@@ -225,7 +228,8 @@ impl<'a> PlyFrame<'a> {
     /// Bytes per point in the binary encoding.
     fn stride(&self) -> usize {
         let c = &self.columns;
-        27 + 4 * usize::from(c.range_clean.is_some())
+        BASE_STRIDE
+            + 4 * usize::from(c.range_clean.is_some())
             + 4 * usize::from(c.power.is_some())
             + usize::from(c.fate.is_some())
             + usize::from(c.cause.is_some())
@@ -237,52 +241,91 @@ impl<'a> PlyFrame<'a> {
     pub fn write<W: Write + ?Sized>(&self, out: &mut W) -> std::io::Result<()> {
         self.check()
             .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()))?;
-        out.write_all(self.header().as_bytes())?;
         match self.encoding {
             PlyEncoding::BinaryLittleEndian => self.write_binary(out),
-            PlyEncoding::Ascii => self.write_ascii(out),
+            PlyEncoding::Ascii => {
+                out.write_all(self.header().as_bytes())?;
+                self.write_ascii(out)
+            }
         }
     }
 
-    /// Binary payload, encoded in chunks so the writer sees few large writes.
+    /// Header and binary payload, encoded into one reused buffer and written at once:
+    /// a single large write passes the caller's buffer by (no copy) and costs one
+    /// system call, and reusing the buffer spares the page faults of a fresh one.
     fn write_binary<W: Write + ?Sized>(&self, out: &mut W) -> std::io::Result<()> {
-        const CHUNK_POINTS: usize = 8192;
-        let c = self.columns;
-        let mut buf: Vec<u8> = Vec::with_capacity(self.stride() * CHUNK_POINTS);
-        for (chunk_no, chunk) in self.returns.chunks(CHUNK_POINTS).enumerate() {
-            buf.clear();
-            let base = chunk_no * CHUNK_POINTS;
-            for (k, r) in chunk.iter().enumerate() {
-                let i = base + k;
-                buf.extend_from_slice(&r.x.to_le_bytes());
-                buf.extend_from_slice(&r.y.to_le_bytes());
-                buf.extend_from_slice(&r.z.to_le_bytes());
-                buf.extend_from_slice(&[r.intensity, r.ring, r.laser]);
-                buf.extend_from_slice(&r.azimuth.to_le_bytes());
-                buf.extend_from_slice(&r.range.to_le_bytes());
-                buf.extend_from_slice(&self.relative_time(r).to_le_bytes());
-                if let Some(v) = c.range_clean {
-                    buf.extend_from_slice(&v[i].to_le_bytes());
-                }
-                if let Some(v) = c.power {
-                    buf.extend_from_slice(&v[i].to_le_bytes());
-                }
-                if let Some(v) = c.fate {
-                    buf.push(v[i]);
-                }
-                if let Some(v) = c.cause {
-                    buf.push(v[i]);
-                }
-                if let Some(v) = c.ground {
-                    buf.push(v[i]);
-                }
-                if let Some(v) = c.cluster {
-                    buf.extend_from_slice(&v[i].to_le_bytes());
-                }
-            }
-            out.write_all(&buf)?;
+        thread_local! {
+            static BUFFER: std::cell::RefCell<Vec<u8>> = const { std::cell::RefCell::new(Vec::new()) };
         }
-        Ok(())
+        BUFFER.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut buf) => {
+                self.encode_binary(&mut buf);
+                out.write_all(&buf)
+            }
+            // Only a writer that writes PLY from inside `write` would get here.
+            Err(_) => {
+                let mut buf = Vec::new();
+                self.encode_binary(&mut buf);
+                out.write_all(&buf)
+            }
+        })
+    }
+
+    /// Fills `buf` with the header and the binary payload (and nothing else).
+    ///
+    /// Rows have a fixed stride; the base properties are written row by row and each
+    /// optional column in its own pass at its offset. Every payload byte is written, so
+    /// the buffer is only zero-filled where it grows beyond its earlier length.
+    fn encode_binary(&self, buf: &mut Vec<u8>) {
+        let header = self.header();
+        let stride = self.stride();
+        let total = header.len() + stride * self.returns.len();
+        if buf.capacity() < total {
+            // A fresh buffer with headroom: growing the old one would copy its bytes.
+            *buf = Vec::with_capacity(total + total / 8);
+        }
+        if buf.len() < total {
+            buf.resize(total, 0);
+        } else {
+            buf.truncate(total);
+        }
+        let (head, payload) = buf.split_at_mut(header.len());
+        head.copy_from_slice(header.as_bytes());
+        let start = self.frame_start_time;
+        for (row, r) in payload.chunks_exact_mut(stride).zip(self.returns) {
+            let Some(row) = row.first_chunk_mut::<BASE_STRIDE>() else {
+                continue;
+            };
+            row[0..4].copy_from_slice(&r.x.to_le_bytes());
+            row[4..8].copy_from_slice(&r.y.to_le_bytes());
+            row[8..12].copy_from_slice(&r.z.to_le_bytes());
+            row[12] = r.intensity;
+            row[13] = r.ring;
+            row[14] = r.laser;
+            row[15..19].copy_from_slice(&r.azimuth.to_le_bytes());
+            row[19..23].copy_from_slice(&r.range.to_le_bytes());
+            row[23..27].copy_from_slice(&((r.time - start) as f32).to_le_bytes());
+        }
+        let c = self.columns;
+        let mut at = BASE_STRIDE;
+        if let Some(v) = c.range_clean {
+            at = put_column(payload, stride, at, v, f32::to_le_bytes);
+        }
+        if let Some(v) = c.power {
+            at = put_column(payload, stride, at, v, f32::to_le_bytes);
+        }
+        if let Some(v) = c.fate {
+            at = put_column(payload, stride, at, v, |b| [b]);
+        }
+        if let Some(v) = c.cause {
+            at = put_column(payload, stride, at, v, |b| [b]);
+        }
+        if let Some(v) = c.ground {
+            at = put_column(payload, stride, at, v, |b| [b]);
+        }
+        if let Some(v) = c.cluster {
+            put_column(payload, stride, at, v, i32::to_le_bytes);
+        }
     }
 
     /// ASCII payload: one line per point, values separated by single spaces.
@@ -333,6 +376,24 @@ impl<'a> PlyFrame<'a> {
     fn relative_time(&self, r: &Return) -> f32 {
         (r.time - self.frame_start_time) as f32
     }
+}
+
+/// Writes one optional column at byte offset `at` of every `stride`-byte row; returns the
+/// offset of the next column.
+#[inline(always)]
+fn put_column<T: Copy, const W: usize>(
+    payload: &mut [u8],
+    stride: usize,
+    at: usize,
+    values: &[T],
+    encode: impl Fn(T) -> [u8; W],
+) -> usize {
+    for (row, &v) in payload.chunks_exact_mut(stride).zip(values) {
+        if let Some(cell) = row.get_mut(at..at + W) {
+            cell.copy_from_slice(&encode(v));
+        }
+    }
+    at + W
 }
 
 impl Output for PlyFrame<'_> {

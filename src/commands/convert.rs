@@ -88,16 +88,8 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             .stage(stage_name)
             .map_err(anyhow::Error::from)
             .and_then(|s| {
-                let written = convert_one(
-                    &args,
-                    capture,
-                    &target,
-                    s.path(),
-                    &options,
-                    output,
-                    &range,
-                    global,
-                )?;
+                let written =
+                    convert_one(capture, &target, s.path(), &options, output, &range, global)?;
                 let files = staging::result_files(s.path());
                 staging::write_manifest(s.path(), "convert", &settings, files)?;
                 Ok((s, written))
@@ -160,9 +152,7 @@ fn is_convert_output(name: &str) -> bool {
 
 /// Writes the frames of `capture` in `range` into `dir` (the staging folder of `target`);
 /// returns how many.
-#[allow(clippy::too_many_arguments)]
 fn convert_one(
-    args: &Args,
     capture: &Path,
     target: &Path,
     dir: &Path,
@@ -196,18 +186,12 @@ fn convert_one(
     super::warn_truncation(global, capture, &summary);
     super::warn_capture(global, capture, &summary, false);
     if written == 0 {
-        anyhow::bail!(
-            "{}: no frame in {} (the capture has {} full frames{}); pick others with --frames \
-             or add --keep-partial",
-            capture.display(),
-            args.frames.as_deref().unwrap_or("the capture"),
-            summary.full_frames,
-            if summary.partial_frames > 0 {
-                ", partial sweeps left out"
-            } else {
-                ""
-            }
-        );
+        // Same message as `run`'s: the capture's full frames counted to its end.
+        return Err(super::run::no_frame_error(
+            &capture.display().to_string(),
+            range,
+            &mut reader,
+        ));
     }
     Ok(written)
 }

@@ -416,35 +416,7 @@ fn run_capture(
         plan.config.sensor.intensity == crate::config::IntensityMode::Reflectivity,
     );
     if spool.frames == 0 {
-        // The reader stopped at the end of the range: count the frames of the whole capture.
-        for frame in reader.by_ref() {
-            frame?;
-        }
-        let s = reader.summary();
-        let full = s.full_frames;
-        let (first, last) = if s.partial_frames > 0 {
-            (1, full)
-        } else {
-            (0, full.saturating_sub(1))
-        };
-        let partial_note = if *plan.frames.start() == 0 && plan.frames.end() == &0 {
-            "frame 0 is the partial first sweep (add --keep-partial to process it); "
-        } else {
-            ""
-        };
-        anyhow::bail!(
-            "{source}: no frame to process in --frames {}..{}: {partial_note}the capture has {} \
-             full frame{} ({}); pick others with --frames or add --keep-partial",
-            plan.frames.start(),
-            plan.frames.end(),
-            full,
-            if full == 1 { "" } else { "s" },
-            if full == 0 {
-                "none".to_string()
-            } else {
-                format!("indexes {first}..{last}")
-            }
-        );
+        return Err(no_frame_error(source, &plan.frames, &mut reader));
     }
     let (summary, clusters) = documents(plan, source, &capture_summary, spool.totals.clone());
     let frames = spool.frames;
@@ -522,6 +494,45 @@ pub(super) fn report_line(source: &str, frames: usize, t: &Totals) -> String {
         t.noise.dropped.below_min_range,
         100.0 * t.ground_fraction,
         t.stages.clusters,
+    )
+}
+
+/// The error for a `--frames` range with no frame to process, naming the capture's full
+/// frames (the reader stopped at the end of the range, so it reads on to count them).
+pub(super) fn no_frame_error(
+    source: &str,
+    frames: &RangeInclusive<u32>,
+    reader: &mut FrameReader,
+) -> anyhow::Error {
+    for frame in reader.by_ref() {
+        if let Err(e) = frame {
+            return e.into();
+        }
+    }
+    let s = reader.summary();
+    let full = s.full_frames;
+    let (first, last) = if s.partial_frames > 0 {
+        (1, full)
+    } else {
+        (0, full.saturating_sub(1))
+    };
+    let partial_note = if *frames.start() == 0 && *frames.end() == 0 {
+        "frame 0 is the partial first sweep (add --keep-partial to process it); "
+    } else {
+        ""
+    };
+    anyhow::anyhow!(
+        "{source}: no frame to process in --frames {}..{}: {partial_note}the capture has {} \
+         full frame{} ({}); pick others with --frames or add --keep-partial",
+        frames.start(),
+        frames.end(),
+        full,
+        if full == 1 { "" } else { "s" },
+        if full == 0 {
+            "none".to_string()
+        } else {
+            format!("indexes {first}..{last}")
+        }
     )
 }
 

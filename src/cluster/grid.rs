@@ -51,16 +51,16 @@ fn gap(lo: f64, hi: f64, v: f64) -> f64 {
     (lo - v).max(v - hi).max(0.0)
 }
 
-/// Voxel coordinate `floor(v / side)`, or `None` beyond [`CELL_LIMIT`] or for NaN. Written
-/// out because `f64::floor` is a libm call on baseline x86-64.
+/// `floor(f)` for `|f| <= CELL_LIMIT`, written out because `f64::floor` is a libm call on
+/// baseline x86-64.
 #[inline(always)]
-fn cell_of_coord(v: f32, side: f64) -> Option<i64> {
-    let f = v as f64 / side;
-    if f.is_nan() || f.abs() > CELL_LIMIT {
-        return None;
-    }
+fn floor_i64(f: f64) -> i64 {
     let t = f as i64;
-    Some(if (t as f64) > f { t - 1 } else { t })
+    if (t as f64) > f {
+        t - 1
+    } else {
+        t
+    }
 }
 
 /// Stable LSD radix sort of `keys` (only the low `bits` bits set) carrying `vals` along.
@@ -95,6 +95,46 @@ fn radix_sort(keys: &mut Vec<u64>, vals: &mut Vec<u32>, bits: u32) {
             std::mem::swap(vals, &mut v2);
         }
         shift += RADIX_BITS;
+    }
+}
+
+/// Stable LSD radix sort of `items` by their bits `from..from + bits` (the low bits carry
+/// a point index, already ascending, so equal keys keep input order). All digit
+/// histograms come from one read pass, and the digit width is spread evenly over the
+/// passes (29 key bits: three passes of 10 bits, not 11 + 11 + 7).
+fn radix_sort_packed(items: &mut Vec<u64>, from: u32, bits: u32) {
+    const MAX_PASSES: usize = 6;
+    let n = items.len();
+    let passes = bits.div_ceil(RADIX_BITS).max(1) as usize;
+    debug_assert!(passes <= MAX_PASSES);
+    let digit = bits.div_ceil(passes as u32);
+    let buckets = 1usize << digit;
+    let mask = (buckets - 1) as u64;
+    let mut hist = vec![0u32; buckets * passes];
+    for &k in items.iter() {
+        for (p, h) in hist.chunks_exact_mut(buckets).enumerate() {
+            h[((k >> (from + p as u32 * digit)) & mask) as usize] += 1;
+        }
+    }
+    let mut tmp = vec![0u64; n];
+    for (p, h) in hist.chunks_exact_mut(buckets).enumerate() {
+        // A digit shared by every item leaves the order unchanged.
+        if h.contains(&(n as u32)) {
+            continue;
+        }
+        let mut sum = 0;
+        for c in h.iter_mut() {
+            let v = *c;
+            *c = sum;
+            sum += v;
+        }
+        let shift = from + p as u32 * digit;
+        for &k in items.iter() {
+            let d = ((k >> shift) & mask) as usize;
+            tmp[h[d] as usize] = k;
+            h[d] += 1;
+        }
+        std::mem::swap(items, &mut tmp);
     }
 }
 
@@ -157,9 +197,15 @@ pub(crate) struct Rule<'a> {
 }
 
 /// Voxel of each point and the union-find over voxels after linking, for the points of one
-/// pass. The voxel side is `rule.lo / sqrt(3)` (every same-voxel pair links); `None` when
-/// the grid does not apply (zero or infinite cutoff, `rule.hi` beyond two voxel sides,
-/// coordinates too far out for the packed keys).
+/// pass (all finite). The voxel side is `rule.lo / sqrt(3)` (every same-voxel pair links);
+/// `None` when the grid does not apply (zero or infinite cutoff, `rule.hi` beyond two voxel
+/// sides, coordinates too far out for the packed keys).
+///
+/// The result (which voxels end up in one set, hence the partition of the points) does not
+/// depend on how each point is assigned to a voxel, as long as same-voxel points are closer
+/// than `rule.lo` and linked points lie at most two voxels apart per axis: so the voxel
+/// coordinate is `floor(v * (1 / side))`, a multiplication, whose relative rounding error
+/// (~1e-16) is far inside the 1e-6 shrink of the side.
 pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, UnionFind)> {
     // The 1e-6 shrink keeps same-voxel pairs below the cutoff despite rounding in the voxel
     // assignment and in the distance itself (both ~1e-16 relative).
@@ -167,18 +213,29 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
     if !(side > 0.0 && side.is_finite()) || rule.hi > 2.0 * side {
         return None;
     }
+    let inv = 1.0 / side;
     let m = points.len();
     if m == 0 {
         return Some((Vec::new(), UnionFind::new(0)));
     }
-    // Two cheap passes (bounds, then keys) instead of storing every voxel triple.
-    let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
+    // Coordinate bounds in f32 (no division per point); `floor(v * inv)` is monotone in `v`,
+    // so the voxel bounds are the voxels of the coordinate bounds.
+    let (mut mn, mut mx) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     for p in points {
         for a in 0..3 {
-            let c = cell_of_coord(p[a], side)?;
-            lo[a] = lo[a].min(c);
-            hi[a] = hi[a].max(c);
+            mn[a] = mn[a].min(p[a]);
+            mx[a] = mx[a].max(p[a]);
         }
+    }
+    let (mut lo, mut hi) = ([0i64; 3], [0i64; 3]);
+    for a in 0..3 {
+        let (f_lo, f_hi) = (mn[a] as f64 * inv, mx[a] as f64 * inv);
+        // Also rejects NaN bounds (only from non-finite points, which callers never pass).
+        if !(f_lo.abs() <= CELL_LIMIT && f_hi.abs() <= CELL_LIMIT) {
+            return None;
+        }
+        lo[a] = floor_i64(f_lo);
+        hi[a] = floor_i64(f_hi);
     }
     // Fields hold cell - lo + 2 in [2, span + 2], so a step of up to two either way stays
     // inside its field and key arithmetic never carries between fields.
@@ -189,45 +246,64 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
         return None;
     }
     let (sx, sy) = (wy + wz, wz);
-    let field = |p: &[f32; 3], a: usize| {
-        (cell_of_coord(p[a], side).expect("checked in the first pass") - lo[a] + 2) as u64
+    let key_of = |p: &[f32; 3]| -> u64 {
+        let f = |a: usize| (floor_i64(p[a] as f64 * inv) - lo[a] + 2) as u64;
+        f(0) << sx | f(1) << sy | f(2)
     };
-    let mut keys: Vec<u64> = points
-        .iter()
-        .map(|p| field(p, 0) << sx | field(p, 1) << sy | field(p, 2))
-        .collect();
-    let mut order: Vec<u32> = (0..m as u32).collect();
-    radix_sort(&mut keys, &mut order, total);
+    // Sorted (key, point index) pairs: packed in one u64 when both fit (one array to sort
+    // and scatter instead of two), else sorted as two arrays.
+    let ib = 32 - (m as u32).leading_zeros();
+    let sorted: Vec<(u64, u32)> = if total + ib <= 64 {
+        let idx_mask = (1u64 << ib) - 1;
+        let mut items: Vec<u64> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| key_of(p) << ib | i as u64)
+            .collect();
+        radix_sort_packed(&mut items, ib, total);
+        items
+            .iter()
+            .map(|&k| (k >> ib, (k & idx_mask) as u32))
+            .collect()
+    } else {
+        let mut keys: Vec<u64> = points.iter().map(key_of).collect();
+        let mut order: Vec<u32> = (0..m as u32).collect();
+        radix_sort(&mut keys, &mut order, total);
+        keys.into_iter().zip(order).collect()
+    };
 
-    // Voxels as runs of the sorted keys; points copied in voxel order for locality.
+    // Voxels as runs of the sorted keys; points copied in voxel order for locality. Boxes
+    // are kept in f32 (the coordinates are f32, so min and max are exact) and widened to
+    // f64 where they are compared.
     let mut cell_key: Vec<u64> = Vec::new();
     let mut cell_start: Vec<u32> = Vec::new();
-    let mut cell_box: Vec<[f64; 6]> = Vec::new();
+    let mut cell_box: Vec<[f32; 6]> = Vec::new();
     let mut sp: Vec<[f32; 3]> = Vec::with_capacity(m);
     let mut cell_of: Vec<u32> = vec![0; m];
     // Range of each point in voxel order (adaptive passes only).
     let mut sr: Vec<f64> = Vec::with_capacity(if rule.ranges.is_some() { m } else { 0 });
-    for (k, (&key, &i)) in keys.iter().zip(order.iter()).enumerate() {
-        let pf = points[i as usize];
+    let mut prev_key = u64::MAX;
+    for (k, &(key, i)) in sorted.iter().enumerate() {
+        let p = points[i as usize];
         if let Some(r) = rule.ranges {
             sr.push(r[i as usize]);
         }
-        let p = pf.map(|c| c as f64);
-        if k == 0 || keys[k - 1] != key {
+        if key != prev_key {
+            prev_key = key;
             cell_key.push(key);
             cell_start.push(k as u32);
             cell_box.push([p[0], p[1], p[2], p[0], p[1], p[2]]);
-        }
-        let b = cell_box.last_mut().expect("pushed above");
-        for a in 0..3 {
-            b[a] = b[a].min(p[a]);
-            b[a + 3] = b[a + 3].max(p[a]);
+        } else {
+            let b = cell_box.last_mut().expect("pushed above");
+            for a in 0..3 {
+                b[a] = b[a].min(p[a]);
+                b[a + 3] = b[a + 3].max(p[a]);
+            }
         }
         cell_of[i as usize] = (cell_key.len() - 1) as u32;
-        sp.push(pf);
+        sp.push(p);
     }
-    drop(keys);
-    drop(order);
+    drop(sorted);
     let n_cells = cell_key.len();
     cell_start.push(m as u32);
     // Sentinel above every neighbour key (keys use at most 62 bits): walks need no bounds test.
@@ -252,22 +328,24 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
         (pack(2, -2, -2), pack(2, 2, 2)),
     ];
     let z_mask = (1u64 << wz) - 1;
-    let mut ptr = vec![0usize; columns.len()];
+    let mut ptr = [0usize; 3];
 
-    // Tests one voxel pair and joins it when some point pair links.
-    let try_link = |sets: &mut UnionFind, a: usize, b: usize| {
-        let (ra, rb) = (sets.find(a as u32), sets.find(b as u32));
+    // Tests one voxel pair (`ra` the current root of `a`'s set) and joins it when some
+    // point pair links; returns the root of `a`'s set afterwards.
+    let try_link = |sets: &mut UnionFind, ra: u32, a: usize, b: usize| -> u32 {
+        let rb = sets.find(b as u32);
         if ra == rb {
-            return;
+            return ra;
         }
         let (ba, bb) = (&cell_box[a], &cell_box[b]);
+        let bb: [f64; 6] = bb.map(f64::from);
         let g = sq3(
-            (bb[0] - ba[3]).max(ba[0] - bb[3]).max(0.0),
-            (bb[1] - ba[4]).max(ba[1] - bb[4]).max(0.0),
-            (bb[2] - ba[5]).max(ba[2] - bb[5]).max(0.0),
+            (bb[0] - ba[3] as f64).max(ba[0] as f64 - bb[3]).max(0.0),
+            (bb[1] - ba[4] as f64).max(ba[1] as f64 - bb[4]).max(0.0),
+            (bb[2] - ba[5] as f64).max(ba[2] as f64 - bb[5]).max(0.0),
         );
         if g > t_hi {
-            return;
+            return ra;
         }
         let (b0, b1) = (cell_start[b] as usize, cell_start[b + 1] as usize);
         let pb = &sp[b0..b1];
@@ -297,17 +375,19 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
                     .any(|q| sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64) <= t)
             };
             if linked {
-                sets.join_roots(ra, rb);
-                return;
+                return sets.join_roots(ra, rb);
             }
         }
+        ra
     };
 
     for c in 0..n_cells {
         let key = cell_key[c];
+        // Only this loop's own joins can change `c`'s root, and `try_link` reports them.
+        let mut root = sets.find(c as u32);
         let mut q = c + 1;
         while cell_key[q] <= key + 2 {
-            try_link(&mut sets, c, q);
+            root = try_link(&mut sets, root, c, q);
             q += 1;
         }
         let z = key & z_mask;
@@ -320,7 +400,7 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
             ptr[j] = p;
             while cell_key[p] <= khi {
                 if (cell_key[p] & z_mask).abs_diff(z) <= 2 {
-                    try_link(&mut sets, c, p);
+                    root = try_link(&mut sets, root, c, p);
                 }
                 p += 1;
             }

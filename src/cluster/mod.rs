@@ -132,14 +132,15 @@ impl UnionFind {
         true
     }
 
-    /// Joins two distinct roots (union by size).
+    /// Joins two distinct roots (union by size); returns the root of the joined set.
     #[inline]
-    pub(crate) fn join_roots(&mut self, mut ra: u32, mut rb: u32) {
+    pub(crate) fn join_roots(&mut self, mut ra: u32, mut rb: u32) -> u32 {
         if self.size[ra as usize] < self.size[rb as usize] {
             std::mem::swap(&mut ra, &mut rb);
         }
         self.parent[rb as usize] = ra;
         self.size[ra as usize] += self.size[rb as usize];
+        ra
     }
 
     /// Number of elements.

@@ -105,8 +105,12 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         }
     }
 
-    // Column-major cells (col * rows + row) keep a column contiguous for the angle pass.
-    let cells = rows * cols;
+    // Column-major cells (col * stride + row) keep a column contiguous for the link scans;
+    // the power-of-two stride makes a cell's row a mask, not a division (rows past `rows`
+    // stay empty).
+    let stride = rows.next_power_of_two();
+    let row_mask = stride - 1;
+    let cells = stride * cols;
     let mut rep = vec![NONE; cells];
     let mut cell_of = vec![NONE; n];
     for (i, r) in returns.iter().enumerate() {
@@ -126,7 +130,7 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         } else {
             bin.rem_euclid(cols as i64) as usize
         };
-        let cell = col * rows + ring;
+        let cell = col * stride + ring;
         cell_of[i] = cell as u32;
         let cur = rep[cell];
         if cur == NONE || r.range < returns[cur as usize].range {
@@ -152,7 +156,7 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         if rep[cell] == NONE {
             return NONE;
         }
-        let row = cell % rows;
+        let row = cell & row_mask;
         let top = (row + MAX_HOLE_ROWS + 2).min(rows);
         (cell + 1..cell - row + top)
             .find(|&c| rep[c] != NONE)
@@ -162,7 +166,7 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         if rep[cell] == NONE {
             return NONE;
         }
-        let row = cell % rows;
+        let row = cell & row_mask;
         let bottom = row.saturating_sub(MAX_HOLE_ROWS + 1);
         (cell - row + bottom..cell)
             .rev()
@@ -199,9 +203,9 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
     let mut ground = vec![false; cells];
     // A stack, not a queue: the grown set does not depend on the visiting order.
     let mut stack: Vec<u32> = Vec::new();
-    let wrap = (cols - 1) * rows;
+    let wrap = (cols - 1) * stride;
     for col in 0..cols {
-        let base = col * rows;
+        let base = col * stride;
         let Some(lowest) = (base..base + rows).find(|&c| rep[c] != NONE) else {
             continue;
         };
@@ -215,8 +219,12 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         while let Some(cur) = stack.pop() {
             let cur = cur as usize;
             // Same row in the adjacent columns, wrapping around in azimuth.
-            let left = if cur >= rows { cur - rows } else { cur + wrap };
-            let right = if cur < wrap { cur + rows } else { cur - wrap };
+            let left = if cur >= stride {
+                cur - stride
+            } else {
+                cur + wrap
+            };
+            let right = if cur < wrap { cur + stride } else { cur - wrap };
             let a = angle_of(cur);
             for nb in [up(cur), down(cur), left as u32, right as u32] {
                 if nb == NONE || ground[nb as usize] {

@@ -156,10 +156,15 @@ pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec
     let (cell_of, mut sets) = link_cells(&fp.points, &rule)?;
     // Labels in input order, numbered by each component's smallest input index.
     let n_cells = sets.len();
-    let mut cell_of_input = vec![u32::MAX; n];
-    for (f, &i) in fp.index.iter().enumerate() {
-        cell_of_input[i as usize] = cell_of[f];
-    }
+    let cell_of_input = if fp.is_identity() {
+        cell_of
+    } else {
+        let mut by_input = vec![u32::MAX; n];
+        for (f, &c) in cell_of.iter().enumerate() {
+            by_input[fp.global(f) as usize] = c;
+        }
+        by_input
+    };
     let mut root_label = vec![u32::MAX; n_cells];
     let mut next = 0u32;
     let labels = cell_of_input
@@ -220,11 +225,18 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
     }
     // Coordinate bounds in f32 (no division per point); `floor(v * inv)` is monotone in `v`,
     // so the voxel bounds are the voxels of the coordinate bounds.
-    let (mut mn, mut mx) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    // Plain comparisons, not `f32::min` (whose NaN handling costs instructions): callers
+    // pass finite points only (see `FinitePoints`).
+    debug_assert!(points.iter().flatten().all(|c| c.is_finite()));
+    let (mut mn, mut mx) = (points[0], points[0]);
     for p in points {
         for a in 0..3 {
-            mn[a] = mn[a].min(p[a]);
-            mx[a] = mx[a].max(p[a]);
+            if p[a] < mn[a] {
+                mn[a] = p[a];
+            }
+            if p[a] > mx[a] {
+                mx[a] = p[a];
+            }
         }
     }
     let (mut lo, mut hi) = ([0i64; 3], [0i64; 3]);
@@ -237,17 +249,27 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
         lo[a] = floor_i64(f_lo);
         hi[a] = floor_i64(f_hi);
     }
-    // Fields hold cell - lo + 2 in [2, span + 2], so a step of up to two either way stays
-    // inside its field and key arithmetic never carries between fields.
-    let width = |a: usize| 64 - ((hi[a] - lo[a] + 4) as u64).leading_zeros();
+    // A point's field on axis `a` is `trunc(v * inv - (lo[a] - 2))`. The exact value of the
+    // difference lies in [2, span + 3) (`v * inv` rounded lies in [lo, hi + 1)), so the
+    // rounded one lies in [2, span + 3] and is positive: truncation is the floor and no
+    // `floor` emulation is needed. That is the voxel `floor(v * inv) - lo + 2` up to the
+    // rounding of the subtraction, below 2^31 * 2^-53 = 2.4e-7 of a voxel (spans are below
+    // 2^31 voxels by CELL_LIMIT); with the rounding of `v * inv` (at most 1.2e-7 of a voxel
+    // there) that is well inside the
+    // 1e-6 shrink of the side, so same-voxel points still link and linked points still lie
+    // at most two voxels apart (see above: that is all the partition depends on). Fields
+    // up to span + 3 plus a step of two must stay below 2^width, so no key arithmetic ever
+    // carries between fields.
+    let width = |a: usize| 64 - ((hi[a] - lo[a] + 5) as u64).leading_zeros();
     let (wy, wz) = (width(1), width(2));
     let total = width(0) + wy + wz;
     if total > 62 {
         return None;
     }
     let (sx, sy) = (wy + wz, wz);
+    let off = lo.map(|l| (l - 2) as f64);
     let key_of = |p: &[f32; 3]| -> u64 {
-        let f = |a: usize| (floor_i64(p[a] as f64 * inv) - lo[a] + 2) as u64;
+        let f = |a: usize| (p[a] as f64 * inv - off[a]) as i64 as u64;
         f(0) << sx | f(1) << sy | f(2)
     };
     // Sorted (key, point index) pairs: packed in one u64 when both fit (one array to sort
@@ -330,64 +352,24 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
     let z_mask = (1u64 << wz) - 1;
     let mut ptr = [0usize; 3];
 
-    // Tests one voxel pair (`ra` the current root of `a`'s set) and joins it when some
-    // point pair links; returns the root of `a`'s set afterwards.
-    let try_link = |sets: &mut UnionFind, ra: u32, a: usize, b: usize| -> u32 {
-        let rb = sets.find(b as u32);
-        if ra == rb {
-            return ra;
-        }
-        let (ba, bb) = (&cell_box[a], &cell_box[b]);
-        let bb: [f64; 6] = bb.map(f64::from);
-        let g = sq3(
-            (bb[0] - ba[3] as f64).max(ba[0] as f64 - bb[3]).max(0.0),
-            (bb[1] - ba[4] as f64).max(ba[1] as f64 - bb[4]).max(0.0),
-            (bb[2] - ba[5] as f64).max(ba[2] as f64 - bb[5]).max(0.0),
-        );
-        if g > t_hi {
-            return ra;
-        }
-        let (b0, b1) = (cell_start[b] as usize, cell_start[b + 1] as usize);
-        let pb = &sp[b0..b1];
-        for (ia, p) in sp[cell_start[a] as usize..cell_start[a + 1] as usize]
-            .iter()
-            .enumerate()
-        {
-            let p = p.map(|c| c as f64);
-            let g = sq3(
-                gap(bb[0], bb[3], p[0]),
-                gap(bb[1], bb[4], p[1]),
-                gap(bb[2], bb[5], p[2]),
-            );
-            if g > t_hi {
-                continue;
-            }
-            let linked = if adaptive {
-                let ra_range = sr[cell_start[a] as usize + ia];
-                pb.iter().enumerate().any(|(ib, q)| {
-                    let d2 = sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64);
-                    d2 <= t
-                        || (d2 <= t_hi
-                            && d2.sqrt() <= rule.cutoff_m + rule.per_m * ra_range.max(sr[b0 + ib]))
-                })
-            } else {
-                pb.iter()
-                    .any(|q| sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64) <= t)
-            };
-            if linked {
-                return sets.join_roots(ra, rb);
-            }
-        }
-        ra
+    let walk = Walk {
+        cell_box: &cell_box,
+        cell_start: &cell_start,
+        sp: &sp,
+        sr: &sr,
+        t,
+        t_hi,
+        adaptive,
+        cutoff_m: rule.cutoff_m,
+        per_m: rule.per_m,
     };
-
     for c in 0..n_cells {
         let key = cell_key[c];
         // Only this loop's own joins can change `c`'s root, and `try_link` reports them.
         let mut root = sets.find(c as u32);
         let mut q = c + 1;
         while cell_key[q] <= key + 2 {
-            root = try_link(&mut sets, root, c, q);
+            root = walk.try_link(&mut sets, root, c, q);
             q += 1;
         }
         let z = key & z_mask;
@@ -400,7 +382,7 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
             ptr[j] = p;
             while cell_key[p] <= khi {
                 if (cell_key[p] & z_mask).abs_diff(z) <= 2 {
-                    root = try_link(&mut sets, root, c, p);
+                    root = walk.try_link(&mut sets, root, c, p);
                 }
                 p += 1;
             }
@@ -408,6 +390,80 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
     }
 
     Some((cell_of, sets))
+}
+
+/// What the voxel-pair test of [`link_cells`] reads: a struct with methods rather than a
+/// closure so that the cheap checks inline into both walks and the point loop does not.
+struct Walk<'a> {
+    cell_box: &'a [[f32; 6]],
+    cell_start: &'a [u32],
+    sp: &'a [[f32; 3]],
+    sr: &'a [f64],
+    t: f64,
+    t_hi: f64,
+    adaptive: bool,
+    cutoff_m: f64,
+    per_m: f64,
+}
+
+impl Walk<'_> {
+    /// Tests one voxel pair (`ra` the current root of `a`'s set) and joins it when some
+    /// point pair links; returns the root of `a`'s set afterwards.
+    #[inline(always)]
+    fn try_link(&self, sets: &mut UnionFind, ra: u32, a: usize, b: usize) -> u32 {
+        let rb = sets.find(b as u32);
+        if ra == rb {
+            return ra;
+        }
+        let (ba, bb) = (&self.cell_box[a], &self.cell_box[b]);
+        let bb: [f64; 6] = bb.map(f64::from);
+        let g = sq3(
+            (bb[0] - ba[3] as f64).max(ba[0] as f64 - bb[3]).max(0.0),
+            (bb[1] - ba[4] as f64).max(ba[1] as f64 - bb[4]).max(0.0),
+            (bb[2] - ba[5] as f64).max(ba[2] as f64 - bb[5]).max(0.0),
+        );
+        if g > self.t_hi || !self.points_link(a, b, &bb) {
+            return ra;
+        }
+        sets.join_roots(ra, rb)
+    }
+
+    /// True when some point of voxel `a` links with some point of voxel `b` (box `bb`).
+    #[inline(never)]
+    fn points_link(&self, a: usize, b: usize, bb: &[f64; 6]) -> bool {
+        let (t, t_hi) = (self.t, self.t_hi);
+        let (a0, a1) = (self.cell_start[a] as usize, self.cell_start[a + 1] as usize);
+        let (b0, b1) = (self.cell_start[b] as usize, self.cell_start[b + 1] as usize);
+        let pb = &self.sp[b0..b1];
+        for (ia, p) in self.sp[a0..a1].iter().enumerate() {
+            let p = p.map(|c| c as f64);
+            let g = sq3(
+                gap(bb[0], bb[3], p[0]),
+                gap(bb[1], bb[4], p[1]),
+                gap(bb[2], bb[5], p[2]),
+            );
+            if g > t_hi {
+                continue;
+            }
+            let linked = if self.adaptive {
+                let ra_range = self.sr[a0 + ia];
+                pb.iter().enumerate().any(|(ib, q)| {
+                    let d2 = sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64);
+                    d2 <= t
+                        || (d2 <= t_hi
+                            && d2.sqrt()
+                                <= self.cutoff_m + self.per_m * ra_range.max(self.sr[b0 + ib]))
+                })
+            } else {
+                pb.iter()
+                    .any(|q| sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64) <= t)
+            };
+            if linked {
+                return true;
+            }
+        }
+        false
+    }
 }
 
 #[cfg(test)]
@@ -420,6 +476,22 @@ mod tests {
             let t = squared_threshold(c);
             assert!(t.sqrt() <= c, "{c}");
             assert!(f64::from_bits(t.to_bits() + 1).sqrt() > c, "{c}");
+        }
+    }
+
+    #[test]
+    fn packed_radix_sort_sorts_by_key_bits_and_keeps_index_order() {
+        for (bits, ib) in [(40u32, 13u32), (7, 13), (29, 15), (1, 1)] {
+            let n = 1u64 << (ib - 1).min(12);
+            let mut items: Vec<u64> = (0..n)
+                .map(|i| ((i * 2_654_435_761) % (1 << bits)) << ib | i)
+                .collect();
+            let orig = items.clone();
+            radix_sort_packed(&mut items, ib, bits);
+            // Sorted by (key, index): the key order, and input order among equal keys.
+            let mut expected = orig;
+            expected.sort_unstable();
+            assert_eq!(items, expected, "bits {bits}");
         }
     }
 

@@ -222,16 +222,24 @@ fn drop_interior(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
     if pts.len() < 16 {
         return pts;
     }
-    let pick = |f: &dyn Fn(&[f64; 2], &[f64; 2]) -> std::cmp::Ordering| {
-        *pts.iter().min_by(|a, b| f(a, b)).expect("not empty")
-    };
-    // Counter-clockwise: left, bottom, right, top.
-    let quad = [
-        pick(&|a, b| a[0].total_cmp(&b[0])),
-        pick(&|a, b| a[1].total_cmp(&b[1])),
-        pick(&|a, b| b[0].total_cmp(&a[0])),
-        pick(&|a, b| b[1].total_cmp(&a[1])),
-    ];
+    // Counter-clockwise: left, bottom, right, top; the first extreme point in input order
+    // on ties (strict comparisons), in one pass.
+    let mut quad = [pts[0]; 4];
+    for p in &pts[1..] {
+        use std::cmp::Ordering::{Greater, Less};
+        if p[0].total_cmp(&quad[0][0]) == Less {
+            quad[0] = *p;
+        }
+        if p[1].total_cmp(&quad[1][1]) == Less {
+            quad[1] = *p;
+        }
+        if p[0].total_cmp(&quad[2][0]) == Greater {
+            quad[2] = *p;
+        }
+        if p[1].total_cmp(&quad[3][1]) == Greater {
+            quad[3] = *p;
+        }
+    }
     // A repeated corner gives a zero cross product on its edge, so nothing is dropped
     // against it: strict tests keep every point on or outside an edge.
     pts.retain(|&p| !(0..4).all(|i| cross(quad[i], quad[(i + 1) % 4], p) > 0.0));

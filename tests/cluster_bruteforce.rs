@@ -241,3 +241,50 @@ fn invalid_options_are_errors() {
     assert_eq!(distance_components(&pts, 0.0, 0.0).unwrap(), vec![0, 0, 0]);
     assert!(distance_components(&[], 0.5, 0.0).unwrap().is_empty());
 }
+
+/// Pairs at exactly the cutoff (which link: `<=`), points on and next to voxel faces and
+/// clouds far from the origin, where the voxel assignment's rounding is largest: the grid
+/// must still match the brute force exactly.
+#[test]
+fn boundary_distances_match_brute_force() {
+    for seed in 0..60u64 {
+        let mut rng = ChaCha8Rng::seed_from_u64(7000 + seed);
+        let n = rng.random_range(50..800);
+        let step = [0.25f32, 0.125, 0.5][seed as usize % 3];
+        let origin = match seed % 4 {
+            0 => [0.0f32; 3],
+            1 => [1000.0, -2000.0, 5.0],
+            2 => [-40_000.0, 30_000.0, 0.0],
+            _ => [rng.random_range(-100.0..100.0), 7.0, -3.0],
+        };
+        let mut pts: Vec<[f32; 3]> = (0..n)
+            .map(|_| {
+                // Lattice points (many pairs at exactly k * step), some nudged by one ulp.
+                let mut p = [0f32; 3];
+                for (a, c) in p.iter_mut().enumerate() {
+                    let v = origin[a] + step * rng.random_range(-12i32..12) as f32;
+                    *c = match rng.random_range(0..6) {
+                        0 => f32::from_bits(v.to_bits() + 1),
+                        1 if v != 0.0 => f32::from_bits(v.to_bits() - 1),
+                        _ => v,
+                    };
+                }
+                p
+            })
+            .collect();
+        // Cutoffs that equal some pair's exact f64 distance.
+        let (i, j) = (rng.random_range(0..n), rng.random_range(0..n));
+        pts.push(pts[i]);
+        let cutoffs = [
+            2.0 * step as f64,
+            step as f64,
+            dist(&pts[i], &pts[j]).clamp(0.01, 3.0),
+            (2.0 * (step as f64).powi(2)).sqrt(),
+        ];
+        for cutoff in cutoffs {
+            let expected = brute_force(&pts, |a, b| dist(&pts[a], &pts[b]) <= cutoff);
+            let got = distance_components(&pts, cutoff, 0.0).unwrap();
+            assert_eq!(canonical(&got), expected, "seed {seed}, cutoff {cutoff}");
+        }
+    }
+}

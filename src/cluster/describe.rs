@@ -111,6 +111,40 @@ pub fn describe(returns: &[Return], labels: &[i32]) -> Result<Vec<ClusterInfo>> 
             labels.len()
         )));
     }
+    let max_label = labels.iter().copied().max().unwrap_or(-1);
+    if max_label < 0 {
+        return Ok(Vec::new());
+    }
+    // Dense labels (the clustering numbers its clusters 0..k): a counting sort by label,
+    // stable, so each cluster's members keep input order as the map below keeps them.
+    if max_label as usize <= 2 * returns.len() + 64 {
+        let k = max_label as usize + 1;
+        let mut start = vec![0u32; k + 1];
+        for &l in labels {
+            if l >= 0 {
+                start[l as usize + 1] += 1;
+            }
+        }
+        for i in 0..k {
+            start[i + 1] += start[i];
+        }
+        let mut next = start[..k].to_vec();
+        let mut members: Vec<&Return> = vec![&returns[0]; start[k] as usize];
+        for (r, &l) in returns.iter().zip(labels) {
+            if l >= 0 {
+                let slot = &mut next[l as usize];
+                members[*slot as usize] = r;
+                *slot += 1;
+            }
+        }
+        return Ok((0..k)
+            .filter(|&id| start[id + 1] > start[id])
+            .map(|id| {
+                let group = &members[start[id] as usize..start[id + 1] as usize];
+                summarize(id as i32, group)
+            })
+            .collect());
+    }
     let mut groups: BTreeMap<i32, Vec<&Return>> = BTreeMap::new();
     for (r, &l) in returns.iter().zip(labels) {
         if l >= 0 {
@@ -188,16 +222,24 @@ fn drop_interior(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
     if pts.len() < 16 {
         return pts;
     }
-    let pick = |f: &dyn Fn(&[f64; 2], &[f64; 2]) -> std::cmp::Ordering| {
-        *pts.iter().min_by(|a, b| f(a, b)).expect("not empty")
-    };
-    // Counter-clockwise: left, bottom, right, top.
-    let quad = [
-        pick(&|a, b| a[0].total_cmp(&b[0])),
-        pick(&|a, b| a[1].total_cmp(&b[1])),
-        pick(&|a, b| b[0].total_cmp(&a[0])),
-        pick(&|a, b| b[1].total_cmp(&a[1])),
-    ];
+    // Counter-clockwise: left, bottom, right, top; the first extreme point in input order
+    // on ties (strict comparisons), in one pass.
+    let mut quad = [pts[0]; 4];
+    for p in &pts[1..] {
+        use std::cmp::Ordering::{Greater, Less};
+        if p[0].total_cmp(&quad[0][0]) == Less {
+            quad[0] = *p;
+        }
+        if p[1].total_cmp(&quad[1][1]) == Less {
+            quad[1] = *p;
+        }
+        if p[0].total_cmp(&quad[2][0]) == Greater {
+            quad[2] = *p;
+        }
+        if p[1].total_cmp(&quad[3][1]) == Greater {
+            quad[3] = *p;
+        }
+    }
     // A repeated corner gives a zero cross product on its edge, so nothing is dropped
     // against it: strict tests keep every point on or outside an edge.
     pts.retain(|&p| !(0..4).all(|i| cross(quad[i], quad[(i + 1) % 4], p) > 0.0));
@@ -385,6 +427,50 @@ mod tests {
         assert_eq!(i.lasers, vec![0, 3, 7, 9]);
         assert!((i.mean_intensity - 25.0).abs() < 1e-12);
         assert!((i.extent[2] - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn dense_and_sparse_label_grouping_agree() {
+        // The counting sort (dense labels) and the map (sparse labels) must group and order
+        // members identically: sums are order-sensitive in floating point.
+        let mut state = 11u64;
+        let mut next = |m: u64| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) % m
+        };
+        for _ in 0..20 {
+            let n = 1 + next(400) as usize;
+            let k = 1 + next(30) as i32;
+            let rs: Vec<Return> = (0..n)
+                .map(|_| {
+                    let c = |v: u64| v as f32 * 0.37 - 20.0;
+                    ret(
+                        c(next(100)),
+                        c(next(100)),
+                        c(next(10)),
+                        next(256) as u8,
+                        next(40) as u8,
+                    )
+                })
+                .collect();
+            let labels: Vec<i32> = (0..n).map(|_| next(k as u64 + 2) as i32 - 2).collect();
+            let dense = describe(&rs, &labels).unwrap();
+            // One extra point with a huge label forces the map path.
+            let mut rs2 = rs.clone();
+            rs2.push(ret(1.0, 2.0, 3.0, 4, 5));
+            let mut labels2 = labels.clone();
+            labels2.push(i32::MAX);
+            let mut sparse = describe(&rs2, &labels2).unwrap();
+            assert_eq!(sparse.pop().map(|c| c.id), Some(i32::MAX));
+            assert_eq!(dense, sparse);
+            let ids: Vec<i32> = dense.iter().map(|c| c.id).collect();
+            let mut expected: Vec<i32> = labels.iter().copied().filter(|&l| l >= 0).collect();
+            expected.sort_unstable();
+            expected.dedup();
+            assert_eq!(ids, expected);
+        }
     }
 
     #[test]

@@ -51,16 +51,16 @@ fn gap(lo: f64, hi: f64, v: f64) -> f64 {
     (lo - v).max(v - hi).max(0.0)
 }
 
-/// Voxel coordinate `floor(v / side)`, or `None` beyond [`CELL_LIMIT`] or for NaN. Written
-/// out because `f64::floor` is a libm call on baseline x86-64.
+/// `floor(f)` for `|f| <= CELL_LIMIT`, written out because `f64::floor` is a libm call on
+/// baseline x86-64.
 #[inline(always)]
-fn cell_of_coord(v: f32, side: f64) -> Option<i64> {
-    let f = v as f64 / side;
-    if f.is_nan() || f.abs() > CELL_LIMIT {
-        return None;
-    }
+fn floor_i64(f: f64) -> i64 {
     let t = f as i64;
-    Some(if (t as f64) > f { t - 1 } else { t })
+    if (t as f64) > f {
+        t - 1
+    } else {
+        t
+    }
 }
 
 /// Stable LSD radix sort of `keys` (only the low `bits` bits set) carrying `vals` along.
@@ -98,6 +98,46 @@ fn radix_sort(keys: &mut Vec<u64>, vals: &mut Vec<u32>, bits: u32) {
     }
 }
 
+/// Stable LSD radix sort of `items` by their bits `from..from + bits` (the low bits carry
+/// a point index, already ascending, so equal keys keep input order). All digit
+/// histograms come from one read pass, and the digit width is spread evenly over the
+/// passes (29 key bits: three passes of 10 bits, not 11 + 11 + 7).
+fn radix_sort_packed(items: &mut Vec<u64>, from: u32, bits: u32) {
+    const MAX_PASSES: usize = 6;
+    let n = items.len();
+    let passes = bits.div_ceil(RADIX_BITS).max(1) as usize;
+    debug_assert!(passes <= MAX_PASSES);
+    let digit = bits.div_ceil(passes as u32);
+    let buckets = 1usize << digit;
+    let mask = (buckets - 1) as u64;
+    let mut hist = vec![0u32; buckets * passes];
+    for &k in items.iter() {
+        for (p, h) in hist.chunks_exact_mut(buckets).enumerate() {
+            h[((k >> (from + p as u32 * digit)) & mask) as usize] += 1;
+        }
+    }
+    let mut tmp = vec![0u64; n];
+    for (p, h) in hist.chunks_exact_mut(buckets).enumerate() {
+        // A digit shared by every item leaves the order unchanged.
+        if h.contains(&(n as u32)) {
+            continue;
+        }
+        let mut sum = 0;
+        for c in h.iter_mut() {
+            let v = *c;
+            *c = sum;
+            sum += v;
+        }
+        let shift = from + p as u32 * digit;
+        for &k in items.iter() {
+            let d = ((k >> shift) & mask) as usize;
+            tmp[h[d] as usize] = k;
+            h[d] += 1;
+        }
+        std::mem::swap(items, &mut tmp);
+    }
+}
+
 /// Component number per input point (`n` inputs, finite ones in `fp`), numbered 0.. in order
 /// of each component's smallest input index; non-finite points are singletons. `None` when
 /// the grid does not apply (zero or infinite cutoff, coordinates too far out for the packed
@@ -116,10 +156,15 @@ pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec
     let (cell_of, mut sets) = link_cells(&fp.points, &rule)?;
     // Labels in input order, numbered by each component's smallest input index.
     let n_cells = sets.len();
-    let mut cell_of_input = vec![u32::MAX; n];
-    for (f, &i) in fp.index.iter().enumerate() {
-        cell_of_input[i as usize] = cell_of[f];
-    }
+    let cell_of_input = if fp.is_identity() {
+        cell_of
+    } else {
+        let mut by_input = vec![u32::MAX; n];
+        for (f, &c) in cell_of.iter().enumerate() {
+            by_input[fp.global(f) as usize] = c;
+        }
+        by_input
+    };
     let mut root_label = vec![u32::MAX; n_cells];
     let mut next = 0u32;
     let labels = cell_of_input
@@ -157,9 +202,15 @@ pub(crate) struct Rule<'a> {
 }
 
 /// Voxel of each point and the union-find over voxels after linking, for the points of one
-/// pass. The voxel side is `rule.lo / sqrt(3)` (every same-voxel pair links); `None` when
-/// the grid does not apply (zero or infinite cutoff, `rule.hi` beyond two voxel sides,
-/// coordinates too far out for the packed keys).
+/// pass (all finite). The voxel side is `rule.lo / sqrt(3)` (every same-voxel pair links);
+/// `None` when the grid does not apply (zero or infinite cutoff, `rule.hi` beyond two voxel
+/// sides, coordinates too far out for the packed keys).
+///
+/// The result (which voxels end up in one set, hence the partition of the points) does not
+/// depend on how each point is assigned to a voxel, as long as same-voxel points are closer
+/// than `rule.lo` and linked points lie at most two voxels apart per axis: so the voxel
+/// coordinate is `floor(v * (1 / side))`, a multiplication, whose relative rounding error
+/// (~1e-16) is far inside the 1e-6 shrink of the side.
 pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, UnionFind)> {
     // The 1e-6 shrink keeps same-voxel pairs below the cutoff despite rounding in the voxel
     // assignment and in the distance itself (both ~1e-16 relative).
@@ -167,67 +218,114 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
     if !(side > 0.0 && side.is_finite()) || rule.hi > 2.0 * side {
         return None;
     }
+    let inv = 1.0 / side;
     let m = points.len();
     if m == 0 {
         return Some((Vec::new(), UnionFind::new(0)));
     }
-    // Two cheap passes (bounds, then keys) instead of storing every voxel triple.
-    let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
+    // Coordinate bounds in f32 (no division per point); `floor(v * inv)` is monotone in `v`,
+    // so the voxel bounds are the voxels of the coordinate bounds.
+    // Plain comparisons, not `f32::min` (whose NaN handling costs instructions): callers
+    // pass finite points only (see `FinitePoints`).
+    debug_assert!(points.iter().flatten().all(|c| c.is_finite()));
+    let (mut mn, mut mx) = (points[0], points[0]);
     for p in points {
         for a in 0..3 {
-            let c = cell_of_coord(p[a], side)?;
-            lo[a] = lo[a].min(c);
-            hi[a] = hi[a].max(c);
+            if p[a] < mn[a] {
+                mn[a] = p[a];
+            }
+            if p[a] > mx[a] {
+                mx[a] = p[a];
+            }
         }
     }
-    // Fields hold cell - lo + 2 in [2, span + 2], so a step of up to two either way stays
-    // inside its field and key arithmetic never carries between fields.
-    let width = |a: usize| 64 - ((hi[a] - lo[a] + 4) as u64).leading_zeros();
+    let (mut lo, mut hi) = ([0i64; 3], [0i64; 3]);
+    for a in 0..3 {
+        let (f_lo, f_hi) = (mn[a] as f64 * inv, mx[a] as f64 * inv);
+        // Also rejects NaN bounds (only from non-finite points, which callers never pass).
+        if !(f_lo.abs() <= CELL_LIMIT && f_hi.abs() <= CELL_LIMIT) {
+            return None;
+        }
+        lo[a] = floor_i64(f_lo);
+        hi[a] = floor_i64(f_hi);
+    }
+    // A point's field on axis `a` is `trunc(v * inv - (lo[a] - 2))`. The exact value of the
+    // difference lies in [2, span + 3) (`v * inv` rounded lies in [lo, hi + 1)), so the
+    // rounded one lies in [2, span + 3] and is positive: truncation is the floor and no
+    // `floor` emulation is needed. That is the voxel `floor(v * inv) - lo + 2` up to the
+    // rounding of the subtraction, below 2^31 * 2^-53 = 2.4e-7 of a voxel (spans are below
+    // 2^31 voxels by CELL_LIMIT); with the rounding of `v * inv` (at most 1.2e-7 of a voxel
+    // there) that is well inside the
+    // 1e-6 shrink of the side, so same-voxel points still link and linked points still lie
+    // at most two voxels apart (see above: that is all the partition depends on). Fields
+    // up to span + 3 plus a step of two must stay below 2^width, so no key arithmetic ever
+    // carries between fields.
+    let width = |a: usize| 64 - ((hi[a] - lo[a] + 5) as u64).leading_zeros();
     let (wy, wz) = (width(1), width(2));
     let total = width(0) + wy + wz;
     if total > 62 {
         return None;
     }
     let (sx, sy) = (wy + wz, wz);
-    let field = |p: &[f32; 3], a: usize| {
-        (cell_of_coord(p[a], side).expect("checked in the first pass") - lo[a] + 2) as u64
+    let off = lo.map(|l| (l - 2) as f64);
+    let key_of = |p: &[f32; 3]| -> u64 {
+        let f = |a: usize| (p[a] as f64 * inv - off[a]) as i64 as u64;
+        f(0) << sx | f(1) << sy | f(2)
     };
-    let mut keys: Vec<u64> = points
-        .iter()
-        .map(|p| field(p, 0) << sx | field(p, 1) << sy | field(p, 2))
-        .collect();
-    let mut order: Vec<u32> = (0..m as u32).collect();
-    radix_sort(&mut keys, &mut order, total);
+    // Sorted (key, point index) pairs: packed in one u64 when both fit (one array to sort
+    // and scatter instead of two), else sorted as two arrays.
+    let ib = 32 - (m as u32).leading_zeros();
+    let sorted: Vec<(u64, u32)> = if total + ib <= 64 {
+        let idx_mask = (1u64 << ib) - 1;
+        let mut items: Vec<u64> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| key_of(p) << ib | i as u64)
+            .collect();
+        radix_sort_packed(&mut items, ib, total);
+        items
+            .iter()
+            .map(|&k| (k >> ib, (k & idx_mask) as u32))
+            .collect()
+    } else {
+        let mut keys: Vec<u64> = points.iter().map(key_of).collect();
+        let mut order: Vec<u32> = (0..m as u32).collect();
+        radix_sort(&mut keys, &mut order, total);
+        keys.into_iter().zip(order).collect()
+    };
 
-    // Voxels as runs of the sorted keys; points copied in voxel order for locality.
+    // Voxels as runs of the sorted keys; points copied in voxel order for locality. Boxes
+    // are kept in f32 (the coordinates are f32, so min and max are exact) and widened to
+    // f64 where they are compared.
     let mut cell_key: Vec<u64> = Vec::new();
     let mut cell_start: Vec<u32> = Vec::new();
-    let mut cell_box: Vec<[f64; 6]> = Vec::new();
+    let mut cell_box: Vec<[f32; 6]> = Vec::new();
     let mut sp: Vec<[f32; 3]> = Vec::with_capacity(m);
     let mut cell_of: Vec<u32> = vec![0; m];
     // Range of each point in voxel order (adaptive passes only).
     let mut sr: Vec<f64> = Vec::with_capacity(if rule.ranges.is_some() { m } else { 0 });
-    for (k, (&key, &i)) in keys.iter().zip(order.iter()).enumerate() {
-        let pf = points[i as usize];
+    let mut prev_key = u64::MAX;
+    for (k, &(key, i)) in sorted.iter().enumerate() {
+        let p = points[i as usize];
         if let Some(r) = rule.ranges {
             sr.push(r[i as usize]);
         }
-        let p = pf.map(|c| c as f64);
-        if k == 0 || keys[k - 1] != key {
+        if key != prev_key {
+            prev_key = key;
             cell_key.push(key);
             cell_start.push(k as u32);
             cell_box.push([p[0], p[1], p[2], p[0], p[1], p[2]]);
-        }
-        let b = cell_box.last_mut().expect("pushed above");
-        for a in 0..3 {
-            b[a] = b[a].min(p[a]);
-            b[a + 3] = b[a + 3].max(p[a]);
+        } else {
+            let b = cell_box.last_mut().expect("pushed above");
+            for a in 0..3 {
+                b[a] = b[a].min(p[a]);
+                b[a + 3] = b[a + 3].max(p[a]);
+            }
         }
         cell_of[i as usize] = (cell_key.len() - 1) as u32;
-        sp.push(pf);
+        sp.push(p);
     }
-    drop(keys);
-    drop(order);
+    drop(sorted);
     let n_cells = cell_key.len();
     cell_start.push(m as u32);
     // Sentinel above every neighbour key (keys use at most 62 bits): walks need no bounds test.
@@ -252,62 +350,26 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
         (pack(2, -2, -2), pack(2, 2, 2)),
     ];
     let z_mask = (1u64 << wz) - 1;
-    let mut ptr = vec![0usize; columns.len()];
+    let mut ptr = [0usize; 3];
 
-    // Tests one voxel pair and joins it when some point pair links.
-    let try_link = |sets: &mut UnionFind, a: usize, b: usize| {
-        let (ra, rb) = (sets.find(a as u32), sets.find(b as u32));
-        if ra == rb {
-            return;
-        }
-        let (ba, bb) = (&cell_box[a], &cell_box[b]);
-        let g = sq3(
-            (bb[0] - ba[3]).max(ba[0] - bb[3]).max(0.0),
-            (bb[1] - ba[4]).max(ba[1] - bb[4]).max(0.0),
-            (bb[2] - ba[5]).max(ba[2] - bb[5]).max(0.0),
-        );
-        if g > t_hi {
-            return;
-        }
-        let (b0, b1) = (cell_start[b] as usize, cell_start[b + 1] as usize);
-        let pb = &sp[b0..b1];
-        for (ia, p) in sp[cell_start[a] as usize..cell_start[a + 1] as usize]
-            .iter()
-            .enumerate()
-        {
-            let p = p.map(|c| c as f64);
-            let g = sq3(
-                gap(bb[0], bb[3], p[0]),
-                gap(bb[1], bb[4], p[1]),
-                gap(bb[2], bb[5], p[2]),
-            );
-            if g > t_hi {
-                continue;
-            }
-            let linked = if adaptive {
-                let ra_range = sr[cell_start[a] as usize + ia];
-                pb.iter().enumerate().any(|(ib, q)| {
-                    let d2 = sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64);
-                    d2 <= t
-                        || (d2 <= t_hi
-                            && d2.sqrt() <= rule.cutoff_m + rule.per_m * ra_range.max(sr[b0 + ib]))
-                })
-            } else {
-                pb.iter()
-                    .any(|q| sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64) <= t)
-            };
-            if linked {
-                sets.join_roots(ra, rb);
-                return;
-            }
-        }
+    let walk = Walk {
+        cell_box: &cell_box,
+        cell_start: &cell_start,
+        sp: &sp,
+        sr: &sr,
+        t,
+        t_hi,
+        adaptive,
+        cutoff_m: rule.cutoff_m,
+        per_m: rule.per_m,
     };
-
     for c in 0..n_cells {
         let key = cell_key[c];
+        // Only this loop's own joins can change `c`'s root, and `try_link` reports them.
+        let mut root = sets.find(c as u32);
         let mut q = c + 1;
         while cell_key[q] <= key + 2 {
-            try_link(&mut sets, c, q);
+            root = walk.try_link(&mut sets, root, c, q);
             q += 1;
         }
         let z = key & z_mask;
@@ -320,7 +382,7 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
             ptr[j] = p;
             while cell_key[p] <= khi {
                 if (cell_key[p] & z_mask).abs_diff(z) <= 2 {
-                    try_link(&mut sets, c, p);
+                    root = walk.try_link(&mut sets, root, c, p);
                 }
                 p += 1;
             }
@@ -328,6 +390,80 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
     }
 
     Some((cell_of, sets))
+}
+
+/// What the voxel-pair test of [`link_cells`] reads: a struct with methods rather than a
+/// closure so that the cheap checks inline into both walks and the point loop does not.
+struct Walk<'a> {
+    cell_box: &'a [[f32; 6]],
+    cell_start: &'a [u32],
+    sp: &'a [[f32; 3]],
+    sr: &'a [f64],
+    t: f64,
+    t_hi: f64,
+    adaptive: bool,
+    cutoff_m: f64,
+    per_m: f64,
+}
+
+impl Walk<'_> {
+    /// Tests one voxel pair (`ra` the current root of `a`'s set) and joins it when some
+    /// point pair links; returns the root of `a`'s set afterwards.
+    #[inline(always)]
+    fn try_link(&self, sets: &mut UnionFind, ra: u32, a: usize, b: usize) -> u32 {
+        let rb = sets.find(b as u32);
+        if ra == rb {
+            return ra;
+        }
+        let (ba, bb) = (&self.cell_box[a], &self.cell_box[b]);
+        let bb: [f64; 6] = bb.map(f64::from);
+        let g = sq3(
+            (bb[0] - ba[3] as f64).max(ba[0] as f64 - bb[3]).max(0.0),
+            (bb[1] - ba[4] as f64).max(ba[1] as f64 - bb[4]).max(0.0),
+            (bb[2] - ba[5] as f64).max(ba[2] as f64 - bb[5]).max(0.0),
+        );
+        if g > self.t_hi || !self.points_link(a, b, &bb) {
+            return ra;
+        }
+        sets.join_roots(ra, rb)
+    }
+
+    /// True when some point of voxel `a` links with some point of voxel `b` (box `bb`).
+    #[inline(never)]
+    fn points_link(&self, a: usize, b: usize, bb: &[f64; 6]) -> bool {
+        let (t, t_hi) = (self.t, self.t_hi);
+        let (a0, a1) = (self.cell_start[a] as usize, self.cell_start[a + 1] as usize);
+        let (b0, b1) = (self.cell_start[b] as usize, self.cell_start[b + 1] as usize);
+        let pb = &self.sp[b0..b1];
+        for (ia, p) in self.sp[a0..a1].iter().enumerate() {
+            let p = p.map(|c| c as f64);
+            let g = sq3(
+                gap(bb[0], bb[3], p[0]),
+                gap(bb[1], bb[4], p[1]),
+                gap(bb[2], bb[5], p[2]),
+            );
+            if g > t_hi {
+                continue;
+            }
+            let linked = if self.adaptive {
+                let ra_range = self.sr[a0 + ia];
+                pb.iter().enumerate().any(|(ib, q)| {
+                    let d2 = sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64);
+                    d2 <= t
+                        || (d2 <= t_hi
+                            && d2.sqrt()
+                                <= self.cutoff_m + self.per_m * ra_range.max(self.sr[b0 + ib]))
+                })
+            } else {
+                pb.iter()
+                    .any(|q| sq3(p[0] - q[0] as f64, p[1] - q[1] as f64, p[2] - q[2] as f64) <= t)
+            };
+            if linked {
+                return true;
+            }
+        }
+        false
+    }
 }
 
 #[cfg(test)]
@@ -340,6 +476,22 @@ mod tests {
             let t = squared_threshold(c);
             assert!(t.sqrt() <= c, "{c}");
             assert!(f64::from_bits(t.to_bits() + 1).sqrt() > c, "{c}");
+        }
+    }
+
+    #[test]
+    fn packed_radix_sort_sorts_by_key_bits_and_keeps_index_order() {
+        for (bits, ib) in [(40u32, 13u32), (7, 13), (29, 15), (1, 1)] {
+            let n = 1u64 << (ib - 1).min(12);
+            let mut items: Vec<u64> = (0..n)
+                .map(|i| ((i * 2_654_435_761) % (1 << bits)) << ib | i)
+                .collect();
+            let orig = items.clone();
+            radix_sort_packed(&mut items, ib, bits);
+            // Sorted by (key, index): the key order, and input order among equal keys.
+            let mut expected = orig;
+            expected.sort_unstable();
+            assert_eq!(items, expected, "bits {bits}");
         }
     }
 

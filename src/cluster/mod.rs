@@ -33,6 +33,7 @@ pub use tree::{cut_tree, inconsistent, linkage, write_linkage_csv, TreeCut};
 use crate::error::{Error, Result};
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
 use kiddo::SquaredEuclidean;
+use std::borrow::Cow;
 
 /// Relative enlargement of the `f32` search radius, so the tree never misses a candidate.
 const SEARCH_MARGIN: f64 = 1e-5;
@@ -132,14 +133,15 @@ impl UnionFind {
         true
     }
 
-    /// Joins two distinct roots (union by size).
+    /// Joins two distinct roots (union by size); returns the root of the joined set.
     #[inline]
-    pub(crate) fn join_roots(&mut self, mut ra: u32, mut rb: u32) {
+    pub(crate) fn join_roots(&mut self, mut ra: u32, mut rb: u32) -> u32 {
         if self.size[ra as usize] < self.size[rb as usize] {
             std::mem::swap(&mut ra, &mut rb);
         }
         self.parent[rb as usize] = ra;
         self.size[ra as usize] += self.size[rb as usize];
+        ra
     }
 
     /// Number of elements.
@@ -181,15 +183,16 @@ pub fn point_range(a: &[f32; 3]) -> f64 {
 }
 
 /// Finite points and their original indices (the tree must not see NaN or infinity).
-pub(crate) struct FinitePoints {
-    /// Finite points in input order.
-    pub(crate) points: Vec<[f32; 3]>,
-    /// Original index of each finite point.
-    pub(crate) index: Vec<u32>,
+pub(crate) struct FinitePoints<'a> {
+    /// Finite points in input order (the input itself when every point is finite).
+    pub(crate) points: Cow<'a, [[f32; 3]]>,
+    /// Original index of each finite point; `None` when every point is finite (identity),
+    /// which spares copying the input, the common case.
+    index: Option<Vec<u32>>,
 }
 
-impl FinitePoints {
-    pub(crate) fn new(points: &[[f32; 3]]) -> Result<Self> {
+impl<'a> FinitePoints<'a> {
+    pub(crate) fn new(points: &'a [[f32; 3]]) -> Result<Self> {
         if points.len() >= u32::MAX as usize {
             return Err(Error::Invalid(format!(
                 "clustering: {} points is more than the {} supported",
@@ -197,17 +200,39 @@ impl FinitePoints {
                 u32::MAX - 1
             )));
         }
-        let mut out = Self {
-            points: Vec::with_capacity(points.len()),
-            index: Vec::with_capacity(points.len()),
-        };
+        let finite = |p: &[f32; 3]| p.iter().all(|c| c.is_finite());
+        if points.iter().all(finite) {
+            return Ok(Self {
+                points: Cow::Borrowed(points),
+                index: None,
+            });
+        }
+        let mut kept = Vec::with_capacity(points.len());
+        let mut index = Vec::with_capacity(points.len());
         for (i, p) in points.iter().enumerate() {
-            if p.iter().all(|c| c.is_finite()) {
-                out.points.push(*p);
-                out.index.push(i as u32);
+            if finite(p) {
+                kept.push(*p);
+                index.push(i as u32);
             }
         }
-        Ok(out)
+        Ok(Self {
+            points: Cow::Owned(kept),
+            index: Some(index),
+        })
+    }
+
+    /// Original index of finite point `f`.
+    #[inline]
+    pub(crate) fn global(&self, f: usize) -> u32 {
+        match &self.index {
+            None => f as u32,
+            Some(index) => index[f],
+        }
+    }
+
+    /// True when every input point is finite (point `f` is input point `f`).
+    pub(crate) fn is_identity(&self) -> bool {
+        self.index.is_none()
     }
 
     /// k-d tree over the finite points, items are positions in `self.points`.
@@ -257,13 +282,13 @@ pub fn distance_components(
             // Each pair is examined once, from its lower index.
             let r2 = search_radius_sq(cutoff_m);
             for (i, p) in pts.iter().enumerate() {
-                let gi = fp.index[i];
+                let gi = fp.global(i);
                 for nb in tree.within_unsorted::<SquaredEuclidean>(p, r2) {
                     let j = nb.item as usize;
                     if j <= i {
                         continue;
                     }
-                    let gj = fp.index[j];
+                    let gj = fp.global(j);
                     if uf.find(gi) == uf.find(gj) {
                         continue;
                     }
@@ -281,13 +306,13 @@ pub fn distance_components(
             for (i, p) in pts.iter().enumerate() {
                 let cut = cutoff_m + cutoff_per_m * ranges[i];
                 let r2 = search_radius_sq(cut);
-                let gi = fp.index[i];
+                let gi = fp.global(i);
                 for nb in tree.within_unsorted::<SquaredEuclidean>(p, r2) {
                     let j = nb.item as usize;
                     if !key_less(j, i) {
                         continue;
                     }
-                    let gj = fp.index[j];
+                    let gj = fp.global(j);
                     if uf.find(gi) == uf.find(gj) {
                         continue;
                     }
@@ -369,7 +394,7 @@ fn adaptive_shells(fp: &FinitePoints, n: usize, cutoff_m: f64, per_m: f64) -> Op
             // Fold the pass's voxel sets into the point union-find.
             let mut first = vec![u32::MAX; sets.len()];
             for (k, &c) in cell_of.iter().enumerate() {
-                let g = fp.index[order[from + k] as usize];
+                let g = fp.global(order[from + k] as usize);
                 let root = sets.find(c) as usize;
                 if first[root] == u32::MAX {
                     first[root] = g;
@@ -391,7 +416,11 @@ fn adaptive_shells(fp: &FinitePoints, n: usize, cutoff_m: f64, per_m: f64) -> Op
 /// Clusters with fewer than `min_points` points become noise (-1); the rest are numbered
 /// 0..k in order of their smallest point index.
 pub fn apply_min_points(partition: &[u32], min_points: usize) -> Clustering {
-    let n_parts = partition.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
+    let n_parts = partition
+        .iter()
+        .copied()
+        .max()
+        .map_or(0, |m| m as usize + 1);
     let mut counts = vec![0usize; n_parts];
     for &c in partition {
         counts[c as usize] += 1;

@@ -125,7 +125,7 @@ pub fn linkage(points: &[[f32; 3]], max_edge_m: f64) -> Result<Vec<[f64; 4]>> {
             }
             let d = point_distance(p, &fp.points[j]);
             if d <= max_edge_m {
-                edges.push((d, fp.index[i], fp.index[j]));
+                edges.push((d, fp.global(i), fp.global(j)));
             }
         }
     }
@@ -160,7 +160,7 @@ fn prim_edges(fp: &FinitePoints) -> Vec<(u32, u32, f64)> {
                 current = best[i];
             }
         }
-        rows.push((fp.index[x], fp.index[y], current));
+        rows.push((fp.global(x), fp.global(y), current));
         x = y;
     }
     rows.sort_by(|a, b| a.2.total_cmp(&b.2));

@@ -105,8 +105,12 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         }
     }
 
-    // Column-major cells (col * rows + row) keep a column contiguous for the angle pass.
-    let cells = rows * cols;
+    // Column-major cells (col * stride + row) keep a column contiguous for the link scans;
+    // the power-of-two stride makes a cell's row a mask, not a division (rows past `rows`
+    // stay empty).
+    let stride = rows.next_power_of_two();
+    let row_mask = stride - 1;
+    let cells = stride * cols;
     let mut rep = vec![NONE; cells];
     let mut cell_of = vec![NONE; n];
     for (i, r) in returns.iter().enumerate() {
@@ -120,8 +124,13 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         let x = (f64::from(r.azimuth) - phase[ring]) / width + 0.5;
         let t = x as i64;
         let bin = if (t as f64) > x { t - 1 } else { t };
-        let col = bin.rem_euclid(cols as i64) as usize;
-        let cell = col * rows + ring;
+        // Almost every bin is already in range: skip the integer division then.
+        let col = if (0..cols as i64).contains(&bin) {
+            bin as usize
+        } else {
+            bin.rem_euclid(cols as i64) as usize
+        };
+        let cell = col * stride + ring;
         cell_of[i] = cell as u32;
         let cur = rep[cell];
         if cur == NONE || r.range < returns[cur as usize].range {
@@ -129,39 +138,41 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         }
     }
 
-    // Horizontal distance and height of each cell's return, gathered once.
-    let mut dz = vec![(0.0f32, 0.0f32); cells];
-    for (cell, &i) in rep.iter().enumerate() {
-        if i != NONE {
-            let r = &returns[i as usize];
-            dz[cell] = ((r.x * r.x + r.y * r.y).sqrt(), r.z);
-        }
-    }
+    // Horizontal distance and height of a cell's return, read when its angle is computed
+    // (only cells next to the ground are): gathering them for every cell cost more.
+    let dz = |cell: usize| {
+        let r = &returns[rep[cell] as usize];
+        ((r.x * r.x + r.y * r.y).sqrt(), r.z)
+    };
     let slope = |a: usize, b: usize| {
-        let ((da, za), (db, zb)) = (dz[a], dz[b]);
+        let ((da, za), (db, zb)) = (dz(a), dz(b));
         (zb - za).abs().atan2((db - da).abs()).to_degrees()
     };
 
-    // Bridged vertical links; the angles are computed when the growth first reads them.
-    let mut up = vec![NONE; cells];
-    let mut down = vec![NONE; cells];
-    for col in 0..cols {
-        let base = col * rows;
-        let mut prev: Option<usize> = None;
-        for row in 0..rows {
-            let cell = base + row;
-            if rep[cell] == NONE {
-                continue;
-            }
-            if let Some(p) = prev {
-                if row - p - 1 <= MAX_HOLE_ROWS {
-                    up[base + p] = cell as u32;
-                    down[cell] = (base + p) as u32;
-                }
-            }
-            prev = Some(row);
+    // Bridged vertical links, found on demand by scanning the column (contiguous in `rep`):
+    // the next valid cell above (below) a valid cell at most `MAX_HOLE_ROWS` empty rows
+    // away; `NONE` for empty cells and at the column ends.
+    let up = |cell: usize| -> u32 {
+        if rep[cell] == NONE {
+            return NONE;
         }
-    }
+        let row = cell & row_mask;
+        let top = (row + MAX_HOLE_ROWS + 2).min(rows);
+        (cell + 1..cell - row + top)
+            .find(|&c| rep[c] != NONE)
+            .map_or(NONE, |c| c as u32)
+    };
+    let down = |cell: usize| -> u32 {
+        if rep[cell] == NONE {
+            return NONE;
+        }
+        let row = cell & row_mask;
+        let bottom = row.saturating_sub(MAX_HOLE_ROWS + 1);
+        (cell - row + bottom..cell)
+            .rev()
+            .find(|&c| rep[c] != NONE)
+            .map_or(NONE, |c| c as u32)
+    };
     // A cell's angle, from its upward link, else its downward one; NaN without either
     // (empty cells have neither). Computed on first use and cached: the growth reads only
     // the cells next to the ground, and `atan2` was most of this function's time. Angles
@@ -173,12 +184,14 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         if cached != UNKNOWN {
             return cached;
         }
-        let a = if up[cell] != NONE {
-            slope(cell, up[cell] as usize)
-        } else if down[cell] != NONE {
-            slope(down[cell] as usize, cell)
+        let u = up(cell);
+        let a = if u != NONE {
+            slope(cell, u as usize)
         } else {
-            f32::NAN
+            match down(cell) {
+                NONE => f32::NAN,
+                d => slope(d as usize, cell),
+            }
         };
         angle[cell] = a;
         a
@@ -190,9 +203,9 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
     let mut ground = vec![false; cells];
     // A stack, not a queue: the grown set does not depend on the visiting order.
     let mut stack: Vec<u32> = Vec::new();
-    let wrap = (cols - 1) * rows;
+    let wrap = (cols - 1) * stride;
     for col in 0..cols {
-        let base = col * rows;
+        let base = col * stride;
         let Some(lowest) = (base..base + rows).find(|&c| rep[c] != NONE) else {
             continue;
         };
@@ -206,10 +219,14 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
         while let Some(cur) = stack.pop() {
             let cur = cur as usize;
             // Same row in the adjacent columns, wrapping around in azimuth.
-            let left = if cur >= rows { cur - rows } else { cur + wrap };
-            let right = if cur < wrap { cur + rows } else { cur - wrap };
+            let left = if cur >= stride {
+                cur - stride
+            } else {
+                cur + wrap
+            };
+            let right = if cur < wrap { cur + stride } else { cur - wrap };
             let a = angle_of(cur);
-            for nb in [up[cur], down[cur], left as u32, right as u32] {
+            for nb in [up(cur), down(cur), left as u32, right as u32] {
                 if nb == NONE || ground[nb as usize] {
                     continue;
                 }

@@ -123,6 +123,7 @@ pub fn main() -> i32 {
     crate::signals::install();
     let global = Global { quiet: cli.quiet };
     if let Some(n) = cli.threads {
+        crate::options::set_worker_threads(usize::from(n));
         if let Err(e) = rayon::ThreadPoolBuilder::new()
             .num_threads(usize::from(n))
             .build_global()

@@ -174,6 +174,29 @@ pub fn parse_range(flag: &str, text: &str) -> Result<RangeInclusive<u32>> {
     Ok(range)
 }
 
+/// Worker threads set by `--threads`, if given (see [`worker_threads`]).
+static THREADS: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+
+/// Records `--threads N` for [`worker_threads`]; the first call wins.
+pub fn set_worker_threads(n: usize) {
+    let _ = THREADS.set(n.max(1));
+}
+
+/// Worker threads to use: `--threads`, else `RAYON_NUM_THREADS` (when a positive number),
+/// else one per core, as rayon decides. Unlike `rayon::current_num_threads` it does not
+/// start rayon's pool, whose idle threads would spin beside the streaming workers of
+/// `run` and `convert`, which use none of it.
+pub fn worker_threads() -> usize {
+    if let Some(&n) = THREADS.get() {
+        return n;
+    }
+    std::env::var("RAYON_NUM_THREADS")
+        .ok()
+        .and_then(|v| v.trim().parse::<usize>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -561,7 +561,7 @@ pub(super) fn frame_outputs(
 }
 
 /// Runs `work` on every frame in `frames` as a bounded pipeline: the calling thread
-/// decodes frames and hands them to `rayon::current_num_threads()` workers, and hands
+/// decodes frames and hands them to `options::worker_threads()` workers, and hands
 /// each result to `done` (with the reader, to recycle buffers) in frame order as soon as every earlier frame's is in. Decoding,
 /// processing (with each frame's own files) and the ordered report append overlap, with
 /// no barrier between groups of frames: a slow frame holds back only the report append,
@@ -579,7 +579,7 @@ pub(crate) fn stream_frames<T: Send>(
     use std::panic::AssertUnwindSafe;
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::sync::{mpsc, Mutex};
-    let workers = rayon::current_num_threads().max(1);
+    let workers = crate::options::worker_threads();
     let window = 2 * workers + 1;
     let (frame_tx, frame_rx) = mpsc::sync_channel::<(usize, Frame)>(workers);
     let frame_rx = Mutex::new(frame_rx);

@@ -53,6 +53,21 @@ fn bin_upper_nm(bin: usize) -> u64 {
     u64::MAX
 }
 
+/// `x.round() as i64` (half away from zero) without the libm `round` call, which the
+/// per-return loop of [`NoiseSummary::from_frame`] paid for every kept return: below
+/// 2^52 the truncation `t` and the fraction `x - t` are exact, so the fraction decides
+/// the rounding exactly; NaN, infinities and larger values take `round` itself.
+#[inline]
+fn round_to_i64(x: f64) -> i64 {
+    if x.abs() < 4_503_599_627_370_496.0 {
+        let t = x as i64;
+        let frac = x - t as f64;
+        t + i64::from(frac >= 0.5) - i64::from(frac <= -0.5)
+    } else {
+        x.round() as i64
+    }
+}
+
 /// Removed returns by cause.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct DropCounts {
@@ -89,8 +104,9 @@ pub struct RangeChange {
 
 impl RangeChange {
     /// Adds one change in metres.
+    #[inline]
     pub fn add(&mut self, delta_m: f64) {
-        let nm = (delta_m * 1e9).round() as i64;
+        let nm = round_to_i64(delta_m * 1e9);
         let abs = nm.unsigned_abs();
         self.count += 1;
         self.sum_nm += i128::from(nm);
@@ -339,6 +355,43 @@ mod tests {
         let mut bad = r.state();
         bad.abs_hist.push((BINS as u32, 1));
         assert_eq!(RangeChange::from_state(&bad), None);
+    }
+
+    #[test]
+    fn round_to_i64_rounds_like_round() {
+        let mut xs = vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            -2.5,
+            0.49999999999999994,
+            -0.49999999999999994,
+            4_503_599_627_370_495.5,
+            -4_503_599_627_370_495.5,
+            4_503_599_627_370_496.0,
+            9.3e18,
+            -9.3e18,
+            1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        let mut v = 1e-3f64;
+        while v < 1e17 {
+            for k in [-1.0, 1.0] {
+                xs.push(k * v);
+                xs.push(k * (v.floor() + 0.5));
+                xs.push(k * f64::from_bits((v.floor() + 0.5).to_bits() - 1));
+            }
+            v *= 1.37;
+        }
+        for x in xs {
+            assert_eq!(round_to_i64(x), x.round() as i64, "{x}");
+        }
     }
 
     #[test]

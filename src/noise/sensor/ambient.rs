@@ -67,14 +67,29 @@ impl NoiseStage for Ambient {
         if p_bg == 0.0 && offset == 0.0 {
             return;
         }
-        for i in 0..frame.len() {
-            if !frame.fate[i].is_alive() {
+        let stage = frame.stage;
+        let NoisyFrame {
+            fate,
+            cause,
+            power,
+            range,
+            ..
+        } = frame;
+        for (((f, c), &p), r) in fate
+            .iter_mut()
+            .zip(cause.iter_mut())
+            .zip(power.iter())
+            .zip(range.iter_mut())
+        {
+            if !f.is_alive() {
                 continue;
             }
-            if p_bg > 0.0 && frame.power[i] < cut {
-                frame.set_fate(i, Fate::BelowPower);
+            if p_bg > 0.0 && p < cut {
+                // As `NoisyFrame::set_fate` (the frame is borrowed field by field).
+                *f = Fate::BelowPower;
+                *c = stage;
             } else if offset != 0.0 {
-                frame.range[i] = (f64::from(frame.range[i]) + offset) as f32;
+                *r = (f64::from(*r) + offset) as f32;
             }
         }
     }

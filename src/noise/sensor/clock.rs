@@ -86,7 +86,8 @@ impl NoiseStage for Clock {
             match &mut frame.moved.time {
                 Some(times) => times.iter_mut().for_each(|t| *t = stretch(*t)),
                 None => {
-                    frame.moved.time = Some(frame.clean.iter().map(|r| stretch(r.time)).collect())
+                    let lay = frame.layout();
+                    frame.moved.time = Some(lay.time.iter().map(|&t| stretch(t)).collect())
                 }
             }
         }

@@ -52,30 +52,35 @@ impl NoiseStage for Emitter {
         if self.power_factor == 1.0 && self.drift_per_hour == 0.0 {
             return;
         }
+        // Times and intensities from the frame's compact columns (not the 48-byte returns).
+        let lay = frame.layout();
         let NoisyFrame {
-            clean,
-            power,
-            fate,
-            moved,
-            ..
+            power, fate, moved, ..
         } = frame;
-        let inten = moved
-            .intensity
-            .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect());
+        let inten = moved.intensity.get_or_insert_with(|| lay.intensity.clone());
         let mut f = [0.0f64; CHUNK];
-        for (start, chunk) in clean.chunks(CHUNK).enumerate() {
-            let start = start * CHUNK;
+        for (((times, power), inten), fate) in lay
+            .time
+            .chunks(CHUNK)
+            .zip(power.chunks_mut(CHUNK))
+            .zip(inten.chunks_mut(CHUNK))
+            .zip(fate.chunks(CHUNK))
+        {
             // The factors of a chunk first, free of branches (the divisions vectorise).
-            let f = &mut f[..chunk.len()];
-            for (f, r) in f.iter_mut().zip(chunk) {
-                let h = r.time / 3600.0;
+            let f = &mut f[..times.len()];
+            for (f, &t) in f.iter_mut().zip(times) {
+                let h = t / 3600.0;
                 *f = (self.power_factor * (1.0 - self.drift_per_hour * h)).max(0.0);
             }
-            for (k, &f) in f.iter().enumerate() {
-                let i = start + k;
-                if fate[i].is_alive() {
-                    power[i] *= f;
-                    inten[i] = scale_byte(inten[i], f);
+            for (((p, v), fate), &f) in power
+                .iter_mut()
+                .zip(inten.iter_mut())
+                .zip(fate)
+                .zip(f.iter())
+            {
+                if fate.is_alive() {
+                    *p *= f;
+                    *v = scale_byte(*v, f);
                 }
             }
         }

@@ -94,56 +94,74 @@ impl NoiseStage for LaserDiode {
         if !(gains || biases || elevs || azims) {
             return;
         }
-        // One pass over the returns (the 48-byte `Return`s are read once for all four
-        // per-laser values); the pointing offsets apply whatever the fate, the power
-        // and range only to alive returns.
+        // The laser ids come from the frame's compact columns (not the 48-byte returns).
+        // The pointing offsets apply whatever the fate, the power and range only to
+        // alive returns.
+        let lay = frame.layout();
         let NoisyFrame {
-            clean,
             fate,
             power,
             range,
             moved,
             ..
         } = frame;
-        // The intensity bytes of each laser's gain, tabled once per seed (computed here
-        // when the stage runs without its unit draws).
-        let computed;
-        let bytes: &[[u8; 256]; 32] = match (&self.bytes, gains) {
-            (Some(b), _) => b,
-            (None, true) => {
-                computed = byte_tables(gain);
-                &computed
-            }
-            (None, false) => {
-                computed = Box::new([[0; 256]; 32]);
-                &computed
-            }
-        };
-        let mut inten = gains.then(|| {
-            moved
-                .intensity
-                .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect())
-        });
+        let lasers = &lay.laser[..n];
         let offsets = [elev, azim].map(|v| v.map(|x| x as f32));
-        let mut de = elevs.then(|| moved.elevation_deg.get_or_insert_with(|| vec![0.0; n]));
-        let mut da = azims.then(|| moved.azimuth_deg.get_or_insert_with(|| vec![0.0; n]));
-        for i in 0..n {
-            let l = usize::from(clean[i].laser) % 32;
-            if let Some(de) = de.as_deref_mut() {
-                de[i] += offsets[0][l];
-            }
-            if let Some(da) = da.as_deref_mut() {
-                da[i] += offsets[1][l];
-            }
-            if !fate[i].is_alive() {
+        for (on, v, off) in [
+            (elevs, &mut moved.elevation_deg, &offsets[0]),
+            (azims, &mut moved.azimuth_deg, &offsets[1]),
+        ] {
+            if !on {
                 continue;
             }
-            if let Some(inten) = inten.as_deref_mut() {
-                power[i] *= gain[l];
-                inten[i] = bytes[l][usize::from(inten[i])];
+            match v {
+                // `0.0 + x`, not `x`: the same value as adding to a zero vector (-0.0
+                // becomes +0.0).
+                None => {
+                    *v = Some(
+                        lasers
+                            .iter()
+                            .map(|&l| 0.0 + off[usize::from(l & 31)])
+                            .collect(),
+                    )
+                }
+                Some(v) => {
+                    for (d, &l) in v.iter_mut().zip(lasers) {
+                        *d += off[usize::from(l & 31)];
+                    }
+                }
             }
-            if biases {
-                range[i] = (f64::from(range[i]) + bias[l]) as f32;
+        }
+        if gains {
+            // The intensity bytes of each laser's gain, tabled once per seed (computed
+            // here when the stage runs without its unit draws).
+            let computed;
+            let bytes: &[[u8; 256]; 32] = match &self.bytes {
+                Some(b) => b,
+                None => {
+                    computed = byte_tables(gain);
+                    &computed
+                }
+            };
+            let inten = moved.intensity.get_or_insert_with(|| lay.intensity.clone());
+            for (((p, v), &l), f) in power
+                .iter_mut()
+                .zip(inten.iter_mut())
+                .zip(lasers)
+                .zip(fate.iter())
+            {
+                if f.is_alive() {
+                    let l = usize::from(l & 31);
+                    *p *= gain[l];
+                    *v = bytes[l][usize::from(*v)];
+                }
+            }
+        }
+        if biases {
+            for ((r, &l), f) in range.iter_mut().zip(lasers).zip(fate.iter()) {
+                if f.is_alive() {
+                    *r = (f64::from(*r) + bias[usize::from(l & 31)]) as f32;
+                }
             }
         }
     }

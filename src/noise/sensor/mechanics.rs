@@ -85,47 +85,47 @@ impl NoiseStage for Mechanics {
             return;
         }
         let a_start = frame.clean.first().map_or(0.0, |r| f64::from(r.azimuth));
-        let NoisyFrame { clean, moved, .. } = frame;
-        let mut da = azimuth_moves.then(|| moved.azimuth_deg.get_or_insert_with(|| vec![0.0; n]));
-        let mut de = wobbles.then(|| moved.elevation_deg.get_or_insert_with(|| vec![0.0; n]));
-        let mut last_jitter = 0.0;
-        let mut firing = None;
-        let mut shift = 0.0f32;
-        let mut last = (f32::NAN, 0.0f32);
-        // One pass over the returns for the azimuth shift and the wobble.
-        for (i, r) in clean.iter().enumerate() {
-            if let Some(da) = da.as_deref_mut() {
-                // The 32 returns of a firing share its azimuth: one evaluation each.
-                let key = (r.packet, r.block, r.azimuth.to_bits());
-                if firing != Some(key) {
-                    let new_firing = firing.is_none_or(|(p, b, _)| (p, b) != (key.0, key.1));
-                    firing = Some(key);
-                    let jitter = if new_firing && self.jitter_deg > 0.0 {
-                        self.jitter_deg * normal(rng)
-                    } else if new_firing {
-                        0.0
-                    } else {
-                        last_jitter
-                    };
-                    last_jitter = jitter;
-                    let a = f64::from(r.azimuth);
-                    let swept = (a - a_start).rem_euclid(360.0);
-                    shift = (self.azimuth_offset_deg
-                        + self.eccentricity_deg * (a.to_radians() + self.phases[0]).sin()
-                        + jitter
-                        + spin * swept) as f32;
+        // The frame's firings and azimuths from its layout (not the 48-byte returns).
+        // The jitter is drawn per firing (packet, block); the shift and the wobble are
+        // functions of the azimuth, evaluated again only where it changes.
+        let lay = frame.layout();
+        let moved = &mut frame.moved;
+        let da = azimuth_moves.then(|| moved.azimuth_deg.get_or_insert_with(|| vec![0.0; n]));
+        let de = wobbles.then(|| moved.elevation_deg.get_or_insert_with(|| vec![0.0; n]));
+        if let Some(da) = da {
+            for &[start, end] in &lay.firings {
+                let idx = start as usize..end as usize;
+                let jitter = if self.jitter_deg > 0.0 {
+                    self.jitter_deg * normal(rng)
+                } else {
+                    0.0
+                };
+                // The first return of a firing always evaluates (as a new firing did).
+                let mut last: Option<(u32, f32)> = None;
+                for (d, &az) in da[idx.clone()].iter_mut().zip(&lay.azimuth[idx]) {
+                    if last.is_none_or(|(bits, _)| bits != az.to_bits()) {
+                        let a = f64::from(az);
+                        let swept = (a - a_start).rem_euclid(360.0);
+                        last = Some((
+                            az.to_bits(),
+                            (self.azimuth_offset_deg
+                                + self.eccentricity_deg * (a.to_radians() + self.phases[0]).sin()
+                                + jitter
+                                + spin * swept) as f32,
+                        ));
+                    }
+                    *d += last.map_or(0.0, |(_, s)| s);
                 }
-                da[i] += shift;
             }
-            if let Some(de) = de.as_deref_mut() {
-                if r.azimuth.to_bits() != last.0.to_bits() {
-                    let a = f64::from(r.azimuth).to_radians();
-                    last = (
-                        r.azimuth,
-                        (self.wobble_deg * (a + self.phases[1]).sin()) as f32,
-                    );
+        }
+        if let Some(de) = de {
+            let mut last = (f32::NAN, 0.0f32);
+            for (d, &az) in de.iter_mut().zip(&lay.azimuth) {
+                if az.to_bits() != last.0.to_bits() {
+                    let a = f64::from(az).to_radians();
+                    last = (az, (self.wobble_deg * (a + self.phases[1]).sin()) as f32);
                 }
-                de[i] += last.1;
+                *d += last.1;
             }
         }
     }

@@ -90,25 +90,23 @@ impl NoiseStage for Motion {
         // One pose per firing (the returns of a data block): the rotation at the
         // firing's time, and a velocity term that moves each return by its own time:
         // p' = R (p - v dt x) = R p + (-v R x) dt.
-        let mut firing = None;
-        let mut firings = Vec::with_capacity(n / 32 + 1);
+        // One pose per firing of the frame's layout (consecutive returns with the same
+        // packet and block); the time of a firing is that of its first return.
+        let lay = frame.layout();
+        let mut firings = Vec::with_capacity(lay.firings.len());
         let mut index = Vec::with_capacity(n);
-        for r in &frame.clean {
-            let key = (r.packet, r.block);
-            if firing != Some(key) {
-                firing = Some(key);
-                let dt = r.time - t_ref;
-                let roll = vib * (w * dt + phi[0]).sin();
-                let pitch = vib * (w * dt + phi[1]).sin();
-                let ego = Pose::from_small_rpy(0.0, 0.0, -omega * dt, [0.0; 3]);
-                let rot = Pose::from_small_rpy(roll, pitch, 0.0, [0.0; 3]).then_after(&ego);
-                let velocity = [0, 1, 2].map(|k| -self.speed_mps * rot.r[k][0]);
-                firings.push(FiringPose {
-                    pose: rot,
-                    velocity,
-                });
-            }
-            index.push(firings.len() as u32 - 1);
+        for &[start, end] in &lay.firings {
+            let dt = lay.time[start as usize] - t_ref;
+            let roll = vib * (w * dt + phi[0]).sin();
+            let pitch = vib * (w * dt + phi[1]).sin();
+            let ego = Pose::from_small_rpy(0.0, 0.0, -omega * dt, [0.0; 3]);
+            let rot = Pose::from_small_rpy(roll, pitch, 0.0, [0.0; 3]).then_after(&ego);
+            let velocity = [0, 1, 2].map(|k| -self.speed_mps * rot.r[k][0]);
+            firings.push(FiringPose {
+                pose: rot,
+                velocity,
+            });
+            index.resize(end as usize, firings.len() as u32 - 1);
         }
         let poses = Poses {
             t_ref,

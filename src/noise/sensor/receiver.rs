@@ -98,8 +98,8 @@ impl NoiseStage for Receiver {
             // square root and one division per return, four to a vector instruction.
             let k = (self.range_noise_m * (p_th / 2.0).sqrt()) as f32;
             let n = frame.len();
+            let lay = frame.layout();
             let NoisyFrame {
-                clean,
                 range,
                 power,
                 fate,
@@ -115,8 +115,12 @@ impl NoiseStage for Receiver {
                 let (power, fate) = (&mut power[start..end], &mut fate[start..end]);
                 if scale_power {
                     // Branch free, so it vectorises: dead returns keep their power.
-                    for ((p, f), r) in power.iter_mut().zip(fate.iter()).zip(&clean[start..end]) {
-                        let g = factor[usize::from(r.laser) % 32];
+                    for ((p, f), &l) in power
+                        .iter_mut()
+                        .zip(fate.iter())
+                        .zip(&lay.laser[start..end])
+                    {
+                        let g = factor[usize::from(l & 31)];
                         *p = if f.is_alive() { *p * g } else { *p };
                     }
                 }
@@ -150,11 +154,11 @@ impl NoiseStage for Receiver {
         }
         if self.gain_error != 1.0 {
             let g = self.gain_error;
-            let clean = &frame.clean;
+            let lay = frame.layout();
             let v = frame
                 .moved
                 .intensity
-                .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect());
+                .get_or_insert_with(|| lay.intensity.clone());
             for x in v.iter_mut() {
                 *x = scale_byte(*x, g);
             }

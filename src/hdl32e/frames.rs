@@ -147,6 +147,61 @@ struct Building {
     last_step: u32,
 }
 
+/// What decides frame boundaries and capture timing, carried from packet to packet:
+/// one piece for the reader and the frame index (so both cut frames alike), copied whole
+/// into a seek point to resume.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct SweepState {
+    /// Last firing's azimuth relative to the cut angle, centidegrees.
+    prev_rel: Option<u32>,
+    /// Last firing's azimuth, centidegrees.
+    prev_azimuth: Option<u16>,
+    /// Last data packet's timestamp, microseconds past the hour.
+    prev_ts: Option<u32>,
+    /// Hours the sensor clock has restarted, as microseconds.
+    hour_offset_us: f64,
+    /// First firing's time in the capture.
+    first_time_us: Option<f64>,
+    /// Rotation so far (forward steps only), centidegrees.
+    unwrapped_centideg: u64,
+}
+
+impl SweepState {
+    /// Takes a data packet's timestamp and its first firing's time past the hour; returns
+    /// that firing's time in the capture.
+    #[inline]
+    pub(super) fn on_packet(&mut self, ts: u32, first_firing_us: f64) -> f64 {
+        if let Some(prev) = self.prev_ts {
+            // The sensor clock restarts every hour: keep time increasing. Compared in u64:
+            // in u32 `ts + 1_800_000_000` overflows once the clock passes 41 min 35 s.
+            if u64::from(ts) + 1_800_000_000 < u64::from(prev) {
+                self.hour_offset_us += 3_600_000_000.0;
+            }
+        }
+        self.prev_ts = Some(ts);
+        let time0 = first_firing_us + self.hour_offset_us;
+        self.first_time_us.get_or_insert(time0);
+        time0
+    }
+
+    /// Takes a firing's azimuth; returns it relative to the cut angle `cut` and whether it
+    /// starts a new sweep (it crossed the cut).
+    #[inline]
+    pub(super) fn on_firing(&mut self, azimuth: u16, cut: u32) -> (u32, bool) {
+        if let Some(prev) = self.prev_azimuth {
+            let d = (u32::from(azimuth) + 36000 - u32::from(prev)) % 36000;
+            if d < 18000 {
+                self.unwrapped_centideg += u64::from(d);
+            }
+        }
+        self.prev_azimuth = Some(azimuth);
+        let rel = (u32::from(azimuth) + 36000 - cut) % 36000;
+        let wrapped = self.prev_rel.is_some_and(|p| rel + 18000 < p);
+        self.prev_rel = Some(rel);
+        (rel, wrapped)
+    }
+}
+
 /// Iterator over the frames of a capture.
 pub struct FrameReader {
     capture: CaptureReader,
@@ -156,13 +211,8 @@ pub struct FrameReader {
     building: Option<Building>,
     ready: VecDeque<Frame>,
     next_index: u32,
-    prev_rel: Option<u32>,
-    hour_offset_us: f64,
-    prev_ts: Option<u32>,
-    first_time_us: Option<f64>,
+    sweep: SweepState,
     last_time_us: f64,
-    unwrapped_centideg: u64,
-    prev_azimuth: Option<u16>,
     summary: CaptureSummary,
     done: bool,
     /// Copy of the current data packet (the datagram borrows the reader).
@@ -255,13 +305,8 @@ impl FrameReader {
             building: None,
             ready: VecDeque::new(),
             next_index: 0,
-            prev_rel: None,
-            hour_offset_us: 0.0,
-            prev_ts: None,
-            first_time_us: None,
+            sweep: SweepState::default(),
             last_time_us: 0.0,
-            unwrapped_centideg: 0,
-            prev_azimuth: None,
             summary: CaptureSummary {
                 format: Format::Pcap,
                 linktype: -1,
@@ -327,12 +372,7 @@ impl FrameReader {
     /// Sets the frame state a reader from the start has just before the resume packet.
     fn resume(&mut self, at: &FrameSeek) {
         self.next_index = at.next_index;
-        self.prev_rel = at.prev_rel;
-        self.prev_azimuth = at.prev_azimuth;
-        self.prev_ts = at.prev_ts;
-        self.hour_offset_us = at.hour_offset_us;
-        self.first_time_us = at.first_time_us;
-        self.unwrapped_centideg = at.unwrapped_centideg;
+        self.sweep = at.sweep;
         self.skip_before = at.frame;
         // The frame open before the resume packet: only its tail is seen, and it is
         // dropped (its index is below `skip_before`).
@@ -387,10 +427,10 @@ impl FrameReader {
         s.linktype = self.capture.linktype().unwrap_or(-1);
         s.linktype_name = crate::capture::link::link_name(s.linktype);
         s.capture = self.capture.stats().clone();
-        if let Some(first) = self.first_time_us {
+        if let Some(first) = self.sweep.first_time_us {
             s.duration_s = (self.last_time_us - first) * 1e-6;
             if s.duration_s > 0.0 {
-                s.rotation_hz = Some(self.unwrapped_centideg as f64 / 36000.0 / s.duration_s);
+                s.rotation_hz = Some(self.sweep.unwrapped_centideg as f64 / 36000.0 / s.duration_s);
             }
         }
         s
@@ -418,16 +458,7 @@ impl FrameReader {
     }
 
     fn on_firing(&mut self, azimuth: u16, step: u32) {
-        if let Some(prev) = self.prev_azimuth {
-            let d = (u32::from(azimuth) + 36000 - u32::from(prev)) % 36000;
-            if d < 18000 {
-                self.unwrapped_centideg += u64::from(d);
-            }
-        }
-        self.prev_azimuth = Some(azimuth);
-        let rel = (u32::from(azimuth) + 36000 - self.cut) % 36000;
-        let wrapped = self.prev_rel.is_some_and(|p| rel + 18000 < p);
-        self.prev_rel = Some(rel);
+        let (rel, wrapped) = self.sweep.on_firing(azimuth, self.cut);
         if wrapped {
             if let Some(b) = self.building.take() {
                 self.finish_frame(b, false);
@@ -494,18 +525,10 @@ impl FrameReader {
         if self.summary.data_ports.len() < 8 && !self.summary.data_ports.contains(&ports) {
             self.summary.data_ports.push(ports);
         }
-        let ts = packet::timestamp_us(payload);
-        if let Some(prev) = self.prev_ts {
-            // The sensor clock restarts every hour: keep time increasing. Compared in u64:
-            // in u32 `ts + 1_800_000_000` overflows once the clock passes 41 min 35 s.
-            if u64::from(ts) + 1_800_000_000 < u64::from(prev) {
-                self.hour_offset_us += 3_600_000_000.0;
-            }
-        }
-        self.prev_ts = Some(ts);
         let (firings, n) = self.decoder.firings(payload, mode);
-        let time0 = first_firing_us(payload, n) + self.hour_offset_us;
-        self.first_time_us.get_or_insert(time0);
+        let time0 = self
+            .sweep
+            .on_packet(packet::timestamp_us(payload), first_firing_us(payload, n));
         self.last_time_us = time0 + (n as f64 - 1.0) * packet::FIRING_US;
         for firing in &firings[..n] {
             self.on_firing(firing.azimuth, firing.step);

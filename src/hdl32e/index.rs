@@ -9,14 +9,15 @@
 //! yields the same frames as a reader from the start. The scan streams: it holds one
 //! packet and one frame's seek point, whatever the capture's length.
 //!
-//! The frame cut is the few lines of `FrameReader::on_firing` and `decode_packet` that
-//! decide boundaries, repeated here rather than shared so that the decoding loop stays
-//! as it is; tests/frame_index.rs checks, frame by frame, that both agree.
+//! The frame cut and the capture clock are [`super::frames::SweepState`], the same piece
+//! the reader steps; what each frame keeps (first and last azimuth, for the partial
+//! flag) mirrors `FrameReader::finish_frame`, and tests/frame_index.rs checks, frame by
+//! frame, that both agree.
 //!
 //! [`FrameReader::open_at`]: super::frames::FrameReader::open_at
 
 use super::decode::{first_firing_us, PacketDecoder};
-use super::frames::{identify_in, ArcBytes, DecoderOptions};
+use super::frames::{identify_in, ArcBytes, DecoderOptions, SweepState};
 use super::packet::{self, ReturnMode};
 use crate::capture::{CapturePoint, CaptureReader};
 use crate::error::Result;
@@ -32,12 +33,7 @@ pub struct FrameSeek {
     pub(super) capture: CapturePoint,
     pub(super) next_index: u32,
     pub(super) open: bool,
-    pub(super) prev_rel: Option<u32>,
-    pub(super) prev_azimuth: Option<u16>,
-    pub(super) prev_ts: Option<u32>,
-    pub(super) hour_offset_us: f64,
-    pub(super) first_time_us: Option<f64>,
-    pub(super) unwrapped_centideg: u64,
+    pub(super) sweep: SweepState,
 }
 
 /// One frame found by the scan.
@@ -66,12 +62,7 @@ struct Open {
 struct Before {
     next_index: u32,
     open: bool,
-    prev_rel: Option<u32>,
-    prev_azimuth: Option<u16>,
-    prev_ts: Option<u32>,
-    hour_offset_us: f64,
-    first_time_us: Option<f64>,
-    unwrapped_centideg: u64,
+    sweep: SweepState,
 }
 
 /// Iterator over the frames of a capture with their seek points, in frame order (every
@@ -81,12 +72,7 @@ pub struct FrameScan {
     decoder: PacketDecoder,
     cut: u32,
     next_index: u32,
-    prev_rel: Option<u32>,
-    prev_azimuth: Option<u16>,
-    prev_ts: Option<u32>,
-    hour_offset_us: f64,
-    first_time_us: Option<f64>,
-    unwrapped_centideg: u64,
+    sweep: SweepState,
     building: Option<Open>,
     ready: VecDeque<ScannedFrame>,
     done: bool,
@@ -114,12 +100,7 @@ impl FrameScan {
             decoder: PacketDecoder::new(&options.calibration, false, options.dual),
             cut: ((options.cut_angle_deg.rem_euclid(360.0) * 100.0).round() as u32) % 36000,
             next_index: 0,
-            prev_rel: None,
-            prev_azimuth: None,
-            prev_ts: None,
-            hour_offset_us: 0.0,
-            first_time_us: None,
-            unwrapped_centideg: 0,
+            sweep: SweepState::default(),
             building: None,
             ready: VecDeque::new(),
             done: false,
@@ -158,24 +139,14 @@ impl FrameScan {
             let before = Before {
                 next_index: self.next_index,
                 open: self.building.is_some(),
-                prev_rel: self.prev_rel,
-                prev_azimuth: self.prev_azimuth,
-                prev_ts: self.prev_ts,
-                hour_offset_us: self.hour_offset_us,
-                first_time_us: self.first_time_us,
-                unwrapped_centideg: self.unwrapped_centideg,
+                sweep: self.sweep,
             };
             let offset = d.offset;
-            let ts = packet::timestamp_us(d.payload);
-            if let Some(prev) = self.prev_ts {
-                if u64::from(ts) + 1_800_000_000 < u64::from(prev) {
-                    self.hour_offset_us += 3_600_000_000.0;
-                }
-            }
-            self.prev_ts = Some(ts);
             let (firings, n) = self.decoder.firings(d.payload, mode);
-            let time0 = first_firing_us(d.payload, n) + self.hour_offset_us;
-            self.first_time_us.get_or_insert(time0);
+            self.sweep.on_packet(
+                packet::timestamp_us(d.payload),
+                first_firing_us(d.payload, n),
+            );
             for firing in &firings[..n] {
                 self.on_firing(firing.azimuth, firing.step, &before, offset);
             }
@@ -184,16 +155,7 @@ impl FrameScan {
     }
 
     fn on_firing(&mut self, azimuth: u16, step: u32, before: &Before, offset: u64) {
-        if let Some(prev) = self.prev_azimuth {
-            let d = (u32::from(azimuth) + 36000 - u32::from(prev)) % 36000;
-            if d < 18000 {
-                self.unwrapped_centideg += u64::from(d);
-            }
-        }
-        self.prev_azimuth = Some(azimuth);
-        let rel = (u32::from(azimuth) + 36000 - self.cut) % 36000;
-        let wrapped = self.prev_rel.is_some_and(|p| rel + 18000 < p);
-        self.prev_rel = Some(rel);
+        let (rel, wrapped) = self.sweep.on_firing(azimuth, self.cut);
         if wrapped {
             if let Some(b) = self.building.take() {
                 self.finish(b, false);
@@ -207,12 +169,7 @@ impl FrameScan {
                 capture: self.capture.point_before_last(offset),
                 next_index: before.next_index,
                 open: before.open,
-                prev_rel: before.prev_rel,
-                prev_azimuth: before.prev_azimuth,
-                prev_ts: before.prev_ts,
-                hour_offset_us: before.hour_offset_us,
-                first_time_us: before.first_time_us,
-                unwrapped_centideg: before.unwrapped_centideg,
+                sweep: before.sweep,
             };
             self.building = Some(Open {
                 index,

@@ -6,7 +6,6 @@ mod common;
 use common::{config, err, run, stage};
 
 use assert_cmd::Command;
-use lidar_noise::calibration::Calibration;
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::noise::{Fate, NoiseChain, NoisyFrame};
@@ -17,26 +16,15 @@ const C: f64 = 299_792_458.0;
 /// A return of `laser` at `range` m, `azimuth` deg, firing `firing` (12 per packet),
 /// time `time` s.
 fn ret(laser: u8, range: f32, azimuth: f32, intensity: u8, firing: u32, time: f64) -> Return {
-    let cal = Calibration::builtin();
-    let el = cal.lasers[laser as usize].elevation_deg as f32;
-    let (se, ce) = el.to_radians().sin_cos();
-    let (sa, ca) = azimuth.to_radians().sin_cos();
-    Return {
-        x: range * ce * ca,
-        y: -range * ce * sa,
-        z: range * se,
+    common::beam_return(
+        laser,
         range,
         azimuth,
-        elevation: el,
-        time,
-        packet: firing / 12,
-        raw_distance: (range / 0.002) as u16,
         intensity,
-        laser,
-        ring: cal.rings()[laser as usize],
-        block: (firing % 12) as u8,
-        kind: ReturnKind::Strongest,
-    }
+        firing,
+        time,
+        ReturnKind::Strongest,
+    )
 }
 
 /// A 10 Hz rotation: 2000 firings of 32 lasers, ranges 2..60 m, varied intensities.

@@ -2,7 +2,8 @@
 //! (pdiagram-models.md, "Spurious and replaced returns"), the fates, causes and clean
 //! ranges it records, and that stage order does not decide the result.
 
-use lidar_noise::calibration::Calibration;
+mod common;
+
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Return, ReturnKind};
 use lidar_noise::noise::spurious::resolve;
@@ -12,33 +13,8 @@ use std::sync::Arc;
 
 /// A return of `laser` at `range` m in firing `firing` (azimuth 0.2 deg per firing).
 fn ret(laser: u8, range: f32, firing: u32, kind: ReturnKind) -> Return {
-    let cal = Calibration::builtin();
-    let el = cal.lasers[laser as usize].elevation_deg as f32;
-    let azimuth = firing as f32 * 0.2;
-    let (se, ce) = el.to_radians().sin_cos();
-    let (sa, ca) = azimuth.to_radians().sin_cos();
-    let dual = matches!(kind, ReturnKind::DualLast | ReturnKind::DualStrongest);
-    let block = if dual {
-        (firing % 6) as u8 * 2 + u8::from(kind == ReturnKind::DualStrongest)
-    } else {
-        (firing % 12) as u8
-    };
-    Return {
-        x: range * ce * ca,
-        y: -range * ce * sa,
-        z: range * se,
-        range,
-        azimuth,
-        elevation: el,
-        time: 10.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6,
-        packet: if dual { firing / 6 } else { firing / 12 },
-        raw_distance: (range / 0.002) as u16,
-        intensity: 50,
-        laser,
-        ring: cal.rings()[laser as usize],
-        block,
-        kind,
-    }
+    let time = 10.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6;
+    common::beam_return(laser, range, firing as f32 * 0.2, 50, firing, time, kind)
 }
 
 fn ideal() -> IdealPower {

@@ -7,7 +7,6 @@ mod common;
 use common::{config, err, run, stage};
 
 use assert_cmd::Command;
-use lidar_noise::calibration::Calibration;
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::noise::{Fate, IdealPower, NoiseChain, NoisyFrame, NO_CAUSE};
@@ -19,27 +18,9 @@ const C: f64 = 299_792_458.0;
 /// A return of `laser` at `range` m in firing `firing` (0.2 deg per firing, 12 firings
 /// per packet) with `intensity` (reflectivity, %).
 fn ret(laser: u8, range: f32, intensity: u8, firing: u32, kind: ReturnKind) -> Return {
-    let cal = Calibration::builtin();
-    let el = cal.lasers[laser as usize].elevation_deg as f32;
     let azimuth = (firing as f32 * 0.2) % 360.0;
-    let (se, ce) = el.to_radians().sin_cos();
-    let (sa, ca) = azimuth.to_radians().sin_cos();
-    Return {
-        x: range * ce * ca,
-        y: -range * ce * sa,
-        z: range * se,
-        range,
-        azimuth,
-        elevation: el,
-        time: 100.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6,
-        packet: firing / 12,
-        raw_distance: (range / 0.002) as u16,
-        intensity,
-        laser,
-        ring: cal.rings()[laser as usize],
-        block: (firing % 12) as u8,
-        kind,
-    }
+    let time = 100.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6;
+    common::beam_return(laser, range, azimuth, intensity, firing, time, kind)
 }
 
 /// 1800 firings of 32 lasers, ranges 2..60 m, varied intensities; every 7th slot is

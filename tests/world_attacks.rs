@@ -28,27 +28,16 @@ fn firing_time(firing: u32, laser: u8) -> f64 {
 /// A return of `laser` at `range` m in firing `firing` (azimuth 0.18 deg per firing, 12
 /// firings per packet).
 fn ret(laser: u8, range: f32, intensity: u8, firing: u32, kind: ReturnKind) -> Return {
-    let cal = Calibration::builtin();
-    let el = cal.lasers[laser as usize].elevation_deg as f32;
     let azimuth = firing as f32 * AZ_STEP;
-    let (se, ce) = el.to_radians().sin_cos();
-    let (sa, ca) = azimuth.to_radians().sin_cos();
-    Return {
-        x: range * ce * ca,
-        y: -range * ce * sa,
-        z: range * se,
+    common::beam_return(
+        laser,
         range,
         azimuth,
-        elevation: el,
-        time: firing_time(firing, laser),
-        packet: firing / 12,
-        raw_distance: (range / 0.002) as u16,
         intensity,
-        laser,
-        ring: cal.rings()[laser as usize],
-        block: (firing % 12) as u8,
+        firing,
+        firing_time(firing, laser),
         kind,
-    }
+    )
 }
 
 /// A 10 Hz rotation (2000 firings x 32 lasers), every return detectable and none

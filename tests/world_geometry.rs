@@ -7,7 +7,6 @@ mod common;
 use common::{config, run, stage};
 
 use assert_cmd::Command;
-use lidar_noise::calibration::Calibration;
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::noise::{Fate, NoiseChain, NoisyFrame};
@@ -15,33 +14,16 @@ use std::path::Path;
 
 /// A return of `laser` at `range` m in firing `firing` (0.18 degree per firing).
 fn ret(laser: u8, range: f32, intensity: u8, firing: u32, kind: ReturnKind) -> Return {
-    let cal = Calibration::builtin();
-    let el = cal.lasers[laser as usize].elevation_deg as f32;
-    let azimuth = firing as f32 * 0.18;
-    let (se, ce) = el.to_radians().sin_cos();
-    let (sa, ca) = azimuth.to_radians().sin_cos();
-    let dual = matches!(kind, ReturnKind::DualLast | ReturnKind::DualStrongest);
-    let block = if dual {
-        (firing % 6) as u8 * 2 + u8::from(kind == ReturnKind::DualStrongest)
-    } else {
-        (firing % 12) as u8
-    };
-    Return {
-        x: range * ce * ca,
-        y: -range * ce * sa,
-        z: range * se,
-        range,
-        azimuth,
-        elevation: el,
-        time: 100.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6,
-        packet: if dual { firing / 6 } else { firing / 12 },
-        raw_distance: (range / 0.002) as u16,
-        intensity,
+    let time = 100.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6;
+    common::beam_return(
         laser,
-        ring: cal.rings()[laser as usize],
-        block,
+        range,
+        firing as f32 * 0.18,
+        intensity,
+        firing,
+        time,
         kind,
-    }
+    )
 }
 
 /// Bands of 10 firings alternately on a foreground at `near` m and a background at `far`

@@ -73,3 +73,44 @@ pub fn err(text: &str) -> String {
         Err(e) => e.to_string(),
     }
 }
+
+/// A return of `laser` (built-in calibration) at `range` m and `azimuth` deg, at `time` s,
+/// in firing `firing` of a capture in `kind`'s return mode: 12 firings per packet, or 6
+/// in dual mode, where a firing's last and strongest entries take blocks 2k and 2k + 1.
+pub fn beam_return(
+    laser: u8,
+    range: f32,
+    azimuth: f32,
+    intensity: u8,
+    firing: u32,
+    time: f64,
+    kind: lidar_noise::frame::ReturnKind,
+) -> lidar_noise::frame::Return {
+    use lidar_noise::frame::ReturnKind;
+    let cal = lidar_noise::calibration::Calibration::builtin();
+    let el = cal.lasers[laser as usize].elevation_deg as f32;
+    let (se, ce) = el.to_radians().sin_cos();
+    let (sa, ca) = azimuth.to_radians().sin_cos();
+    let dual = matches!(kind, ReturnKind::DualLast | ReturnKind::DualStrongest);
+    let block = if dual {
+        (firing % 6) as u8 * 2 + u8::from(kind == ReturnKind::DualStrongest)
+    } else {
+        (firing % 12) as u8
+    };
+    lidar_noise::frame::Return {
+        x: range * ce * ca,
+        y: -range * ce * sa,
+        z: range * se,
+        range,
+        azimuth,
+        elevation: el,
+        time,
+        packet: if dual { firing / 6 } else { firing / 12 },
+        raw_distance: (range / 0.002) as u16,
+        intensity,
+        laser,
+        ring: cal.rings()[laser as usize],
+        block,
+        kind,
+    }
+}

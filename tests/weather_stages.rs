@@ -317,15 +317,8 @@ fn zero_weather_writes_the_same_ply() {
             .assert()
             .success();
     }
-    let payload = |dir: &str| {
-        let bytes = std::fs::read(tmp.path().join(dir).join("crossroad/frame_00000.ply")).unwrap();
-        let end = bytes
-            .windows(11)
-            .position(|w| w == b"end_header\n")
-            .unwrap()
-            + 11;
-        bytes[end..].to_vec()
-    };
+    let payload =
+        |dir: &str| common::ply_payload(&tmp.path().join(dir).join("crossroad/frame_00000.ply"));
     let (pa, pb) = (payload("a"), payload("b"));
     assert!(!pa.is_empty());
     assert!(pa == pb, "PLY payloads differ");

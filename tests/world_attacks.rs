@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{config, err, run, stage};
+use common::{config, err, ply_payload, run, stage};
 
 use assert_cmd::Command;
 use lidar_noise::calibration::Calibration;
@@ -629,16 +629,6 @@ fn every_attack_stage_is_sweepable_and_toggleable() {
                 .unwrap();
         assert_eq!(c.noise[0].kind(), k);
     }
-}
-
-fn ply_payload(path: &Path) -> Vec<u8> {
-    let bytes = std::fs::read(path).unwrap();
-    let end = bytes
-        .windows(11)
-        .position(|w| w == b"end_header\n")
-        .unwrap()
-        + 11;
-    bytes[end..].to_vec()
 }
 
 #[test]

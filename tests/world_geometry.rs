@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{config, run, stage};
+use common::{config, ply_payload, run, stage};
 
 use assert_cmd::Command;
 use lidar_noise::config::Config;
@@ -473,16 +473,6 @@ fn bad_options_name_key_and_line() {
         assert!(e.contains(&format!("noise[0].{key} (line 4")), "{e}");
         assert!(e.contains(word), "{e}");
     }
-}
-
-fn ply_payload(path: &Path) -> Vec<u8> {
-    let bytes = std::fs::read(path).unwrap();
-    let end = bytes
-        .windows(11)
-        .position(|w| w == b"end_header\n")
-        .unwrap()
-        + 11;
-    bytes[end..].to_vec()
 }
 
 #[test]

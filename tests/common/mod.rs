@@ -114,3 +114,14 @@ pub fn beam_return(
         kind,
     }
 }
+
+/// The body of a PLY file: its bytes after the header.
+pub fn ply_payload(path: &std::path::Path) -> Vec<u8> {
+    let bytes = std::fs::read(path).unwrap();
+    let end = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .unwrap()
+        + 11;
+    bytes[end..].to_vec()
+}

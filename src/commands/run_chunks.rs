@@ -153,23 +153,6 @@ fn part_chunk_size(name: &str) -> Option<u32> {
     m.parse().ok()
 }
 
-fn part_settings(
-    run: &serde_json::Value,
-    m: u32,
-    j: usize,
-    of: usize,
-    r: &RangeInclusive<u32>,
-) -> serde_json::Value {
-    let mut v = run.clone();
-    v["chunk"] = serde_json::json!({
-        "frames_per_chunk": m,
-        "index": j,
-        "of": of,
-        "frames": [r.start(), r.end()],
-    });
-    v
-}
-
 fn write_part(path: &Path, part: &Part, inputs: &[&Path]) -> Result<()> {
     let body = serde_json::to_vec(part)?;
     let sum = xxhash_rust::xxh3::xxh3_64(&body);
@@ -204,25 +187,15 @@ fn read_part(path: &Path) -> Option<std::result::Result<Part, String>> {
 
 /// Refuses a run whose `--chunk-frames` differs from a part found in `dir`.
 fn check_parts(dir: &Path, m: u32) -> Result<()> {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return Ok(());
-    };
-    let mut names: Vec<String> = entries
-        .filter_map(|e| e.ok())
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    for name in names {
-        if let Some(found) = part_chunk_size(&name) {
-            if found != m {
-                bail!(
-                    "{}: a part of a run computed with --chunk-frames {found}, and this run has \
-                     --chunk-frames {m}: give --chunk-frames {found} to every shard and the \
-                     merge of this run (or delete the parts to start over)",
-                    dir.join(&name).display()
-                );
-            }
-        }
+    if let Some((name, found)) =
+        crate::sweep::chunks::other_chunk_size(dir, Some(m), part_chunk_size)
+    {
+        bail!(
+            "{}: a part of a run computed with --chunk-frames {found}, and this run has \
+             --chunk-frames {m}: give --chunk-frames {found} to every shard and the \
+             merge of this run (or delete the parts to start over)",
+            dir.join(&name).display()
+        );
     }
     Ok(())
 }
@@ -380,7 +353,8 @@ fn units(
                 }
                 std::fs::create_dir_all(&dir).map_err(|e| crate::error::Error::io(&dir, e))?;
                 let path = dir.join(part_name(m, j));
-                let want = part_settings(settings, m, j, n, &chunks.ranges[j]);
+                let want =
+                    crate::sweep::chunks::part_settings(settings, m, j, n, &chunks.ranges[j]);
                 // A part already there for these settings is kept (shards may run twice).
                 if let Some(Ok(p)) = read_part(&path) {
                     if p.settings == want && p.files.iter().all(|f| dir.join(f).is_file()) {
@@ -504,7 +478,7 @@ fn merge(
         }
         for j in 0..n {
             let path = dir.join(part_name(m, j));
-            let want = part_settings(settings, m, j, n, &chunks.ranges[j]);
+            let want = crate::sweep::chunks::part_settings(settings, m, j, n, &chunks.ranges[j]);
             match read_part(&path) {
                 Some(Ok(p)) if p.settings == want && p.frames <= m as usize => {
                     // A frame file deleted since: the unit is to be computed again.

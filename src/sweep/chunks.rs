@@ -96,30 +96,56 @@ pub fn part_chunk_size(name: &str) -> Option<u32> {
 /// of a part found in `dir`: joining parts of other ranges would be wrong, and mixing
 /// sizes would compute frames twice.
 pub fn check_parts(dir: &Path, m: Option<u32>) -> Result<()> {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return Ok(());
-    };
+    if let Some((name, found)) = other_chunk_size(dir, m, part_chunk_size) {
+        let given = m.map_or("no --chunk-frames".into(), |m| {
+            format!("--chunk-frames {m}")
+        });
+        return Err(Error::Invalid(format!(
+            "{}: a part of a cell computed with --chunk-frames {found}, and this sweep \
+             has {given}: give --chunk-frames {found} to every shard, the merge and \
+             reruns of this sweep (or delete the parts to start over)",
+            dir.join(&name).display()
+        )));
+    }
+    Ok(())
+}
+
+/// The first part in `dir` (in name order) whose chunk size, read from its name by
+/// `chunk_size_of`, differs from `m` (None: no part may be there), with that size.
+pub fn other_chunk_size(
+    dir: &Path,
+    m: Option<u32>,
+    chunk_size_of: impl Fn(&str) -> Option<u32>,
+) -> Option<(String, u32)> {
+    let entries = std::fs::read_dir(dir).ok()?;
     let mut names: Vec<String> = entries
         .filter_map(|e| e.ok())
         .map(|e| e.file_name().to_string_lossy().into_owned())
         .collect();
     names.sort();
-    for name in names {
-        if let Some(found) = part_chunk_size(&name) {
-            if Some(found) != m {
-                let given = m.map_or("no --chunk-frames".into(), |m| {
-                    format!("--chunk-frames {m}")
-                });
-                return Err(Error::Invalid(format!(
-                    "{}: a part of a cell computed with --chunk-frames {found}, and this sweep \
-                     has {given}: give --chunk-frames {found} to every shard, the merge and \
-                     reruns of this sweep (or delete the parts to start over)",
-                    dir.join(&name).display()
-                )));
-            }
-        }
-    }
-    Ok(())
+    names.into_iter().find_map(|name| {
+        let found = chunk_size_of(&name)?;
+        (Some(found) != m).then_some((name, found))
+    })
+}
+
+/// A part's settings: its cell's or run's, plus the chunk (size, index, count and frame
+/// range).
+pub fn part_settings(
+    whole: &serde_json::Value,
+    m: u32,
+    j: usize,
+    n: usize,
+    range: &std::ops::RangeInclusive<u32>,
+) -> serde_json::Value {
+    let mut v = whole.clone();
+    v["chunk"] = serde_json::json!({
+        "frames_per_chunk": m,
+        "index": j,
+        "of": n,
+        "frames": [range.start(), range.end()],
+    });
+    v
 }
 
 /// Part paths of a cell, in chunk order.

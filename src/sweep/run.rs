@@ -289,7 +289,7 @@ pub fn run_mode(
             let parts = chunks::part_paths(&dir, &file_name, m, n_chunks);
             let mut complete = true;
             for (j, part) in parts.iter().enumerate() {
-                let part_settings = part_settings(&settings, m, j, n_chunks, &ranges[j]);
+                let part_settings = chunks::part_settings(&settings, m, j, n_chunks, &ranges[j]);
                 let want = (ranges[j].clone(), part_settings);
                 let done = match read_cell(part) {
                     Some(Ok(f)) if f.settings == want.1 => {
@@ -410,24 +410,6 @@ pub fn run_mode(
         )));
     }
     Ok(outcome)
-}
-
-/// A part's settings: its cell's, plus the chunk (size, index, count and frame range).
-fn part_settings(
-    cell: &serde_json::Value,
-    m: u32,
-    j: usize,
-    n: usize,
-    range: &RangeInclusive<u32>,
-) -> serde_json::Value {
-    let mut v = cell.clone();
-    v["chunk"] = serde_json::json!({
-        "frames_per_chunk": m,
-        "index": j,
-        "of": n,
-        "frames": [range.start(), range.end()],
-    });
-    v
 }
 
 /// Joins a cell's parts (which must all verify) in frame order into the cell file a sweep

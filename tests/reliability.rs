@@ -478,29 +478,23 @@ fn frame_range_messages_explain_the_problem() {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
-    let o = bin()
-        .arg("run")
-        .arg(&capture)
-        .args(["--frames", "0", "-o"])
-        .arg(tmp.path().join("o"))
-        .output()
-        .unwrap();
-    let e = stderr(&o);
-    assert_eq!(o.status.code(), Some(1), "{e}");
-    assert!(e.contains("partial first sweep"), "{e}");
-    assert!(e.contains("17 full frames") && e.contains("1..17"), "{e}");
     // `convert` stops decoding at the end of the range too, and still counts every frame.
-    let o = bin()
-        .arg("convert")
-        .arg(&capture)
-        .args(["--frames", "0", "-o"])
-        .arg(tmp.path().join("c"))
-        .output()
-        .unwrap();
-    let e = stderr(&o);
-    assert_eq!(o.status.code(), Some(1), "{e}");
-    assert!(e.contains("partial first sweep"), "{e}");
-    assert!(e.contains("17 full frames") && e.contains("1..17"), "{e}");
+    for command in ["run", "convert"] {
+        let o = bin()
+            .arg(command)
+            .arg(&capture)
+            .args(["--frames", "0", "-o"])
+            .arg(tmp.path().join(command))
+            .output()
+            .unwrap();
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{command}: {e}");
+        assert!(e.contains("partial first sweep"), "{command}: {e}");
+        assert!(
+            e.contains("17 full frames") && e.contains("1..17"),
+            "{command}: {e}"
+        );
+    }
 }
 
 /// Defect 8 (configs): settings that would silently do nothing are pointed out.

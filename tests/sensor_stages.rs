@@ -525,48 +525,17 @@ fn bad_options_name_key_and_line() {
 #[test]
 fn zero_magnitude_chain_writes_the_same_ply_and_bad_options_write_nothing() {
     let tmp = tempfile::tempdir().unwrap();
-    let fixture = common::fixtures().join("crossroad.pcap");
-    let zero = tmp.path().join("zero.toml");
-    std::fs::write(&zero, all_zero()).unwrap();
-    let none = tmp.path().join("none.toml");
-    std::fs::write(&none, "seed = 5\n").unwrap();
-    for (cfg, out) in [(&zero, "a"), (&none, "b")] {
-        Command::cargo_bin("lidar-noise")
-            .unwrap()
-            .args(["--quiet", "run"])
-            .arg(&fixture)
-            .arg("-c")
-            .arg(cfg)
-            .args(["--keep-dropped", "--frames", "0", "-o"])
-            .arg(tmp.path().join(out))
-            .assert()
-            .success();
-    }
-    let a = ply_payload(&tmp.path().join("a/crossroad/frame_00000.ply"));
-    let b = ply_payload(&tmp.path().join("b/crossroad/frame_00000.ply"));
+    let ply = common::run_frame0(
+        tmp.path(),
+        &[&all_zero(), "seed = 5\n"],
+        &["--keep-dropped"],
+    );
+    let a = ply_payload(&ply[0]);
+    let b = ply_payload(&ply[1]);
     assert!(!a.is_empty());
     assert!(a == b, "PLY payloads differ");
-    let bad = tmp.path().join("bad.toml");
-    std::fs::write(&bad, stage("clock", "jitter_ps = -3")).unwrap();
-    let o = Command::cargo_bin("lidar-noise")
-        .unwrap()
-        .args(["--quiet", "run"])
-        .arg(&fixture)
-        .arg("-c")
-        .arg(&bad)
-        .arg("-o")
-        .arg(tmp.path().join("c"))
-        .assert()
-        .failure();
-    let msg = String::from_utf8_lossy(&o.get_output().stderr).to_string();
+    let msg = common::refused_run(tmp.path(), &stage("clock", "jitter_ps = -3"));
     assert!(msg.contains("noise[0].jitter_ps (line 4"), "{msg}");
-    assert!(
-        !tmp.path().join("c").exists()
-            || std::fs::read_dir(tmp.path().join("c"))
-                .unwrap()
-                .next()
-                .is_none()
-    );
 }
 
 #[test]

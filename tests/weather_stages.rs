@@ -6,7 +6,6 @@ mod common;
 
 use common::{config, err, run, stage};
 
-use assert_cmd::Command;
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::noise::{Fate, IdealPower, NoiseChain, NoisyFrame, NO_CAUSE};
@@ -295,31 +294,13 @@ fn zero_weather_is_the_identity() {
 #[test]
 fn zero_weather_writes_the_same_ply() {
     let tmp = tempfile::tempdir().unwrap();
-    let fixture = common::fixtures().join("crossroad.pcap");
     let rain = "seed = 5\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 7\n";
-    let a = tmp.path().join("a.toml");
-    std::fs::write(&a, rain).unwrap();
-    let b = tmp.path().join("b.toml");
-    std::fs::write(
-        &b,
-        format!("{rain}[[noise]]\ntype = \"fog\"\nvisibility_m = inf\n[[noise]]\ntype = \"snow\"\nrate_mm_h = 0.0\n"),
-    )
-    .unwrap();
-    for (cfg, out) in [(&a, "a"), (&b, "b")] {
-        Command::cargo_bin("lidar-noise")
-            .unwrap()
-            .args(["--quiet", "run"])
-            .arg(&fixture)
-            .arg("-c")
-            .arg(cfg)
-            .args(["--frames", "0", "--keep-dropped", "-o"])
-            .arg(tmp.path().join(out))
-            .assert()
-            .success();
-    }
-    let payload =
-        |dir: &str| common::ply_payload(&tmp.path().join(dir).join("crossroad/frame_00000.ply"));
-    let (pa, pb) = (payload("a"), payload("b"));
+    let weather = format!(
+        "{rain}[[noise]]\ntype = \"fog\"\nvisibility_m = inf\n[[noise]]\ntype = \"snow\"\nrate_mm_h = 0.0\n"
+    );
+    let ply = common::run_frame0(tmp.path(), &[rain, &weather], &["--keep-dropped"]);
+    let payload = |i: usize| common::ply_payload(&ply[i]);
+    let (pa, pb) = (payload(0), payload(1));
     assert!(!pa.is_empty());
     assert!(pa == pb, "PLY payloads differ");
 }

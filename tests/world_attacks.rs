@@ -639,24 +639,9 @@ fn zero_magnitude_stages_write_the_same_ply_and_the_world_config_runs_with_pcap_
     for (k, body) in ZERO {
         zero.push_str(&format!("[[noise]]\ntype = \"{k}\"\n{body}\n"));
     }
-    let zero_path = tmp.path().join("zero.toml");
-    std::fs::write(&zero_path, zero).unwrap();
-    let none = tmp.path().join("none.toml");
-    std::fs::write(&none, "seed = 5\n").unwrap();
-    for (cfg, out) in [(&zero_path, "a"), (&none, "b")] {
-        Command::cargo_bin("lidar-noise")
-            .unwrap()
-            .args(["--quiet", "run"])
-            .arg(&fixture)
-            .arg("-c")
-            .arg(cfg)
-            .args(["--frames", "0", "-o"])
-            .arg(tmp.path().join(out))
-            .assert()
-            .success();
-    }
-    let a = std::fs::read(tmp.path().join("a/crossroad/frame_00000.ply")).unwrap();
-    let b = std::fs::read(tmp.path().join("b/crossroad/frame_00000.ply")).unwrap();
+    let ply = common::run_frame0(tmp.path(), &[&zero, "seed = 5\n"], &[]);
+    let a = std::fs::read(&ply[0]).unwrap();
+    let b = std::fs::read(&ply[1]).unwrap();
     // Same schema (no fate/cause columns at zero magnitude) and the same points.
     let header = |x: &[u8]| -> Vec<String> {
         String::from_utf8_lossy(x)
@@ -667,10 +652,7 @@ fn zero_magnitude_stages_write_the_same_ply_and_the_world_config_runs_with_pcap_
             .collect()
     };
     assert_eq!(header(&a), header(&b));
-    let (pa, pb) = (
-        ply_payload(&tmp.path().join("a/crossroad/frame_00000.ply")),
-        ply_payload(&tmp.path().join("b/crossroad/frame_00000.ply")),
-    );
+    let (pa, pb) = (ply_payload(&ply[0]), ply_payload(&ply[1]));
     assert!(!pa.is_empty());
     assert!(pa == pb, "PLY payloads differ");
     // The world configuration runs and writes a noisy capture (spurious returns included).

@@ -125,3 +125,55 @@ pub fn ply_payload(path: &std::path::Path) -> Vec<u8> {
         + 11;
     bytes[end..].to_vec()
 }
+
+/// Runs `lidar-noise --quiet run` on frame 0 of the crossroad fixture once per
+/// configuration text in `configs` (plus `args`), each in its own folder under `dir`;
+/// returns the frame's PLY file of each run, in order.
+pub fn run_frame0(dir: &std::path::Path, configs: &[&str], args: &[&str]) -> Vec<PathBuf> {
+    configs
+        .iter()
+        .enumerate()
+        .map(|(i, text)| {
+            let cfg = dir.join(format!("config-{i}.toml"));
+            std::fs::write(&cfg, text).unwrap();
+            let out = dir.join(format!("out-{i}"));
+            assert_cmd::Command::cargo_bin("lidar-noise")
+                .unwrap()
+                .args(["--quiet", "run"])
+                .arg(fixtures().join("crossroad.pcap"))
+                .arg("-c")
+                .arg(&cfg)
+                .args(["--frames", "0"])
+                .args(args)
+                .arg("-o")
+                .arg(&out)
+                .assert()
+                .success();
+            out.join("crossroad/frame_00000.ply")
+        })
+        .collect()
+}
+
+/// Runs `lidar-noise --quiet run` on the crossroad fixture with the configuration text
+/// `config`, checks that it fails and leaves no output, and returns its error output.
+pub fn refused_run(dir: &std::path::Path, config: &str) -> String {
+    let cfg = dir.join("refused.toml");
+    std::fs::write(&cfg, config).unwrap();
+    let out = dir.join("refused");
+    let o = assert_cmd::Command::cargo_bin("lidar-noise")
+        .unwrap()
+        .args(["--quiet", "run"])
+        .arg(fixtures().join("crossroad.pcap"))
+        .arg("-c")
+        .arg(&cfg)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .failure();
+    assert!(
+        !out.exists() || std::fs::read_dir(&out).unwrap().next().is_none(),
+        "a refused run wrote into {}",
+        out.display()
+    );
+    String::from_utf8_lossy(&o.get_output().stderr).to_string()
+}

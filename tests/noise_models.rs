@@ -1,7 +1,8 @@
 //! Tests of the noise chain against the formulas of docs/noise-models.md, computed here
 //! independently of the code under test.
 
-use lidar_noise::calibration::Calibration;
+mod common;
+
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::noise::{Fate, NoiseChain, NoisyFrame};
@@ -9,26 +10,16 @@ use std::path::Path;
 
 /// A return of `laser` at `range` metres and `azimuth` degrees with the built-in table.
 fn ret(laser: u8, range: f32, azimuth: f32, intensity: u8) -> Return {
-    let cal = Calibration::builtin();
-    let el = cal.lasers[laser as usize].elevation_deg as f32;
-    let (se, ce) = el.to_radians().sin_cos();
-    let (sa, ca) = azimuth.to_radians().sin_cos();
-    Return {
-        x: range * ce * ca,
-        y: -range * ce * sa,
-        z: range * se,
+    // Firing 0 at time 0: packet 0, block 0.
+    common::beam_return(
+        laser,
         range,
         azimuth,
-        elevation: el,
-        time: 0.0,
-        packet: 0,
-        raw_distance: (range / 0.002) as u16,
         intensity,
-        laser,
-        ring: cal.rings()[laser as usize],
-        block: 0,
-        kind: ReturnKind::Strongest,
-    }
+        0,
+        0.0,
+        ReturnKind::Strongest,
+    )
 }
 
 fn frame(index: u32, returns: Vec<Return>) -> Frame {

@@ -362,7 +362,7 @@ fn run_capture(
     progress.set_message(source.to_string());
     // Per-frame reports are streamed to spool files and joined at the end, so memory
     // does not grow with the capture's length.
-    let mut spool = ReportSpool::new(dir)?;
+    let mut spool = ReportSpool::new(dir, &cluster_document(source), inputs)?;
     // --pcap-out: workers patch the return slots, frames are written as they complete.
     let pcap = if plan.pcap_out {
         use crate::writers::pcap::{NoisyCapture, Source};
@@ -418,7 +418,7 @@ fn run_capture(
     if spool.frames == 0 {
         return Err(no_frame_error(source, &plan.frames, &mut reader));
     }
-    let (summary, clusters) = documents(plan, source, &capture_summary, spool.totals.clone());
+    let (summary, _) = documents(plan, source, &capture_summary, spool.totals.clone());
     let frames = spool.frames;
     if let Some(p) = pcap {
         let name = p.file_name();
@@ -430,7 +430,7 @@ fn run_capture(
             ));
         }
     }
-    spool.finish(&summary, &clusters, dir, inputs)?;
+    spool.finish(&summary, dir, inputs)?;
     Ok(report_line(source, frames, &summary.totals))
 }
 
@@ -461,13 +461,18 @@ pub(super) fn documents<'a>(
         totals,
         frames: &[],
     };
-    let clusters = ClusterReport {
+    (summary, cluster_document(source))
+}
+
+/// The capture's clusters.json with an empty `frames` array: it depends on nothing but
+/// the capture's name, so a run writes its head first and streams the frames after it.
+fn cluster_document(source: &str) -> ClusterReport<'static> {
+    ClusterReport {
         tool: "lidar-noise",
         version: env!("CARGO_PKG_VERSION"),
         capture: source.to_string(),
         frames: &[],
-    };
-    (summary, clusters)
+    }
 }
 
 /// The line a run prints for a capture.
@@ -673,7 +678,9 @@ pub(crate) fn stream_frames<T: Send>(
 /// cluster CSV rows), with the totals kept as a running sum.
 struct ReportSpool {
     summary_frames: std::io::BufWriter<std::fs::File>,
-    cluster_frames: std::io::BufWriter<std::fs::File>,
+    /// clusters.json itself: its head needs nothing the frames decide, so the frames go
+    /// straight into the final file instead of a spool that is copied at the end.
+    clusters: crate::writers::atomic::AtomicFile,
     csv_rows: std::io::BufWriter<std::fs::File>,
     totals: Totals,
     frames: usize,
@@ -706,19 +713,22 @@ impl SpoolEntry {
 }
 
 const SPOOL_SUMMARY: &str = ".summary-frames.part";
-const SPOOL_CLUSTERS: &str = ".clusters-frames.part";
 const SPOOL_CSV: &str = ".clusters-csv.part";
 
 impl ReportSpool {
-    fn new(dir: &Path) -> Result<Self> {
+    fn new(dir: &Path, clusters: &ClusterReport, inputs: &[&Path]) -> Result<Self> {
         let open = |name: &str| -> Result<std::io::BufWriter<std::fs::File>> {
             let path = dir.join(name);
             let f = std::fs::File::create(&path).map_err(|e| crate::error::Error::io(&path, e))?;
             Ok(std::io::BufWriter::new(f))
         };
+        let mut cluster_file =
+            crate::writers::atomic::AtomicFile::create(&dir.join("clusters.json"), inputs)?;
+        cluster_file.write_all(document_stem(clusters)?.as_bytes())?;
+        cluster_file.write_all(b"[\n")?;
         Ok(ReportSpool {
             summary_frames: open(SPOOL_SUMMARY)?,
-            cluster_frames: open(SPOOL_CLUSTERS)?,
+            clusters: cluster_file,
             csv_rows: open(SPOOL_CSV)?,
             totals: Totals::default(),
             frames: 0,
@@ -730,8 +740,8 @@ impl ReportSpool {
         let sep: &[u8] = if self.frames == 0 { b"" } else { b",\n" };
         self.summary_frames.write_all(sep)?;
         self.summary_frames.write_all(&entry.summary)?;
-        self.cluster_frames.write_all(sep)?;
-        self.cluster_frames.write_all(&entry.clusters)?;
+        self.clusters.write_all(sep)?;
+        self.clusters.write_all(&entry.clusters)?;
         // Every table starts with the header line; the final file has it once.
         let csv = &entry.csv;
         let start = if self.frames == 0 {
@@ -747,25 +757,20 @@ impl ReportSpool {
         Ok(())
     }
 
-    /// Writes summary.json, clusters.json and clusters.csv from the spool files, with the
-    /// same bytes as serialising the whole documents at once.
-    fn finish<S: Serialize, C: Serialize>(
-        self,
-        summary: &S,
-        clusters: &C,
-        dir: &Path,
-        inputs: &[&Path],
-    ) -> Result<()> {
+    /// Writes summary.json from its spool file, closes clusters.json and renames
+    /// clusters.csv into place, with the same bytes as serialising the whole documents at
+    /// once.
+    fn finish<S: Serialize>(self, summary: &S, dir: &Path, inputs: &[&Path]) -> Result<()> {
         let ReportSpool {
             summary_frames,
-            cluster_frames,
+            mut clusters,
             csv_rows,
             ..
         } = self;
         // Flushed, not synced: the spool files are read back by this process (through the
         // page cache) and the results are renamed into place only after; an fsync here
         // cost more wall time than the whole report.
-        for w in [summary_frames, cluster_frames, csv_rows] {
+        for w in [summary_frames, csv_rows] {
             w.into_inner().map_err(|e| e.into_error())?;
         }
         join_document(
@@ -774,12 +779,8 @@ impl ReportSpool {
             &dir.join("summary.json"),
             inputs,
         )?;
-        join_document(
-            clusters,
-            &dir.join(SPOOL_CLUSTERS),
-            &dir.join("clusters.json"),
-            inputs,
-        )?;
+        clusters.write_all(DOCUMENT_END)?;
+        clusters.commit()?;
         std::fs::rename(dir.join(SPOOL_CSV), dir.join("clusters.csv"))
             .with_context(|| format!("{}: cannot write", dir.join("clusters.csv").display()))?;
         Ok(())
@@ -822,18 +823,29 @@ pub(super) fn join_with<T: Serialize>(
     inputs: &[&Path],
     body: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>,
 ) -> Result<()> {
-    let head = serde_json::to_string_pretty(doc)?;
-    let Some(stem) = head.strip_suffix("[]\n}") else {
-        anyhow::bail!("internal: the report does not end with its frames array");
-    };
+    let stem = document_stem(doc)?;
     crate::writers::atomic::write_atomically(path, inputs, |out| {
         out.write_all(stem.as_bytes())?;
         out.write_all(b"[\n")?;
         body(out)?;
-        out.write_all(b"\n  ]\n}\n")
+        out.write_all(DOCUMENT_END)
     })?;
     Ok(())
 }
+
+/// `doc` (whose last field is an empty `frames` array) pretty-printed up to that array's
+/// opening bracket, exclusive.
+fn document_stem<T: Serialize>(doc: &T) -> Result<String> {
+    let mut head = serde_json::to_string_pretty(doc)?;
+    let Some(len) = head.strip_suffix("[]\n}").map(str::len) else {
+        anyhow::bail!("internal: the report does not end with its frames array");
+    };
+    head.truncate(len);
+    Ok(head)
+}
+
+/// What follows a document's last frame: the frames array and the document closed.
+const DOCUMENT_END: &[u8] = b"\n  ]\n}\n";
 
 fn write_ply(
     plan: &Plan,

@@ -192,3 +192,33 @@ fn every_return_has_one_fate_and_cluster_counts_add_up_under_all_four_configs() 
         eprintln!("{name}: {objects} clusters in the last frame, {found_total} objects found over the frames");
     }
 }
+
+#[test]
+fn a_spare_core_changes_no_result() {
+    // `process_with(_, true)` computes the noise summary on a second thread (the last
+    // frames of a run); everything it returns must equal the one-thread path.
+    for name in ["paper", "clear"] {
+        let config = config(name);
+        let pipeline = Pipeline::new(&config);
+        let reader = FrameReader::open(
+            &common::fixtures().join("crossroad.pcap"),
+            &DecoderOptions::default(),
+        )
+        .unwrap();
+        for frame in reader {
+            let frame = frame.unwrap();
+            let (a, b) = (
+                pipeline.process(frame.clone()).unwrap(),
+                pipeline.process_with(frame, true).unwrap(),
+            );
+            assert_eq!(a.noise, b.noise, "{name} frame {}", a.noisy.index);
+            assert_eq!(a.counts, b.counts);
+            assert_eq!(a.survivors, b.survivors);
+            assert_eq!(
+                (&a.kept, &a.ground, &a.labels),
+                (&b.kept, &b.ground, &b.labels)
+            );
+            assert_eq!(a.clusters, b.clusters);
+        }
+    }
+}

@@ -381,12 +381,12 @@ fn run_capture(
     } else {
         None
     };
-    let work = |f: Frame| -> Result<(SpoolEntry, Vec<crate::frame::Return>)> {
-        let result = plan.pipeline.process(f)?;
+    let work = |f: Frame, spare: bool| -> Result<(SpoolEntry, Vec<crate::frame::Return>)> {
+        let result = plan.pipeline.process_with(f, spare)?;
         if let Some(p) = &pcap {
             p.encode_frame(&result.noisy);
         }
-        frame_outputs(plan, result, source, dir, inputs)
+        frame_outputs(plan, result, source, dir, inputs, spare)
     };
     stream_frames(
         &mut reader,
@@ -545,24 +545,38 @@ pub(super) fn no_frame_error(
 /// report pieces and the frame's return buffer (for the reader to reuse).
 pub(super) fn frame_outputs(
     plan: &Plan,
-    result: FrameResult,
+    mut result: FrameResult,
     source: &str,
     dir: &Path,
     inputs: &[&Path],
+    spare_core: bool,
 ) -> Result<(SpoolEntry, Vec<crate::frame::Return>)> {
-    if plan.ply {
-        write_ply(plan, &result, source, dir, inputs)?;
-    }
-    if plan.linkage {
-        write_linkage(plan, &result, dir, inputs)?;
-    }
-    let report = FrameReport::of(&result);
     let clusters = FrameClusters {
         index: result.noisy.index,
-        clusters: result.clusters,
+        clusters: std::mem::take(&mut result.clusters),
     };
+    let entry = std::thread::scope(|scope| -> Result<SpoolEntry> {
+        let result = &result;
+        // With a spare core (the last frames of a capture), the frame file is written on a
+        // second thread beside the reports; errors still come in the same order.
+        let ply = (plan.ply && spare_core)
+            .then(|| scope.spawn(|| write_ply(plan, result, source, dir, inputs)));
+        if plan.ply && !spare_core {
+            write_ply(plan, result, source, dir, inputs)?;
+        }
+        let reports = (|| {
+            if plan.linkage {
+                write_linkage(plan, result, dir, inputs)?;
+            }
+            SpoolEntry::of(FrameReport::of(result), &clusters)
+        })();
+        if let Some(h) = ply {
+            h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))?;
+        }
+        reports
+    })?;
     // The frame's buffer goes back to the reader for the next frame.
-    Ok((SpoolEntry::of(report, &clusters)?, result.noisy.clean))
+    Ok((entry, result.noisy.clean))
 }
 
 /// Runs `work` on every frame in `frames` as a bounded pipeline: the calling thread
@@ -577,12 +591,12 @@ pub(super) fn frame_outputs(
 pub(crate) fn stream_frames<T: Send>(
     reader: &mut FrameReader,
     frames: &RangeInclusive<u32>,
-    work: impl Fn(Frame) -> Result<T> + Sync,
+    work: impl Fn(Frame, bool) -> Result<T> + Sync,
     mut done: impl FnMut(T, &mut FrameReader) -> Result<()>,
 ) -> Result<()> {
     use std::collections::BTreeMap;
     use std::panic::AssertUnwindSafe;
-    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
     use std::sync::{mpsc, Mutex};
     let workers = crate::options::worker_threads();
     let window = 2 * workers + 1;
@@ -593,19 +607,27 @@ pub(crate) fn stream_frames<T: Send>(
     let (result_tx, result_rx) = mpsc::channel::<(usize, Outcome<T>)>();
     // Set on the first error: queued frames are then skipped, not processed.
     let stop = AtomicBool::new(false);
+    // Frames sent and not yet taken by a worker, and whether the reader has no more: a
+    // worker that takes the last queued frame of an exhausted reader has a core to spare
+    // (the other workers finish and find nothing), and `work` may use it.
+    let queued = AtomicUsize::new(0);
+    let exhausted = AtomicBool::new(false);
     std::thread::scope(|scope| -> Result<()> {
         for _ in 0..workers {
             let (frame_rx, result_tx, work, stop) = (&frame_rx, result_tx.clone(), &work, &stop);
+            let (queued, exhausted) = (&queued, &exhausted);
             scope.spawn(move || loop {
                 // The lock is held only while taking one frame off the queue.
                 let next = frame_rx.lock().unwrap_or_else(|e| e.into_inner()).recv();
                 let Ok((seq, frame)) = next else {
                     return;
                 };
+                let left = queued.fetch_sub(1, Ordering::SeqCst) - 1;
+                let spare = left == 0 && exhausted.load(Ordering::SeqCst);
                 if stop.load(Ordering::Relaxed) {
                     continue;
                 }
-                let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| work(frame)));
+                let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| work(frame, spare)));
                 if result_tx.send((seq, outcome)).is_err() {
                     return;
                 }
@@ -639,10 +661,14 @@ pub(crate) fn stream_frames<T: Send>(
                         Some(frame) => {
                             let tx = frame_tx.as_ref().expect("checked above");
                             // The workers only leave once the queue is closed.
+                            queued.fetch_add(1, Ordering::SeqCst);
                             tx.send((sent, frame)).expect("workers are running");
                             sent += 1;
                         }
-                        None => frame_tx = None,
+                        None => {
+                            exhausted.store(true, Ordering::SeqCst);
+                            frame_tx = None;
+                        }
                     },
                     Err(e) => {
                         decode_error = Some(e.into());

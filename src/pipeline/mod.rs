@@ -107,7 +107,38 @@ impl Pipeline {
 
     /// Runs every stage on one frame.
     pub fn process(&self, frame: Frame) -> Result<FrameResult> {
+        self.process_with(frame, false)
+    }
+
+    /// Runs every stage on one frame; with `spare_core`, the frame's noise summary is
+    /// computed on a second thread beside ground removal and clustering (same results).
+    pub fn process_with(&self, frame: Frame, spare_core: bool) -> Result<FrameResult> {
         let noisy = self.chain.process_owned(frame);
+        // The summary reads the noisy frame only: on the last frames of a capture, when the
+        // other workers have nothing left to do, it runs beside the rest.
+        std::thread::scope(|scope| {
+            let summary = spare_core.then(|| scope.spawn(|| noisy.summary()));
+            let rest = self.segment(&noisy)?;
+            let noise = match summary {
+                Some(h) => h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)),
+                None => noisy.summary(),
+            };
+            Ok((rest, noise))
+        })
+        .map(|(rest, noise)| FrameResult {
+            noisy,
+            survivors: rest.survivors,
+            kept: rest.kept,
+            ground: rest.ground,
+            labels: rest.labels,
+            clusters: rest.clusters,
+            counts: rest.counts,
+            noise,
+        })
+    }
+
+    /// Survivors, ground, clusters and counts of a noisy frame.
+    fn segment(&self, noisy: &NoisyFrame) -> Result<Segmented> {
         let survivors = noisy.survivors();
         let kept = noisy.kept_indices();
         let mut rng = stage_rng(self.seed, noisy.index, self.ground_tag);
@@ -136,16 +167,23 @@ impl Pipeline {
             noise_points: clustering.n_noise_points as u64,
             cluster_points: (non_ground.len() - clustering.n_noise_points) as u64,
         };
-        let noise = noisy.summary();
-        Ok(FrameResult {
-            noisy,
+        Ok(Segmented {
             survivors,
             kept,
             ground,
             labels,
             clusters,
             counts,
-            noise,
         })
     }
+}
+
+/// A [`FrameResult`] but for the noise summary.
+struct Segmented {
+    survivors: Vec<Return>,
+    kept: Vec<u32>,
+    ground: Vec<bool>,
+    labels: Vec<i32>,
+    clusters: Vec<ClusterInfo>,
+    counts: StageCounts,
 }

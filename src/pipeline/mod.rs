@@ -143,7 +143,9 @@ impl Pipeline {
         let kept = noisy.kept_indices();
         let mut rng = stage_rng(self.seed, noisy.index, self.ground_tag);
         let ground = ground::segment(&survivors, &self.ground, &mut rng);
-        let non_ground: Vec<usize> = (0..survivors.len()).filter(|&i| !ground[i]).collect();
+        // Sized up front: a filtered collect would regrow (and copy) about 14 times.
+        let mut non_ground: Vec<usize> = Vec::with_capacity(survivors.len());
+        non_ground.extend((0..survivors.len()).filter(|&i| !ground[i]));
         let points: Vec<[f32; 3]> = non_ground
             .iter()
             .map(|&i| [survivors[i].x, survivors[i].y, survivors[i].z])

@@ -511,7 +511,7 @@ mod tests {
                 };
                 let rn = match pick {
                     0 => range + rng.random_range(-50.0..50.0),
-                    1 => range + 2.147_483_648,
+                    1 => range + 2.147_483_5,
                     2 => 1.0e6,
                     3 => -range,
                     _ => range + rng.random_range(-0.05..0.05),

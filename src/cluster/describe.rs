@@ -111,13 +111,45 @@ pub fn describe(returns: &[Return], labels: &[i32]) -> Result<Vec<ClusterInfo>> 
             labels.len()
         )));
     }
+    describe_members(labels, |i| &returns[i])
+}
+
+/// [`describe`] of the returns `returns[subset[i]]` with labels `labels[i]`, without
+/// copying them out first: the pipeline labels only the non-ground survivors, and the
+/// copy of those 48-byte returns cost more than the lookups.
+pub fn describe_subset(
+    returns: &[Return],
+    subset: &[u32],
+    labels: &[i32],
+) -> Result<Vec<ClusterInfo>> {
+    if subset.len() != labels.len() {
+        return Err(Error::Invalid(format!(
+            "describe clusters: {} returns but {} labels",
+            subset.len(),
+            labels.len()
+        )));
+    }
+    if let Some(&bad) = subset.iter().find(|&&i| i as usize >= returns.len()) {
+        return Err(Error::Invalid(format!(
+            "describe clusters: return {bad} of {}",
+            returns.len()
+        )));
+    }
+    describe_members(labels, |i| &returns[subset[i] as usize])
+}
+
+/// Groups the returns `member(i)` by `labels[i]` and summarises each group.
+fn describe_members<'a>(
+    labels: &[i32],
+    member: impl Fn(usize) -> &'a Return,
+) -> Result<Vec<ClusterInfo>> {
     let max_label = labels.iter().copied().max().unwrap_or(-1);
     if max_label < 0 {
         return Ok(Vec::new());
     }
     // Dense labels (the clustering numbers its clusters 0..k): a counting sort by label,
     // stable, so each cluster's members keep input order as the map below keeps them.
-    if max_label as usize <= 2 * returns.len() + 64 {
+    if max_label as usize <= 2 * labels.len() + 64 {
         let k = max_label as usize + 1;
         let mut start = vec![0u32; k + 1];
         for &l in labels {
@@ -129,11 +161,13 @@ pub fn describe(returns: &[Return], labels: &[i32]) -> Result<Vec<ClusterInfo>> 
             start[i + 1] += start[i];
         }
         let mut next = start[..k].to_vec();
-        let mut members: Vec<&Return> = vec![&returns[0]; start[k] as usize];
-        for (r, &l) in returns.iter().zip(labels) {
+        // Some label is >= 0, so there is a member to fill the slots with first.
+        let first = labels.iter().position(|&l| l >= 0).expect("max label >= 0");
+        let mut members: Vec<&Return> = vec![member(first); start[k] as usize];
+        for (i, &l) in labels.iter().enumerate() {
             if l >= 0 {
                 let slot = &mut next[l as usize];
-                members[*slot as usize] = r;
+                members[*slot as usize] = member(i);
                 *slot += 1;
             }
         }
@@ -146,9 +180,9 @@ pub fn describe(returns: &[Return], labels: &[i32]) -> Result<Vec<ClusterInfo>> 
             .collect());
     }
     let mut groups: BTreeMap<i32, Vec<&Return>> = BTreeMap::new();
-    for (r, &l) in returns.iter().zip(labels) {
+    for (i, &l) in labels.iter().enumerate() {
         if l >= 0 {
-            groups.entry(l).or_default().push(r);
+            groups.entry(l).or_default().push(member(i));
         }
     }
     Ok(groups

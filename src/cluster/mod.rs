@@ -27,7 +27,7 @@ mod describe;
 mod grid;
 mod tree;
 
-pub use describe::{describe, ClusterInfo, ObjectRule, OrientedBox};
+pub use describe::{describe, describe_subset, ClusterInfo, ObjectRule, OrientedBox};
 pub use tree::{cut_tree, inconsistent, linkage, write_linkage_csv, TreeCut};
 
 use crate::error::{Error, Result};

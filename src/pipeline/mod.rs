@@ -140,23 +140,39 @@ impl Pipeline {
     /// Survivors, ground, clusters and counts of a noisy frame.
     fn segment(&self, noisy: &NoisyFrame) -> Result<Segmented> {
         let survivors = noisy.survivors();
-        let kept = noisy.kept_indices();
+        // Same indices as `noisy.kept_indices()`. The index buffers below are filled by
+        // branch-free compaction (write every entry, advance past the wanted ones) into
+        // buffers sized once: a filtered `collect` grows its buffer step by step.
+        let mut kept = vec![0u32; noisy.fate.len()];
+        let mut k = 0;
+        for (i, fate) in noisy.fate.iter().enumerate() {
+            kept[k] = i as u32;
+            k += usize::from(fate.is_alive());
+        }
+        kept.truncate(k);
+        debug_assert_eq!(kept.len(), survivors.len());
         let mut rng = stage_rng(self.seed, noisy.index, self.ground_tag);
         let ground = ground::segment(&survivors, &self.ground, &mut rng);
-        // Sized up front: a filtered collect would regrow (and copy) about 14 times.
-        let mut non_ground: Vec<usize> = Vec::with_capacity(survivors.len());
-        non_ground.extend((0..survivors.len()).filter(|&i| !ground[i]));
-        let points: Vec<[f32; 3]> = non_ground
-            .iter()
-            .map(|&i| [survivors[i].x, survivors[i].y, survivors[i].z])
-            .collect();
+        // The non-ground survivors by index, and their points for the clustering, in one
+        // pass; the clusters are described from `survivors` through the same indices
+        // instead of a copy of the returns.
+        let mut non_ground = vec![0u32; survivors.len()];
+        let mut points = vec![[0f32; 3]; survivors.len()];
+        let mut k = 0;
+        for (i, (s, &g)) in survivors.iter().zip(&ground).enumerate() {
+            non_ground[k] = i as u32;
+            points[k] = [s.x, s.y, s.z];
+            k += usize::from(!g);
+        }
+        non_ground.truncate(k);
+        points.truncate(k);
         let clustering = cluster::cluster(&points, &self.cluster)?;
+        drop(points);
         let mut labels = vec![-1i32; survivors.len()];
         for (&i, &label) in non_ground.iter().zip(&clustering.labels) {
-            labels[i] = label;
+            labels[i as usize] = label;
         }
-        let object_returns: Vec<Return> = non_ground.iter().map(|&i| survivors[i]).collect();
-        let mut clusters = cluster::describe(&object_returns, &clustering.labels)?;
+        let mut clusters = cluster::describe_subset(&survivors, &non_ground, &clustering.labels)?;
         for c in &mut clusters {
             c.object = self.objects.is_object(c, self.cluster.min_points);
         }

@@ -160,21 +160,18 @@ pub struct Layout {
     /// Maximal runs of consecutive returns with the same packet and block (firings), as
     /// ranges of return indices `[start, end)`, in order.
     pub firings: Vec<[u32; 2]>,
+    /// Smallest and largest clean firing time, NaN ignored (`[inf, -inf]` when there is
+    /// none): lets stages whose factor is monotone in time table it for the frame.
+    pub time_range: [f64; 2],
 }
 
 impl Layout {
     /// The columns and firings of `clean`.
     pub fn of(clean: &[Return]) -> Layout {
         let n = clean.len();
-        let mut l = Layout {
-            laser: vec![0; n],
-            intensity: vec![0; n],
-            time: vec![0.0; n],
-            azimuth: vec![0.0; n],
-            firings: Vec::with_capacity(n / 32 + 1),
-        };
+        let mut l = Layout::zeroed(n);
         // One pass over the returns, written through iterators (no per-return `push`);
-        // a firing starts where packet or block changes (its end is set below).
+        // a firing starts where packet or block changes (its end is set in `finish`).
         let mut key = None;
         for (i, ((((r, laser), intensity), time), azimuth)) in clean
             .iter()
@@ -194,10 +191,50 @@ impl Layout {
                 l.firings.push([i as u32, n as u32]);
             }
         }
+        l.finish();
+        l
+    }
+
+    /// Columns of `n` zeros and no firing yet.
+    fn zeroed(n: usize) -> Layout {
+        Layout {
+            laser: vec![0; n],
+            intensity: vec![0; n],
+            time: vec![0.0; n],
+            azimuth: vec![0.0; n],
+            firings: Vec::with_capacity(n / 32 + 1),
+            time_range: [f64::INFINITY, f64::NEG_INFINITY],
+        }
+    }
+
+    /// Sets the ends of the firings (each ends where the next starts; the last at `n`,
+    /// as pushed) and the time range, once the columns are filled.
+    fn finish(&mut self) {
+        let l = self;
         for k in 1..l.firings.len() {
             l.firings[k - 1][1] = l.firings[k][0];
         }
-        l
+        // A pass of its own over the 400 kB column (in the pass over the returns two running
+        // extremes slowed the whole pass down). Four running pairs, so successive
+        // comparisons do not wait on each other; a NaN time compares false and is left
+        // out (the selects are single min/max instructions).
+        let mut lo = [f64::INFINITY; 4];
+        let mut hi = [f64::NEG_INFINITY; 4];
+        let mut quads = l.time.chunks_exact(4);
+        for q in &mut quads {
+            for k in 0..4 {
+                lo[k] = if q[k] < lo[k] { q[k] } else { lo[k] };
+                hi[k] = if q[k] > hi[k] { q[k] } else { hi[k] };
+            }
+        }
+        for &t in quads.remainder() {
+            lo[0] = if t < lo[0] { t } else { lo[0] };
+            hi[0] = if t > hi[0] { t } else { hi[0] };
+        }
+        l.time_range = [
+            lo.into_iter().fold(f64::INFINITY, f64::min),
+            hi.into_iter().fold(f64::NEG_INFINITY, f64::max),
+        ];
     }
 
     /// Number of returns covered.
@@ -248,6 +285,48 @@ impl NoisyFrame {
             .iter()
             .map(|r| ideal.power(r.intensity, r.range))
             .collect();
+        NoisyFrame::of_parts(index, clean, range, power, None)
+    }
+
+    /// Same as [`NoisyFrame::new`] with its [`Layout`] built in the same pass over the
+    /// returns (for chains whose stages read it: a 50k-return frame's returns are
+    /// 2.4 MB, and the three passes of `new` and `Layout::of` each streamed them).
+    pub fn with_layout(index: u32, clean: Vec<Return>, ideal: &IdealPower) -> Self {
+        let n = clean.len();
+        let mut range = vec![0.0f32; n];
+        let mut power = vec![0.0f64; n];
+        let mut l = Layout::zeroed(n);
+        {
+            let (rs, ps) = (&mut range[..n], &mut power[..n]);
+            let (ls, is) = (&mut l.laser[..n], &mut l.intensity[..n]);
+            let (ts, az) = (&mut l.time[..n], &mut l.azimuth[..n]);
+            let mut key = None;
+            // The same values as `new` and `Layout::of`.
+            for (i, r) in clean.iter().enumerate() {
+                rs[i] = r.range;
+                ps[i] = ideal.power(r.intensity, r.range);
+                ls[i] = r.laser % 32;
+                is[i] = r.intensity;
+                ts[i] = r.time;
+                az[i] = r.azimuth;
+                let k = (r.packet, r.block);
+                if key != Some(k) {
+                    key = Some(k);
+                    l.firings.push([i as u32, n as u32]);
+                }
+            }
+        }
+        l.finish();
+        NoisyFrame::of_parts(index, clean, range, power, Some(Arc::new(l)))
+    }
+
+    fn of_parts(
+        index: u32,
+        clean: Vec<Return>,
+        range: Vec<f32>,
+        power: Vec<f64>,
+        layout: Option<Arc<Layout>>,
+    ) -> Self {
         let n = clean.len();
         NoisyFrame {
             index,
@@ -264,7 +343,7 @@ impl NoisyFrame {
             slots: None,
             power_model: None,
             moved: Moved::default(),
-            layout: None,
+            layout,
         }
     }
 
@@ -510,6 +589,11 @@ pub trait NoiseStage: Send + Sync + std::fmt::Debug {
     fn proposes_echoes(&self) -> bool {
         false
     }
+    /// True when the stage reads the frame's [`Layout`] ([`NoisyFrame::layout`]): the
+    /// chain then builds it in the pass that starts the frame.
+    fn uses_layout(&self) -> bool {
+        false
+    }
 }
 
 /// Frame index reserved for per-unit draws: the unit stream of a stage is
@@ -554,6 +638,8 @@ pub struct NoiseChain {
     stages: Vec<Arc<dyn NoiseStage>>,
     tags: Vec<u32>,
     detection: crate::config::DetectionConfig,
+    /// Some stage reads the frame's layout.
+    layout: bool,
 }
 
 impl NoiseChain {
@@ -568,8 +654,9 @@ impl NoiseChain {
                 let mut unit = stage_rng(config.seed, UNIT_FRAME, tag);
                 stage.with_unit_draws(&mut unit).unwrap_or(stage)
             })
-            .collect();
+            .collect::<Vec<Arc<dyn NoiseStage>>>();
         NoiseChain {
+            layout: stages.iter().any(|s| s.uses_layout()),
             seed: config.seed,
             power: Arc::new(IdealPower::new(
                 &config.power,
@@ -609,7 +696,11 @@ impl NoiseChain {
 
     /// Runs the chain on returns of the frame with capture index `index`.
     pub fn process_returns(&self, index: u32, returns: Vec<Return>) -> NoisyFrame {
-        let mut noisy = NoisyFrame::new(index, returns, &self.power);
+        let mut noisy = if self.layout {
+            NoisyFrame::with_layout(index, returns, &self.power)
+        } else {
+            NoisyFrame::new(index, returns, &self.power)
+        };
         noisy.threshold = self.detection.min_power;
         noisy.min_range = self.detection.min_range_m;
         noisy.power_model = Some(Arc::clone(&self.power));

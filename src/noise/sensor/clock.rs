@@ -39,6 +39,9 @@ impl NoiseStage for Clock {
     fn kind(&self) -> &'static str {
         NAME
     }
+    fn uses_layout(&self) -> bool {
+        true
+    }
     fn describe(&self) -> String {
         format!(
             "ToF bias {} ns ({:.4} m), jitter {} ps ({:.4} m), drift {} ppm, time offset {} us",

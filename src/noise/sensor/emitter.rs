@@ -36,6 +36,9 @@ impl NoiseStage for Emitter {
     fn kind(&self) -> &'static str {
         NAME
     }
+    fn uses_layout(&self) -> bool {
+        true
+    }
     fn describe(&self) -> String {
         format!(
             "emitted power x {} minus {} per hour of capture time",
@@ -54,6 +57,17 @@ impl NoiseStage for Emitter {
         }
         // Times and intensities from the frame's compact columns (not the 48-byte returns).
         let lay = frame.layout();
+        let factor = |t: f64| {
+            let h = t / 3600.0;
+            (self.power_factor * (1.0 - self.drift_per_hour * h)).max(0.0)
+        };
+        // The intensity bytes of every factor the frame's times give, tabled once per
+        // frame (see `ByteTable`): f is monotone in t (a division by a positive constant,
+        // a product with a constant, a subtraction from 1, a product with
+        // power_factor >= 0 and max(0), each monotone), so the factor of every time in
+        // the frame's range lies between the factors of its two ends.
+        let [t0, t1] = lay.time_range;
+        let table = ByteTable::between(factor(t0), factor(t1));
         let NoisyFrame {
             power, fate, moved, ..
         } = frame;
@@ -69,20 +83,63 @@ impl NoiseStage for Emitter {
             // The factors of a chunk first, free of branches (the divisions vectorise).
             let f = &mut f[..times.len()];
             for (f, &t) in f.iter_mut().zip(times) {
-                let h = t / 3600.0;
-                *f = (self.power_factor * (1.0 - self.drift_per_hour * h)).max(0.0);
+                *f = factor(t);
             }
-            for (((p, v), fate), &f) in power
-                .iter_mut()
-                .zip(inten.iter_mut())
-                .zip(fate)
-                .zip(f.iter())
-            {
+            // Branch free, so it vectorises: dead returns keep their power.
+            for ((p, fate), &f) in power.iter_mut().zip(fate).zip(f.iter()) {
+                *p = if fate.is_alive() { *p * f } else { *p };
+            }
+            for ((v, fate), &f) in inten.iter_mut().zip(fate).zip(f.iter()) {
                 if fate.is_alive() {
-                    *p *= f;
-                    *v = scale_byte(*v, f);
+                    *v = table.scale(*v, f);
                 }
             }
+        }
+    }
+}
+
+/// `scale_byte(v, f)` for every byte v and every factor f in a range `[lo, hi]`, where
+/// that is one value: `scale_byte(v, f)` is monotone in f (the product v f is, and so
+/// is rounding it), so where the two ends give the same byte every f between them does;
+/// the other bytes (a half-integer lies between v lo and v hi) are computed per return.
+struct ByteTable {
+    lo: f64,
+    hi: f64,
+    /// The byte, or `AMBIGUOUS`.
+    bytes: [u16; 256],
+}
+
+const AMBIGUOUS: u16 = 256;
+
+impl ByteTable {
+    /// The table of the factors between `a` and `b` (in either order); empty (every
+    /// byte computed) unless both are finite.
+    fn between(a: f64, b: f64) -> ByteTable {
+        let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
+        let mut t = ByteTable {
+            lo,
+            hi,
+            bytes: [AMBIGUOUS; 256],
+        };
+        if lo.is_finite() && hi.is_finite() && lo >= 0.0 {
+            for (v, e) in t.bytes.iter_mut().enumerate() {
+                let (x, y) = (scale_byte(v as u8, lo), scale_byte(v as u8, hi));
+                if x == y {
+                    *e = u16::from(x);
+                }
+            }
+        }
+        t
+    }
+
+    /// `scale_byte(v, f)`, from the table when f is in its range.
+    #[inline]
+    fn scale(&self, v: u8, f: f64) -> u8 {
+        let e = self.bytes[usize::from(v)];
+        if e != AMBIGUOUS && f >= self.lo && f <= self.hi {
+            e as u8
+        } else {
+            scale_byte(v, f)
         }
     }
 }

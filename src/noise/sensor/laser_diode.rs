@@ -47,6 +47,9 @@ impl NoiseStage for LaserDiode {
     fn kind(&self) -> &'static str {
         NAME
     }
+    fn uses_layout(&self) -> bool {
+        true
+    }
     fn describe(&self) -> String {
         format!(
             "per-laser power lognormal SD {}, range bias SD {} m, elevation SD {} deg, azimuth SD {} deg (once per seed)",
@@ -144,6 +147,28 @@ impl NoiseStage for LaserDiode {
                 }
             };
             let inten = moved.intensity.get_or_insert_with(|| lay.intensity.clone());
+            let power_and_bytes = |p: &mut f64, v: &mut u8, l: usize| {
+                *p *= gain[l];
+                *v = bytes[l][usize::from(*v)];
+            };
+            if biases {
+                // Power, intensity and range in one pass over fates and laser ids (the
+                // fields are independent, so the order of their updates is free).
+                for ((((p, v), r), &l), f) in power
+                    .iter_mut()
+                    .zip(inten.iter_mut())
+                    .zip(range.iter_mut())
+                    .zip(lasers)
+                    .zip(fate.iter())
+                {
+                    if f.is_alive() {
+                        let l = usize::from(l & 31);
+                        power_and_bytes(p, v, l);
+                        *r = (f64::from(*r) + bias[l]) as f32;
+                    }
+                }
+                return;
+            }
             for (((p, v), &l), f) in power
                 .iter_mut()
                 .zip(inten.iter_mut())
@@ -151,9 +176,7 @@ impl NoiseStage for LaserDiode {
                 .zip(fate.iter())
             {
                 if f.is_alive() {
-                    let l = usize::from(l & 31);
-                    *p *= gain[l];
-                    *v = bytes[l][usize::from(*v)];
+                    power_and_bytes(p, v, usize::from(l & 31));
                 }
             }
         }

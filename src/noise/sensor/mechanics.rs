@@ -46,6 +46,9 @@ impl NoiseStage for Mechanics {
     fn kind(&self) -> &'static str {
         NAME
     }
+    fn uses_layout(&self) -> bool {
+        true
+    }
     fn describe(&self) -> String {
         format!(
             "encoder offset {} deg, eccentricity {} deg, firing jitter SD {} deg, axis wobble {} deg, spin-rate SD {}",

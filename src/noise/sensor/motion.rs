@@ -45,6 +45,9 @@ impl NoiseStage for Motion {
     fn kind(&self) -> &'static str {
         NAME
     }
+    fn uses_layout(&self) -> bool {
+        true
+    }
     fn describe(&self) -> String {
         format!(
             "ego speed {} m/s, yaw rate {} deg/s (t_ref = frame {}), vibration {} deg at {} Hz",
@@ -95,17 +98,23 @@ impl NoiseStage for Motion {
         let lay = frame.layout();
         let mut firings = Vec::with_capacity(lay.firings.len());
         let mut index = Vec::with_capacity(n);
+        // The pose is a function of the firing's time alone: consecutive firings with the
+        // same time (frames whose returns carry no firing time) share one entry.
+        let mut last_dt = None;
         for &[start, end] in &lay.firings {
             let dt = lay.time[start as usize] - t_ref;
-            let roll = vib * (w * dt + phi[0]).sin();
-            let pitch = vib * (w * dt + phi[1]).sin();
-            let ego = Pose::from_small_rpy(0.0, 0.0, -omega * dt, [0.0; 3]);
-            let rot = Pose::from_small_rpy(roll, pitch, 0.0, [0.0; 3]).then_after(&ego);
-            let velocity = [0, 1, 2].map(|k| -self.speed_mps * rot.r[k][0]);
-            firings.push(FiringPose {
-                pose: rot,
-                velocity,
-            });
+            if last_dt != Some(dt.to_bits()) {
+                last_dt = Some(dt.to_bits());
+                let roll = vib * (w * dt + phi[0]).sin();
+                let pitch = vib * (w * dt + phi[1]).sin();
+                let ego = Pose::from_small_rpy(0.0, 0.0, -omega * dt, [0.0; 3]);
+                let rot = Pose::from_small_rpy(roll, pitch, 0.0, [0.0; 3]).then_after(&ego);
+                let velocity = [0, 1, 2].map(|k| -self.speed_mps * rot.r[k][0]);
+                firings.push(FiringPose {
+                    pose: rot,
+                    velocity,
+                });
+            }
             index.resize(end as usize, firings.len() as u32 - 1);
         }
         let poses = Poses {

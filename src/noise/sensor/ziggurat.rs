@@ -27,6 +27,77 @@ struct Tables {
     w: [f64; 128],
     /// Density exp(-x^2/2) at the layers' edges.
     f: [f64; 128],
+    /// Bounds of the density over each layer's wedge (see [`Wedge`]).
+    wedge: [Wedge; 128],
+}
+
+/// Lines bounding the density g(a) = exp(-a^2/2) over the wedge of one layer,
+/// a in [x_{i-1}, x_i], so that most wedge tests are decided without `exp`.
+///
+/// Where g is convex (a >= 1) its chord through the layer's edges lies above it on the
+/// layer and its tangent at the middle below it everywhere; where g is concave (a <= 1)
+/// the other way round. A point above the upper line or below the lower one by more
+/// than [`WEDGE_EPS`] is decided as the test against `exp` decides it; the rest (the
+/// thin band between the lines, and the layer that holds a = 1) call `exp`.
+#[derive(Clone, Copy, Debug, Default)]
+struct Wedge {
+    /// 1: convex on the layer, -1: concave, 0: neither (always `exp`).
+    shape: i8,
+    /// Outer edge x_i and the density there.
+    x_hi: f64,
+    f_hi: f64,
+    /// Slope of the chord.
+    chord: f64,
+    /// Middle of the layer, density there and its derivative.
+    mid: f64,
+    g_mid: f64,
+    slope_mid: f64,
+}
+
+/// Margin of the line tests. It covers every rounding: the values compared are at most
+/// 1, so the libm `exp` (under 1 ulp), the rounding of -x^2/2, the table values and the
+/// line evaluations are each off by about 1e-15 at most; and x reaches below the inner
+/// edge x_{i-1} by at most one step w_i < 2.1e-7 (the acceptance bound k_i is
+/// truncated), where the chord, extended, is off the density's side by at most
+/// 2.1e-7 * (|g'| + |chord slope|) < 2.1e-7 * 2.
+const WEDGE_EPS: f64 = 1e-6;
+
+impl Wedge {
+    fn new(x_lo: f64, x_hi: f64, f_lo: f64, f_hi: f64) -> Wedge {
+        let mid = 0.5 * (x_lo + x_hi);
+        let g_mid = (-0.5 * mid * mid).exp();
+        // Convexity must hold on the whole reach of x, down to x_lo minus one step.
+        let shape = if x_lo - 1e-6 >= 1.0 {
+            1
+        } else if x_hi <= 1.0 {
+            -1
+        } else {
+            0
+        };
+        Wedge {
+            shape,
+            x_hi,
+            f_hi,
+            chord: (f_lo - f_hi) / (x_lo - x_hi),
+            mid,
+            g_mid,
+            slope_mid: -mid * g_mid,
+        }
+    }
+
+    /// `Some(y < exp(-a^2/2))` when the lines decide it, else `None`.
+    #[inline]
+    fn decide(&self, y: f64, a: f64) -> Option<bool> {
+        let chord = self.f_hi + self.chord * (a - self.x_hi);
+        let tangent = self.g_mid + self.slope_mid * (a - self.mid);
+        match self.shape {
+            1 if y >= chord + WEDGE_EPS => Some(false),
+            1 if y < tangent - WEDGE_EPS => Some(true),
+            -1 if y < chord - WEDGE_EPS => Some(true),
+            -1 if y >= tangent + WEDGE_EPS => Some(false),
+            _ => None,
+        }
+    }
 }
 
 fn tables() -> &'static Tables {
@@ -36,6 +107,7 @@ fn tables() -> &'static Tables {
             k: [0; 128],
             w: [0.0; 128],
             f: [0.0; 128],
+            wedge: [Wedge::default(); 128],
         };
         let mut dn = R;
         let mut tn = dn;
@@ -52,6 +124,12 @@ fn tables() -> &'static Tables {
             tn = dn;
             t.f[i] = (-0.5 * dn * dn).exp();
             t.w[i] = dn / M;
+        }
+        // Layer i spans x_{i-1} = w[i-1] M to x_i = w[i] M (exact: M is a power of two),
+        // the top layer from 0.
+        for i in 1..128 {
+            let x_lo = if i == 1 { 0.0 } else { t.w[i - 1] * M };
+            t.wedge[i] = Wedge::new(x_lo, t.w[i] * M, t.f[i - 1], t.f[i]);
         }
         t
     })
@@ -79,7 +157,12 @@ fn slow(t: &Tables, mut hz: i32, mut iz: usize, rng: &mut ChaCha8Rng) -> f64 {
                 }
             }
         }
-        if t.f[iz] + open01(rng) * (t.f[iz - 1] - t.f[iz]) < (-0.5 * x * x).exp() {
+        let y = t.f[iz] + open01(rng) * (t.f[iz - 1] - t.f[iz]);
+        let inside = match t.wedge[iz].decide(y, x.abs()) {
+            Some(inside) => inside,
+            None => y < (-0.5 * x * x).exp(),
+        };
+        if inside {
             return x;
         }
         let w = rng.next_u32();
@@ -170,6 +253,43 @@ mod tests {
         let var = v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n as f64;
         assert!(mean.abs() < 4.0 / (n as f64).sqrt(), "{mean}");
         assert!((var - 1.0).abs() < 4.0 * (2.0 / n as f64).sqrt(), "{var}");
+    }
+
+    #[test]
+    fn wedge_lines_decide_as_exp_does() {
+        // Every point of every layer's wedge that the lines decide must get the answer
+        // of the test against exp: x over the whole reach of the layer (from one step
+        // below the acceptance bound to the outer edge), y over the wedge's height,
+        // plus points near the density itself, where the lines must not decide wrongly.
+        let t = tables();
+        let mut decided = 0u64;
+        let mut total = 0u64;
+        for i in 1..128 {
+            let (k, w) = (f64::from(t.k[i].saturating_sub(1)), t.w[i]);
+            for a_step in 0..=400 {
+                let hz = k + (M - 1.0 - k) * f64::from(a_step) / 400.0;
+                let x = hz.floor() * w;
+                let e = (-0.5 * x * x).exp();
+                let ys = (0..=200)
+                    .map(|j| t.f[i] + f64::from(j) / 200.0 * (t.f[i - 1] - t.f[i]))
+                    .chain([-1e-5, -1e-7, -1e-12, 0.0, 1e-12, 1e-7, 1e-5].map(|d| e + d));
+                for y in ys {
+                    total += 1;
+                    for x in [x, -x] {
+                        if let Some(inside) = t.wedge[i].decide(y, x.abs()) {
+                            decided += 1;
+                            assert_eq!(inside, y < (-0.5 * x * x).exp(), "layer {i} x {x} y {y}");
+                        }
+                    }
+                }
+            }
+        }
+        // The lines decide most of the wedge (the band between them is thin).
+        assert!(
+            decided as f64 > 0.9 * 2.0 * total as f64,
+            "{decided} of {}",
+            2 * total
+        );
     }
 
     #[test]

@@ -329,7 +329,7 @@ pub struct ReturnTally<'a> {
 }
 
 /// Filler for the slots of a block before they are decoded (every field is overwritten).
-const BLANK: Return = Return {
+pub(crate) const BLANK: Return = Return {
     x: 0.0,
     y: 0.0,
     z: 0.0,

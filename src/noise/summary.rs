@@ -485,7 +485,7 @@ mod tests {
 
     #[test]
     fn from_frame_equals_the_per_return_reference() {
-        use crate::frame::{Return, ReturnKind};
+        use crate::frame::Return;
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         let fates = [
@@ -517,20 +517,9 @@ mod tests {
                     _ => range + rng.random_range(-0.05..0.05),
                 };
                 f.clean.push(Return {
-                    x: 0.0,
-                    y: 0.0,
-                    z: 0.0,
                     range,
-                    azimuth: 0.0,
-                    elevation: 0.0,
-                    time: 0.0,
-                    packet: 0,
-                    raw_distance: 0,
-                    intensity: 0,
                     laser: rng.random_range(0..40),
-                    ring: 0,
-                    block: 0,
-                    kind: ReturnKind::Strongest,
+                    ..crate::hdl32e::decode::BLANK
                 });
                 f.range.push(rn);
                 // Mostly kept, as in real frames; every fate in some cases.

@@ -387,9 +387,16 @@ impl NoisyFrame {
     /// Indices (into `clean`) of the returns the sensor reports (kept, replaced and
     /// added), in order.
     pub fn kept_indices(&self) -> Vec<u32> {
-        (0..self.len() as u32)
-            .filter(|&i| self.fate[i as usize].is_alive())
-            .collect()
+        // Branch-free compaction (write every index, advance past the kept ones) into a
+        // buffer sized once: a filtered `collect` grows its buffer step by step.
+        let mut kept = vec![0u32; self.fate.len()];
+        let mut k = 0;
+        for (i, fate) in self.fate.iter().enumerate() {
+            kept[k] = i as u32;
+            k += usize::from(fate.is_alive());
+        }
+        kept.truncate(k);
+        kept
     }
 
     /// The surviving returns with the noisy range; x, y, z are scaled by R_n / R_i so the

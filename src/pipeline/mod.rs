@@ -140,22 +140,13 @@ impl Pipeline {
     /// Survivors, ground, clusters and counts of a noisy frame.
     fn segment(&self, noisy: &NoisyFrame) -> Result<Segmented> {
         let survivors = noisy.survivors();
-        // Same indices as `noisy.kept_indices()`. The index buffers below are filled by
-        // branch-free compaction (write every entry, advance past the wanted ones) into
-        // buffers sized once: a filtered `collect` grows its buffer step by step.
-        let mut kept = vec![0u32; noisy.fate.len()];
-        let mut k = 0;
-        for (i, fate) in noisy.fate.iter().enumerate() {
-            kept[k] = i as u32;
-            k += usize::from(fate.is_alive());
-        }
-        kept.truncate(k);
+        let kept = noisy.kept_indices();
         debug_assert_eq!(kept.len(), survivors.len());
         let mut rng = stage_rng(self.seed, noisy.index, self.ground_tag);
         let ground = ground::segment(&survivors, &self.ground, &mut rng);
         // The non-ground survivors by index, and their points for the clustering, in one
-        // pass; the clusters are described from `survivors` through the same indices
-        // instead of a copy of the returns.
+        // branch-free pass (as `kept_indices`); the clusters are described from
+        // `survivors` through the same indices instead of a copy of the returns.
         let mut non_ground = vec![0u32; survivors.len()];
         let mut points = vec![[0f32; 3]; survivors.len()];
         let mut k = 0;

@@ -410,18 +410,11 @@ impl NoisyFrame {
         let mut out = Vec::with_capacity(self.len());
         if view.plain() {
             // No sensor stage moved anything: only the range scaling, in a loop free of
-            // the per-return tests of the optional parts (same values as `noisy_return`).
+            // the per-return tests of the optional parts (`along_beam`, as `noisy_return`
+            // starts).
             for ((r, &rn), fate) in self.clean.iter().zip(&self.range).zip(&self.fate) {
                 if fate.is_alive() {
-                    let mut o = *r;
-                    if r.range > 0.0 {
-                        let s = rn / r.range;
-                        o.x *= s;
-                        o.y *= s;
-                        o.z *= s;
-                    }
-                    o.range = rn;
-                    out.push(o);
+                    out.push(along_beam(r, rn));
                 }
             }
             return out;
@@ -443,6 +436,22 @@ impl NoisyFrame {
     pub fn summary(&self) -> NoiseSummary {
         NoiseSummary::from_frame(self)
     }
+}
+
+/// Return `r` moved along its beam to range `rn` (x, y, z scaled by `rn / r.range`).
+// Inlined into the loops of `survivors` for the reason given at `View::noisy_return`.
+#[inline(always)]
+fn along_beam(r: &Return, rn: f32) -> Return {
+    let mut out = *r;
+    // A zero clean range has no direction to scale along; keep the point.
+    if r.range > 0.0 {
+        let s = rn / r.range;
+        out.x *= s;
+        out.y *= s;
+        out.z *= s;
+    }
+    out.range = rn;
+    out
 }
 
 /// The per-return state of a [`NoisyFrame`] with its optional parts resolved once, so
@@ -486,16 +495,7 @@ impl<'a> View<'a> {
     #[inline(always)]
     fn noisy_return(&self, i: usize) -> Return {
         let r = &self.clean[i];
-        let rn = self.range[i];
-        let mut out = *r;
-        // A zero clean range has no direction to scale along; keep the point.
-        if r.range > 0.0 {
-            let s = rn / r.range;
-            out.x *= s;
-            out.y *= s;
-            out.z *= s;
-        }
-        out.range = rn;
+        let mut out = along_beam(r, self.range[i]);
         let da = self.azimuth.map_or(0.0, |v| v[i]);
         let de = self.elevation.map_or(0.0, |v| v[i]);
         if (da != 0.0 || de != 0.0) && r.range > 0.0 {

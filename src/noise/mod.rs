@@ -168,6 +168,13 @@ pub struct Layout {
 impl Layout {
     /// The columns and firings of `clean`.
     pub fn of(clean: &[Return]) -> Layout {
+        Layout::build(clean, |_, _| {})
+    }
+
+    /// The columns and firings of `clean`, with `also` called on every return (index and
+    /// return) in the same pass.
+    #[inline(always)]
+    fn build(clean: &[Return], mut also: impl FnMut(usize, &Return)) -> Layout {
         let n = clean.len();
         let mut l = Layout::zeroed(n);
         // One pass over the returns, written through iterators (no per-return `push`);
@@ -185,6 +192,7 @@ impl Layout {
             *intensity = r.intensity;
             *time = r.time;
             *azimuth = r.azimuth;
+            also(i, r);
             let k = (r.packet, r.block);
             if key != Some(k) {
                 key = Some(k);
@@ -295,28 +303,14 @@ impl NoisyFrame {
         let n = clean.len();
         let mut range = vec![0.0f32; n];
         let mut power = vec![0.0f64; n];
-        let mut l = Layout::zeroed(n);
-        {
+        let l = {
             let (rs, ps) = (&mut range[..n], &mut power[..n]);
-            let (ls, is) = (&mut l.laser[..n], &mut l.intensity[..n]);
-            let (ts, az) = (&mut l.time[..n], &mut l.azimuth[..n]);
-            let mut key = None;
-            // The same values as `new` and `Layout::of`.
-            for (i, r) in clean.iter().enumerate() {
+            // The same values as `new`.
+            Layout::build(&clean, |i, r| {
                 rs[i] = r.range;
                 ps[i] = ideal.power(r.intensity, r.range);
-                ls[i] = r.laser % 32;
-                is[i] = r.intensity;
-                ts[i] = r.time;
-                az[i] = r.azimuth;
-                let k = (r.packet, r.block);
-                if key != Some(k) {
-                    key = Some(k);
-                    l.firings.push([i as u32, n as u32]);
-                }
-            }
-        }
-        l.finish();
+            })
+        };
         NoisyFrame::of_parts(index, clean, range, power, Some(Arc::new(l)))
     }
 

@@ -623,7 +623,8 @@ pub(crate) fn stream_frames<T: Send>(
                     return;
                 };
                 let left = queued.fetch_sub(1, Ordering::SeqCst) - 1;
-                let spare = left == 0 && exhausted.load(Ordering::SeqCst);
+                // One worker has no neighbour whose core could be spare.
+                let spare = workers > 1 && left == 0 && exhausted.load(Ordering::SeqCst);
                 if stop.load(Ordering::Relaxed) {
                     continue;
                 }

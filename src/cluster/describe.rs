@@ -284,7 +284,9 @@ fn cross(o: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 }
 
-/// Counter-clockwise convex hull without collinear points (Andrew's monotone chain).
+/// Counter-clockwise convex hull without collinear points (Andrew's monotone chain), of
+/// any points: the reference [`hull_of_f32`] is tested against.
+#[cfg(test)]
 pub(crate) fn convex_hull(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
     pts.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
     hull_of_sorted(pts)
@@ -473,7 +475,9 @@ mod tests {
                 let pts: Vec<[f64; 2]> = (0..n)
                     .map(|_| {
                         let c = |v: u64| {
-                            ((v % 41) as f32 - 20.0) * 0.25 * if v % 7 == 0 { -1.0 } else { 1.0 }
+                            ((v % 41) as f32 - 20.0)
+                                * 0.25
+                                * if v.is_multiple_of(7) { -1.0 } else { 1.0 }
                         };
                         [f64::from(c(next())), f64::from(c(next()))]
                     })

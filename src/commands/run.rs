@@ -6,7 +6,8 @@ use crate::frame::Frame;
 use crate::hdl32e::frames::{CaptureSummary, DecoderOptions, FrameReader};
 use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
 use crate::pipeline::report::{
-    write_cluster_csv, write_pretty_nested, FrameClusters, FrameReport, Totals, FATE_CODES,
+    write_cluster_csv, write_frame_clusters_json, write_pretty_nested, FrameClusters, FrameReport,
+    Totals, FATE_CODES,
 };
 use crate::pipeline::{FrameResult, Pipeline};
 use crate::writers::ply::{PlyColumns, PlyFrame};
@@ -726,8 +727,10 @@ impl SpoolEntry {
     fn of(report: FrameReport, clusters: &FrameClusters) -> Result<Self> {
         let mut summary = Vec::new();
         write_element(&mut summary, "", &report)?;
-        let mut cluster_bytes = Vec::new();
-        write_element(&mut cluster_bytes, "", clusters)?;
+        // As `write_element` lays it out; clusters take about 1.2 kB each.
+        let mut cluster_bytes = Vec::with_capacity(64 + 1280 * clusters.clusters.len());
+        cluster_bytes.extend_from_slice(b"    ");
+        write_frame_clusters_json(&mut cluster_bytes, 2, clusters);
         let mut csv = Vec::new();
         write_cluster_csv(&mut csv, std::slice::from_ref(clusters));
         Ok(SpoolEntry {

@@ -147,23 +147,28 @@ impl Pipeline {
         // The non-ground survivors by index, and their points for the clustering, in one
         // branch-free pass (as `kept_indices`); the clusters are described from
         // `survivors` through the same indices instead of a copy of the returns.
-        let mut non_ground = vec![0u32; survivors.len()];
-        let mut points = vec![[0f32; 3]; survivors.len()];
+        // Both buffers are this worker's scratch from its earlier frames: they only grow,
+        // so a frame neither zero-fills them nor touches fresh pages.
+        let (mut non_ground_buf, mut points_buf) = SCRATCH.take();
+        let n = survivors.len();
+        if non_ground_buf.len() < n {
+            non_ground_buf.resize(n, 0);
+            points_buf.resize(n, [0.0; 3]);
+        }
+        let (non_ground, points) = (&mut non_ground_buf[..n], &mut points_buf[..n]);
         let mut k = 0;
         for (i, (s, &g)) in survivors.iter().zip(&ground).enumerate() {
             non_ground[k] = i as u32;
             points[k] = [s.x, s.y, s.z];
             k += usize::from(!g);
         }
-        non_ground.truncate(k);
-        points.truncate(k);
-        let clustering = cluster::cluster(&points, &self.cluster)?;
-        drop(points);
+        let (non_ground, points) = (&non_ground[..k], &points[..k]);
+        let clustering = cluster::cluster(points, &self.cluster)?;
         let mut labels = vec![-1i32; survivors.len()];
         for (&i, &label) in non_ground.iter().zip(&clustering.labels) {
             labels[i as usize] = label;
         }
-        let mut clusters = cluster::describe_subset(&survivors, &non_ground, &clustering.labels)?;
+        let mut clusters = cluster::describe_subset(&survivors, non_ground, &clustering.labels)?;
         for c in &mut clusters {
             c.object = self.objects.is_object(c, self.cluster.min_points);
         }
@@ -176,6 +181,7 @@ impl Pipeline {
             noise_points: clustering.n_noise_points as u64,
             cluster_points: (non_ground.len() - clustering.n_noise_points) as u64,
         };
+        SCRATCH.set((non_ground_buf, points_buf));
         Ok(Segmented {
             survivors,
             kept,
@@ -185,6 +191,14 @@ impl Pipeline {
             counts,
         })
     }
+}
+
+thread_local! {
+    /// A worker's buffers for the non-ground indices and points of [`Pipeline::segment`],
+    /// kept from frame to frame (a nested call on the same thread finds them taken and
+    /// starts empty ones).
+    static SCRATCH: std::cell::Cell<(Vec<u32>, Vec<[f32; 3]>)> =
+        const { std::cell::Cell::new((Vec::new(), Vec::new())) };
 }
 
 /// A [`FrameResult`] but for the noise summary.

@@ -163,6 +163,8 @@ pub struct Layout {
     /// Smallest and largest clean firing time, NaN ignored (`[inf, -inf]` when there is
     /// none): lets stages whose factor is monotone in time table it for the frame.
     pub time_range: [f64; 2],
+    /// Some clean firing time is NaN (outside `time_range`).
+    pub time_nan: bool,
 }
 
 impl Layout {
@@ -190,6 +192,7 @@ impl Layout {
             azimuth: Vec::with_capacity(n),
             firings: Vec::with_capacity(n / 32 + 1),
             time_range: [f64::INFINITY, f64::NEG_INFINITY],
+            time_nan: false,
         };
         let (mut laser, mut intensity) = ([0u8; B], [0u8; B]);
         let (mut time, mut azimuth) = ([0f64; B], [0f32; B]);
@@ -222,6 +225,7 @@ impl Layout {
             l.firings[k - 1][1] = l.firings[k][0];
         }
         l.time_range = extremes.range();
+        l.time_nan = extremes.nan;
         l
     }
 
@@ -247,6 +251,8 @@ const LAYOUT_CHUNK: usize = 256;
 struct TimeExtremes {
     lo: [f64; 4],
     hi: [f64; 4],
+    /// Some time was NaN.
+    nan: bool,
 }
 
 impl TimeExtremes {
@@ -254,6 +260,7 @@ impl TimeExtremes {
         TimeExtremes {
             lo: [f64::INFINITY; 4],
             hi: [f64::NEG_INFINITY; 4],
+            nan: false,
         }
     }
 
@@ -271,6 +278,7 @@ impl TimeExtremes {
             lo[0] = if t < lo[0] { t } else { lo[0] };
             hi[0] = if t > hi[0] { t } else { hi[0] };
         }
+        self.nan |= times.iter().fold(false, |any, t| any | t.is_nan());
     }
 
     /// `[smallest, largest]` (`[inf, -inf]` when no time was a number).
@@ -928,6 +936,7 @@ mod tests {
             let lo = numbers.clone().fold(f64::INFINITY, f64::min);
             let hi = numbers.fold(f64::NEG_INFINITY, f64::max);
             assert_eq!(l.time_range, [lo, hi], "{n}");
+            assert_eq!(l.time_nan, clean.iter().any(|r| r.time.is_nan()), "{n}");
         }
     }
 

@@ -163,86 +163,70 @@ pub struct Layout {
     /// Smallest and largest clean firing time, NaN ignored (`[inf, -inf]` when there is
     /// none): lets stages whose factor is monotone in time table it for the frame.
     pub time_range: [f64; 2],
+    /// Some clean firing time is NaN (outside `time_range`).
+    pub time_nan: bool,
 }
 
 impl Layout {
     /// The columns and firings of `clean`.
     pub fn of(clean: &[Return]) -> Layout {
-        Layout::build(clean, |_, _| {})
+        Layout::build(clean, |_| {})
     }
 
-    /// The columns and firings of `clean`, with `also` called on every return (index and
-    /// return) in the same pass.
+    /// The columns and firings of `clean`, with `also` called on every chunk of at most
+    /// [`LAYOUT_CHUNK`] returns, in order, in the same pass.
+    ///
+    /// Why chunks: each chunk's columns are written to small buffers (in L1 cache) and
+    /// appended to the columns, which are therefore never zeroed first (`vec![0; n]`
+    /// wrote them all once more); `also` reads the chunk's returns while they are in
+    /// cache; and the loop over one chunk keeps its few pointers in registers (the
+    /// iterator over every column and the return spilled them to the stack).
     #[inline(always)]
-    fn build(clean: &[Return], mut also: impl FnMut(usize, &Return)) -> Layout {
+    fn build(clean: &[Return], mut also: impl FnMut(&[Return])) -> Layout {
+        const B: usize = LAYOUT_CHUNK;
         let n = clean.len();
-        let mut l = Layout::zeroed(n);
-        // One pass over the returns, written through iterators (no per-return `push`);
-        // a firing starts where packet or block changes (its end is set in `finish`).
-        let mut key = None;
-        for (i, ((((r, laser), intensity), time), azimuth)) in clean
-            .iter()
-            .zip(l.laser.iter_mut())
-            .zip(l.intensity.iter_mut())
-            .zip(l.time.iter_mut())
-            .zip(l.azimuth.iter_mut())
-            .enumerate()
-        {
-            *laser = r.laser % 32;
-            *intensity = r.intensity;
-            *time = r.time;
-            *azimuth = r.azimuth;
-            also(i, r);
-            let k = (r.packet, r.block);
-            if key != Some(k) {
-                key = Some(k);
-                l.firings.push([i as u32, n as u32]);
-            }
-        }
-        l.finish();
-        l
-    }
-
-    /// Columns of `n` zeros and no firing yet.
-    fn zeroed(n: usize) -> Layout {
-        Layout {
-            laser: vec![0; n],
-            intensity: vec![0; n],
-            time: vec![0.0; n],
-            azimuth: vec![0.0; n],
+        let mut l = Layout {
+            laser: Vec::with_capacity(n),
+            intensity: Vec::with_capacity(n),
+            time: Vec::with_capacity(n),
+            azimuth: Vec::with_capacity(n),
             firings: Vec::with_capacity(n / 32 + 1),
             time_range: [f64::INFINITY, f64::NEG_INFINITY],
+            time_nan: false,
+        };
+        let (mut laser, mut intensity) = ([0u8; B], [0u8; B]);
+        let (mut time, mut azimuth) = ([0f64; B], [0f32; B]);
+        // The running extremes of the times, as four pairs (see `TimeExtremes`).
+        let mut extremes = TimeExtremes::new();
+        // A firing starts where packet or block changes (its end is set below).
+        let mut key = None;
+        for (c, chunk) in clean.chunks(B).enumerate() {
+            also(chunk);
+            let m = chunk.len();
+            for (j, r) in chunk.iter().enumerate() {
+                laser[j] = r.laser % 32;
+                intensity[j] = r.intensity;
+                time[j] = r.time;
+                azimuth[j] = r.azimuth;
+                let k = (r.packet, r.block);
+                if key != Some(k) {
+                    key = Some(k);
+                    l.firings.push([(c * B + j) as u32, n as u32]);
+                }
+            }
+            extremes.add(&time[..m]);
+            l.laser.extend_from_slice(&laser[..m]);
+            l.intensity.extend_from_slice(&intensity[..m]);
+            l.time.extend_from_slice(&time[..m]);
+            l.azimuth.extend_from_slice(&azimuth[..m]);
         }
-    }
-
-    /// Sets the ends of the firings (each ends where the next starts; the last at `n`,
-    /// as pushed) and the time range, once the columns are filled.
-    fn finish(&mut self) {
-        let l = self;
+        // Each firing ends where the next starts (the last at `n`, as pushed).
         for k in 1..l.firings.len() {
             l.firings[k - 1][1] = l.firings[k][0];
         }
-        // A pass of its own over the 400 kB column (in the pass over the returns two running
-        // extremes slowed the whole pass down). Four running pairs, so successive
-        // comparisons do not wait on each other; a NaN time compares false and is left
-        // out (the selects are single min/max instructions).
-        let mut lo = [f64::INFINITY; 4];
-        let mut hi = [f64::NEG_INFINITY; 4];
-        let mut quads = l.time.chunks_exact(4);
-        for q in &mut quads {
-            for k in 0..4 {
-                lo[k] = if q[k] < lo[k] { q[k] } else { lo[k] };
-                hi[k] = if q[k] > hi[k] { q[k] } else { hi[k] };
-            }
-        }
-        for &t in quads.remainder() {
-            lo[0] = if t < lo[0] { t } else { lo[0] };
-            hi[0] = if t > hi[0] { t } else { hi[0] };
-        }
-        l.time_range = [
-            lo.into_iter().fold(f64::INFINITY, f64::min),
-            hi.into_iter().fold(f64::NEG_INFINITY, f64::max),
-        ];
+        l.time_range = extremes.range();
+        l.time_nan = extremes.nan;
+        l
     }
 
     /// Number of returns covered.
@@ -253,6 +237,56 @@ impl Layout {
     /// True when it covers no return.
     pub fn is_empty(&self) -> bool {
         self.laser.is_empty()
+    }
+}
+
+/// Returns per chunk of [`Layout`]'s pass (a multiple of 4, see [`TimeExtremes`]).
+const LAYOUT_CHUNK: usize = 256;
+
+/// The smallest and largest time of a column fed in order, NaN ignored: four running
+/// pairs, so successive comparisons do not wait on each other (a NaN compares false and
+/// is left out; the selects are single min/max instructions). Times go to pair `i % 4`
+/// by their index `i` in the column, and the last `len % 4` to pair 0, as long as every
+/// piece fed but the last has a length that is a multiple of 4.
+struct TimeExtremes {
+    lo: [f64; 4],
+    hi: [f64; 4],
+    /// Some time was NaN.
+    nan: bool,
+}
+
+impl TimeExtremes {
+    fn new() -> Self {
+        TimeExtremes {
+            lo: [f64::INFINITY; 4],
+            hi: [f64::NEG_INFINITY; 4],
+            nan: false,
+        }
+    }
+
+    #[inline(always)]
+    fn add(&mut self, times: &[f64]) {
+        let (lo, hi) = (&mut self.lo, &mut self.hi);
+        let mut quads = times.chunks_exact(4);
+        for q in &mut quads {
+            for k in 0..4 {
+                lo[k] = if q[k] < lo[k] { q[k] } else { lo[k] };
+                hi[k] = if q[k] > hi[k] { q[k] } else { hi[k] };
+            }
+        }
+        for &t in quads.remainder() {
+            lo[0] = if t < lo[0] { t } else { lo[0] };
+            hi[0] = if t > hi[0] { t } else { hi[0] };
+        }
+        self.nan |= times.iter().fold(false, |any, t| any | t.is_nan());
+    }
+
+    /// `[smallest, largest]` (`[inf, -inf]` when no time was a number).
+    fn range(&self) -> [f64; 2] {
+        [
+            self.lo.into_iter().fold(f64::INFINITY, f64::min),
+            self.hi.into_iter().fold(f64::NEG_INFINITY, f64::max),
+        ]
     }
 }
 
@@ -270,11 +304,52 @@ pub struct Moved {
     pub pose: Option<sensor::Poses>,
     /// Reported firing time (seconds, as `Return::time`).
     pub time: Option<Vec<f64>>,
+    /// Clock stretches of the reported firing times, in the order they were made; each
+    /// acts on the first [`TimeStretch::len`] returns, after `time` (see
+    /// [`Moved::reported_time`]).
+    pub time_stretch: Vec<TimeStretch>,
     /// Reported intensity byte.
     pub intensity: Option<Vec<u8>>,
 }
 
+/// The affine map t -> t0 + (t - t0) scale + offset of the reported firing times of the
+/// first `len` returns of a frame (the clock's oscillator drift and time offset).
+///
+/// Why a map and not a vector of times: the clock stage wrote 400 kB of times per
+/// 50k-return frame (and read as many), while the map is applied, with the same
+/// operations in the same order and so to the same value, only where a time is reported.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimeStretch {
+    /// Fixed point of the stretch (the frame's first firing time), seconds.
+    pub t0: f64,
+    /// Factor on the time since `t0`.
+    pub scale: f64,
+    /// Offset added last, seconds.
+    pub offset: f64,
+    /// Number of returns it covers: those of the frame when it was made (returns added
+    /// later, such as spurious echoes, keep their own time).
+    pub len: usize,
+}
+
+impl TimeStretch {
+    /// The stretched time.
+    #[inline]
+    pub fn apply(&self, t: f64) -> f64 {
+        self.t0 + (t - self.t0) * self.scale + self.offset
+    }
+}
+
 impl Moved {
+    /// The reported firing time of return `i` whose clean time is `clean`: `time[i]` if
+    /// set (else `clean`), through the stretches that cover `i`, in order.
+    #[inline]
+    pub fn reported_time(&self, i: usize, clean: f64) -> f64 {
+        let t = self.time.as_ref().map_or(clean, |v| v[i]);
+        self.time_stretch
+            .iter()
+            .filter(|s| i < s.len)
+            .fold(t, |t, s| s.apply(t))
+    }
     /// The azimuth changes, allocated as zeros on first use.
     pub fn azimuth_mut(&mut self, n: usize) -> &mut Vec<f32> {
         self.azimuth_deg.get_or_insert_with(|| vec![0.0; n])
@@ -301,16 +376,13 @@ impl NoisyFrame {
     /// 2.4 MB, and the three passes of `new` and `Layout::of` each streamed them).
     pub fn with_layout(index: u32, clean: Vec<Return>, ideal: &IdealPower) -> Self {
         let n = clean.len();
-        let mut range = vec![0.0f32; n];
-        let mut power = vec![0.0f64; n];
-        let l = {
-            let (rs, ps) = (&mut range[..n], &mut power[..n]);
-            // The same values as `new`.
-            Layout::build(&clean, |i, r| {
-                rs[i] = r.range;
-                ps[i] = ideal.power(r.intensity, r.range);
-            })
-        };
+        let mut range = Vec::with_capacity(n);
+        let mut power = Vec::with_capacity(n);
+        // The same values as `new`, a chunk at a time (see `Layout::build`).
+        let l = Layout::build(&clean, |chunk| {
+            range.extend(chunk.iter().map(|r| r.range));
+            power.extend(chunk.iter().map(|r| ideal.power(r.intensity, r.range)));
+        });
         NoisyFrame::of_parts(index, clean, range, power, Some(Arc::new(l)))
     }
 
@@ -457,6 +529,7 @@ struct View<'a> {
     elevation: Option<&'a [f32]>,
     pose: Option<&'a sensor::Poses>,
     time: Option<&'a [f64]>,
+    time_stretch: &'a [TimeStretch],
     intensity: Option<&'a [u8]>,
 }
 
@@ -470,6 +543,7 @@ impl<'a> View<'a> {
             elevation: m.elevation_deg.as_deref(),
             pose: m.pose.as_ref(),
             time: m.time.as_deref(),
+            time_stretch: &m.time_stretch,
             intensity: m.intensity.as_deref(),
         }
     }
@@ -480,6 +554,7 @@ impl<'a> View<'a> {
             && self.elevation.is_none()
             && self.pose.is_none()
             && self.time.is_none()
+            && self.time_stretch.is_empty()
             && self.intensity.is_none()
     }
 
@@ -528,6 +603,12 @@ impl<'a> View<'a> {
         }
         if let Some(t) = self.time {
             out.time = t[i];
+        }
+        // As `Moved::reported_time` (here with `time` resolved once).
+        for s in self.time_stretch {
+            if i < s.len {
+                out.time = s.apply(out.time);
+            }
         }
         if let Some(v) = self.intensity {
             out.intensity = v[i];
@@ -731,6 +812,26 @@ impl NoiseChain {
 mod tests {
     use super::*;
 
+    /// A return of zeros.
+    fn blank() -> Return {
+        Return {
+            x: 0.0,
+            y: 0.0,
+            z: 0.0,
+            range: 0.0,
+            azimuth: 0.0,
+            elevation: 0.0,
+            time: 0.0,
+            packet: 0,
+            raw_distance: 0,
+            intensity: 0,
+            laser: 0,
+            ring: 0,
+            block: 0,
+            kind: crate::frame::ReturnKind::Strongest,
+        }
+    }
+
     #[test]
     fn small_sin_cos_agrees_with_sin_cos() {
         for i in -300..=300 {
@@ -761,6 +862,123 @@ mod tests {
                 assert_eq!(wrap_360(x).to_bits(), x.rem_euclid(360.0).to_bits(), "{x}");
             }
             a += 0.37;
+        }
+    }
+
+    /// `n` returns: firings of up to 32 lasers (some missing), times with NaNs and a
+    /// repeat, azimuths varied.
+    fn returns(n: usize) -> Vec<Return> {
+        (0..n)
+            .map(|i| {
+                let k = i as u32;
+                let time = match i % 97 {
+                    5 => f64::NAN,
+                    6 => 0.25,
+                    _ => 0.25 + f64::from(k) * 1.152e-6 - f64::from(k % 7) * 3e-6,
+                };
+                Return {
+                    range: 1.0 + (k.wrapping_mul(2_654_435_761) % 7900) as f32 / 100.0,
+                    azimuth: (k / 29) as f32 * 0.17 + (k % 3) as f32 * 0.01,
+                    time,
+                    packet: k / 350,
+                    intensity: (k % 101) as u8,
+                    laser: (k % 29) as u8 + 3 * u8::from(k.is_multiple_of(5)),
+                    block: ((k / 29) % 12) as u8,
+                    ..blank()
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn with_layout_gives_new_s_values_and_the_columns_of_each_return() {
+        let ideal = IdealPower::new(
+            &crate::config::PowerConfig::default(),
+            &crate::config::SensorConfig::default(),
+            &crate::config::DetectionConfig::default(),
+        );
+        // Sizes around the chunk of `Layout::build` and its quads.
+        for n in [0, 1, 3, 255, 256, 257, 1000, 3 * LAYOUT_CHUNK + 5] {
+            let clean = returns(n);
+            let a = NoisyFrame::with_layout(3, clean.clone(), &ideal);
+            let b = NoisyFrame::new(3, clean.clone(), &ideal);
+            assert_eq!(a.range, b.range);
+            assert!(a
+                .power
+                .iter()
+                .zip(&b.power)
+                .all(|(x, y)| x.to_bits() == y.to_bits()));
+            let l = a.layout.as_ref().expect("built");
+            for (i, r) in clean.iter().enumerate() {
+                assert_eq!(l.laser[i], r.laser % 32);
+                assert_eq!(l.intensity[i], r.intensity);
+                assert_eq!(l.time[i].to_bits(), r.time.to_bits());
+                assert_eq!(l.azimuth[i].to_bits(), r.azimuth.to_bits());
+            }
+            assert_eq!(l.len(), n);
+            // Firings: maximal runs of the same (packet, block), covering every return.
+            let mut runs: Vec<[u32; 2]> = Vec::new();
+            for (i, r) in clean.iter().enumerate() {
+                match runs.last_mut() {
+                    Some(last)
+                        if {
+                            let p = &clean[i - 1];
+                            (p.packet, p.block) == (r.packet, r.block)
+                        } =>
+                    {
+                        last[1] = i as u32 + 1
+                    }
+                    _ => runs.push([i as u32, i as u32 + 1]),
+                }
+            }
+            assert_eq!(l.firings, runs);
+            let numbers = clean.iter().map(|r| r.time).filter(|t| !t.is_nan());
+            let lo = numbers.clone().fold(f64::INFINITY, f64::min);
+            let hi = numbers.fold(f64::NEG_INFINITY, f64::max);
+            assert_eq!(l.time_range, [lo, hi], "{n}");
+            assert_eq!(l.time_nan, clean.iter().any(|r| r.time.is_nan()), "{n}");
+        }
+    }
+
+    #[test]
+    fn time_stretches_give_the_times_of_stretching_each_time_in_place() {
+        let clean = returns(700);
+        let maps = [
+            TimeStretch {
+                t0: clean[0].time,
+                scale: 1.0 + 80e-6,
+                offset: 12.5e-6,
+                len: 600,
+            },
+            TimeStretch {
+                t0: clean[0].time,
+                scale: 1.0 - 20e-6,
+                offset: -3e-6,
+                len: 650,
+            },
+        ];
+        let mut moved = Moved::default();
+        // In place, as the clock did: each stretch over the times of the returns it
+        // covers (here the returns beyond a stretch's `len` came later).
+        let mut times: Vec<f64> = clean.iter().map(|r| r.time).collect();
+        for m in &maps {
+            moved.time_stretch.push(*m);
+            for t in &mut times[..m.len] {
+                *t = m.t0 + (*t - m.t0) * m.scale + m.offset;
+            }
+        }
+        let frame = NoisyFrame {
+            range: clean.iter().map(|r| r.range).collect(),
+            fate: vec![Fate::Kept; clean.len()],
+            clean: clean.clone(),
+            moved,
+            ..NoisyFrame::default()
+        };
+        let out = frame.survivors();
+        for (i, r) in clean.iter().enumerate() {
+            let want = times[i].to_bits();
+            assert_eq!(frame.moved.reported_time(i, r.time).to_bits(), want, "{i}");
+            assert_eq!(out[i].time.to_bits(), want, "{i}");
         }
     }
 

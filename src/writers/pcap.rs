@@ -510,9 +510,11 @@ pub fn check_encodable(chain: &NoiseChain, seed: u64) -> Result<()> {
         }) {
             what.push("position (pose)");
         }
-        if m.time
-            .as_ref()
-            .is_some_and(|v| v.iter().zip(&probe).any(|(&t, r)| t != r.time))
+        if (m.time.is_some() || !m.time_stretch.is_empty())
+            && probe
+                .iter()
+                .enumerate()
+                .any(|(i, r)| m.reported_time(i, r.time) != r.time)
         {
             what.push("firing time");
         }

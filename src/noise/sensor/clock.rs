@@ -14,7 +14,7 @@ use super::{fill_normals, float, number, sigma, CHUNK, C_M_PER_S};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
-use crate::noise::{NoiseStage, NoisyFrame, StageKind};
+use crate::noise::{NoiseStage, NoisyFrame, StageKind, TimeStretch};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 use toml::Value;
@@ -38,9 +38,6 @@ pub struct Clock {
 impl NoiseStage for Clock {
     fn kind(&self) -> &'static str {
         NAME
-    }
-    fn uses_layout(&self) -> bool {
-        true
     }
     fn describe(&self) -> String {
         format!(
@@ -82,17 +79,16 @@ impl NoiseStage for Clock {
             }
         }
         if scale != 1.0 || self.time_offset_us != 0.0 {
-            let t0 = super::frame_start(frame);
-            let offset = self.time_offset_us * 1e-6;
-            let stretch = |t: f64| t0 + (t - t0) * scale + offset;
-            // One pass: in place over reported times, or straight from the clean ones.
-            match &mut frame.moved.time {
-                Some(times) => times.iter_mut().for_each(|t| *t = stretch(*t)),
-                None => {
-                    let lay = frame.layout();
-                    frame.moved.time = Some(lay.time.iter().map(|&t| stretch(t)).collect())
-                }
-            }
+            // The stretch is kept as a map of the frame's times, applied where a time is
+            // reported (see `TimeStretch`): the same operations on the same times as
+            // writing every stretched time here, so the same values, without the pass
+            // over 400 kB of times and the 400 kB vector.
+            frame.moved.time_stretch.push(TimeStretch {
+                t0: super::frame_start(frame),
+                scale,
+                offset: self.time_offset_us * 1e-6,
+                len: frame.len(),
+            });
         }
     }
 }

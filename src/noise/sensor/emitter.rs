@@ -67,11 +67,27 @@ impl NoiseStage for Emitter {
         // power_factor >= 0 and max(0), each monotone), so the factor of every time in
         // the frame's range lies between the factors of its two ends.
         let [t0, t1] = lay.time_range;
-        let table = ByteTable::between(factor(t0), factor(t1));
+        let (f0, f1) = (factor(t0), factor(t1));
+        let table = ByteTable::between(f0, f1);
         let NoisyFrame {
             power, fate, moved, ..
         } = frame;
         let inten = moved.intensity.get_or_insert_with(|| lay.intensity.clone());
+        if !lay.time_nan && f0.to_bits() == f1.to_bits() && f0 != 0.0 && f0.is_finite() {
+            // One factor for the frame: every time lies between the two ends and f is
+            // monotone, so every factor equals theirs (a non-zero value: zero could come
+            // as +0 or -0). So no time is read and nothing divided: as when the drift is
+            // 0, or every return of the frame has the same time. Its table has every
+            // byte (both ends are one factor).
+            for (p, fate) in power.iter_mut().zip(fate.iter()) {
+                *p = if fate.is_alive() { *p * f0 } else { *p };
+            }
+            for (v, fate) in inten.iter_mut().zip(fate.iter()) {
+                let e = table.bytes[usize::from(*v)] as u8;
+                *v = if fate.is_alive() { e } else { *v };
+            }
+            return;
+        }
         let mut f = [0.0f64; CHUNK];
         for (((times, power), inten), fate) in lay
             .time
@@ -88,6 +104,19 @@ impl NoiseStage for Emitter {
             // Branch free, so it vectorises: dead returns keep their power.
             for ((p, fate), &f) in power.iter_mut().zip(fate).zip(f.iter()) {
                 *p = if fate.is_alive() { *p * f } else { *p };
+            }
+            // Where every factor of the chunk is in the table's range and the table has
+            // every byte (as when the frame's times are close), each byte is a look-up
+            // alone; otherwise `scale` decides per return. The same bytes either way.
+            let inside = f
+                .iter()
+                .fold(true, |all, &f| all & (f >= table.lo) & (f <= table.hi));
+            if inside && table.complete {
+                for (v, fate) in inten.iter_mut().zip(fate) {
+                    let e = table.bytes[usize::from(*v)] as u8;
+                    *v = if fate.is_alive() { e } else { *v };
+                }
+                continue;
             }
             for ((v, fate), &f) in inten.iter_mut().zip(fate).zip(f.iter()) {
                 if fate.is_alive() {
@@ -107,6 +136,8 @@ struct ByteTable {
     hi: f64,
     /// The byte, or `AMBIGUOUS`.
     bytes: [u16; 256],
+    /// No byte is `AMBIGUOUS`.
+    complete: bool,
 }
 
 const AMBIGUOUS: u16 = 256;
@@ -120,6 +151,7 @@ impl ByteTable {
             lo,
             hi,
             bytes: [AMBIGUOUS; 256],
+            complete: false,
         };
         if lo.is_finite() && hi.is_finite() && lo >= 0.0 {
             for (v, e) in t.bytes.iter_mut().enumerate() {
@@ -129,6 +161,7 @@ impl ByteTable {
                 }
             }
         }
+        t.complete = t.bytes.iter().all(|&e| e != AMBIGUOUS);
         t
     }
 
@@ -164,3 +197,109 @@ pub const KIND: StageKind = StageKind {
     ],
     build,
 };
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::{Return, ReturnKind};
+    use crate::noise::{Fate, IdealPower};
+
+    /// Powers and bytes of `e` applied to returns of the given times (every third one
+    /// dead), with those of the model's formula per return.
+    fn against_formula(e: &Emitter, times: &[f64]) {
+        let clean: Vec<Return> = times
+            .iter()
+            .enumerate()
+            .map(|(i, &time)| Return {
+                x: 1.0,
+                y: 0.0,
+                z: 0.0,
+                range: 2.0 + i as f32 * 0.01,
+                azimuth: 0.0,
+                elevation: 0.0,
+                time,
+                packet: i as u32 / 384,
+                raw_distance: 0,
+                intensity: (i * 7 % 256) as u8,
+                laser: (i % 32) as u8,
+                ring: 0,
+                block: (i / 32 % 12) as u8,
+                kind: ReturnKind::Strongest,
+            })
+            .collect();
+        let ideal = IdealPower::new(
+            &Default::default(),
+            &Default::default(),
+            &Default::default(),
+        );
+        let mut frame = NoisyFrame::with_layout(0, clean.clone(), &ideal);
+        for k in (0..frame.len()).step_by(3) {
+            frame.fate[k] = Fate::BelowPower;
+        }
+        let before = frame.power.clone();
+        e.apply(&mut frame, &mut crate::noise::stage_rng(1, 0, 0));
+        let inten = frame.moved.intensity.as_ref().expect("intensity");
+        for (i, r) in clean.iter().enumerate() {
+            let f = (e.power_factor * (1.0 - e.drift_per_hour * (r.time / 3600.0))).max(0.0);
+            let (p, v) = if frame.fate[i].is_alive() {
+                (before[i] * f, scale_byte(r.intensity, f))
+            } else {
+                (before[i], r.intensity)
+            };
+            assert_eq!(frame.power[i].to_bits(), p.to_bits(), "{i} {}", r.time);
+            assert_eq!(inten[i], v, "{i} {}", r.time);
+        }
+    }
+
+    #[test]
+    fn one_factor_frames_and_the_others_give_the_formula_s_values() {
+        let drift = Emitter {
+            power_factor: 0.9,
+            drift_per_hour: 0.01,
+        };
+        let flat = Emitter {
+            power_factor: 0.77,
+            drift_per_hour: 0.0,
+        };
+        let off = Emitter {
+            power_factor: 0.0,
+            drift_per_hour: 0.5,
+        };
+        let same = vec![1234.5; 700];
+        let varied: Vec<f64> = (0..700).map(|i| 100.0 + f64::from(i) * 1.152e-6).collect();
+        let mut with_nan = same.clone();
+        with_nan[333] = f64::NAN;
+        let late: Vec<f64> = (0..700).map(|i| 7000.0 + f64::from(i) * 0.5).collect();
+        for e in [&drift, &flat, &off] {
+            for times in [&same, &varied, &with_nan, &late, &vec![0.0; 3], &vec![]] {
+                against_formula(e, times);
+            }
+        }
+    }
+
+    #[test]
+    fn a_complete_table_gives_scale_byte_s_byte_for_every_factor_in_its_range() {
+        // Close ends (as the times of one frame give) make complete tables; the
+        // look-up must then be `scale_byte` for every factor between them.
+        let mut complete = 0;
+        for k in 0..400 {
+            let lo = 0.5 + f64::from(k) * 0.001_37;
+            let hi = lo * (1.0 + 1e-7);
+            let t = ByteTable::between(hi, lo);
+            if !t.complete {
+                continue;
+            }
+            complete += 1;
+            for v in 0..=255u8 {
+                for s in 0..=8 {
+                    let f = lo + (hi - lo) * f64::from(s) / 8.0;
+                    assert_eq!(t.bytes[usize::from(v)] as u8, scale_byte(v, f), "{v} {f}");
+                    assert_eq!(t.scale(v, f), scale_byte(v, f));
+                }
+            }
+        }
+        assert!(complete > 100, "{complete}");
+        // A table over a wide range has ambiguous bytes.
+        assert!(!ByteTable::between(0.5, 0.9).complete);
+    }
+}

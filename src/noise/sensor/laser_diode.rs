@@ -109,7 +109,10 @@ impl NoiseStage for LaserDiode {
             ..
         } = frame;
         let lasers = &lay.laser[..n];
-        let offsets = [elev, azim].map(|v| v.map(|x| x as f32));
+        // `0.0 + x`, not `x`: the same value as adding to a zero vector (-0.0 becomes
+        // +0.0); the sums are tabled per laser.
+        let offsets = [elev, azim].map(|v| v.map(|x| 0.0 + x as f32));
+        let firings = &lay.firings[..];
         for (on, v, off) in [
             (elevs, &mut moved.elevation_deg, &offsets[0]),
             (azims, &mut moved.azimuth_deg, &offsets[1]),
@@ -118,16 +121,7 @@ impl NoiseStage for LaserDiode {
                 continue;
             }
             match v {
-                // `0.0 + x`, not `x`: the same value as adding to a zero vector (-0.0
-                // becomes +0.0).
-                None => {
-                    *v = Some(
-                        lasers
-                            .iter()
-                            .map(|&l| 0.0 + off[usize::from(l & 31)])
-                            .collect(),
-                    )
-                }
+                None => *v = Some(per_laser_column(lasers, firings, off)),
                 Some(v) => {
                     for (d, &l) in v.iter_mut().zip(lasers) {
                         *d += off[usize::from(l & 31)];
@@ -190,6 +184,33 @@ impl NoiseStage for LaserDiode {
     }
 }
 
+/// The laser ids of a firing in which all 32 lasers returned, in firing order.
+const IN_ORDER: [u8; 32] = {
+    let mut ids = [0u8; 32];
+    let mut l = 0;
+    while l < 32 {
+        ids[l] = l as u8;
+        l += 1;
+    }
+    ids
+};
+
+/// `table[l]` for every laser id `l` of `lasers`, firing by firing: a firing of the 32
+/// lasers in order (every laser returned) is a copy of the table; the others are looked
+/// up return by return. The same values either way.
+fn per_laser_column(lasers: &[u8], firings: &[[u32; 2]], table: &[f32; 32]) -> Vec<f32> {
+    let mut out = Vec::with_capacity(lasers.len());
+    for &[start, end] in firings {
+        let ids = &lasers[start as usize..end as usize];
+        if ids == IN_ORDER {
+            out.extend_from_slice(table);
+        } else {
+            out.extend(ids.iter().map(|&l| table[usize::from(l & 31)]));
+        }
+    }
+    out
+}
+
 /// `scale_byte(v, g_l)` for every byte v and laser l.
 fn byte_tables(gain: &[f64; 32]) -> Box<[[u8; 256]; 32]> {
     let mut t = Box::new([[0u8; 256]; 32]);
@@ -245,3 +266,38 @@ pub const KIND: StageKind = StageKind {
     ],
     build,
 };
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn per_laser_column_is_the_table_of_each_return_s_laser() {
+        let table: [f32; 32] = std::array::from_fn(|l| 0.0 + (l as f32 - 15.5) * 1e-3);
+        // Firings in order, with lasers missing, out of order, and ids past 31.
+        let firings_ids: Vec<Vec<u8>> = vec![
+            (0..32).collect(),
+            (0..32).filter(|l| l % 5 != 0).collect(),
+            (0..32).rev().collect(),
+            (0..32).collect(),
+            (32..64).collect(),
+            vec![],
+            vec![7],
+            (0..31).collect(),
+        ];
+        let mut lasers = Vec::new();
+        let mut firings = Vec::new();
+        for ids in firings_ids.iter().filter(|ids| !ids.is_empty()) {
+            let start = lasers.len() as u32;
+            lasers.extend_from_slice(ids);
+            firings.push([start, lasers.len() as u32]);
+        }
+        let got = per_laser_column(&lasers, &firings, &table);
+        let want: Vec<f32> = lasers.iter().map(|&l| table[usize::from(l & 31)]).collect();
+        assert_eq!(got.len(), want.len());
+        assert!(got
+            .iter()
+            .zip(&want)
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
+}

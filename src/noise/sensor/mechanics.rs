@@ -93,42 +93,81 @@ impl NoiseStage for Mechanics {
         // functions of the azimuth, evaluated again only where it changes.
         let lay = frame.layout();
         let moved = &mut frame.moved;
-        let da = azimuth_moves.then(|| moved.azimuth_deg.get_or_insert_with(|| vec![0.0; n]));
-        let de = wobbles.then(|| moved.elevation_deg.get_or_insert_with(|| vec![0.0; n]));
-        if let Some(da) = da {
-            for &[start, end] in &lay.firings {
-                let idx = start as usize..end as usize;
-                let jitter = if self.jitter_deg > 0.0 {
-                    self.jitter_deg * normal(rng)
-                } else {
-                    0.0
-                };
-                // The first return of a firing always evaluates (as a new firing did).
-                let mut last: Option<(u32, f32)> = None;
-                for (d, &az) in da[idx.clone()].iter_mut().zip(&lay.azimuth[idx]) {
-                    if last.is_none_or(|(bits, _)| bits != az.to_bits()) {
-                        let a = f64::from(az);
-                        let swept = (a - a_start).rem_euclid(360.0);
-                        last = Some((
-                            az.to_bits(),
-                            (self.azimuth_offset_deg
-                                + self.eccentricity_deg * (a.to_radians() + self.phases[0]).sin()
-                                + jitter
-                                + spin * swept) as f32,
-                        ));
+        let mut da = azimuth_moves.then(|| moved.azimuth_deg.get_or_insert_with(|| vec![0.0; n]));
+        let mut de = wobbles.then(|| moved.elevation_deg.get_or_insert_with(|| vec![0.0; n]));
+        let shift_of = |az: f32, jitter: f64| {
+            let a = f64::from(az);
+            let swept = (a - a_start).rem_euclid(360.0);
+            (self.azimuth_offset_deg
+                + self.eccentricity_deg * (a.to_radians() + self.phases[0]).sin()
+                + jitter
+                + spin * swept) as f32
+        };
+        let wobble_of = |az: f32| {
+            let a = f64::from(az).to_radians();
+            (self.wobble_deg * (a + self.phases[1]).sin()) as f32
+        };
+        // The shift is evaluated again at the first return of every firing (the jitter
+        // changes there) and where the azimuth changes; the wobble where the azimuth
+        // changes from the last return's (from NaN bits, with 0 as its value, before
+        // the first). One pass over the azimuths does both (they were two passes).
+        let mut wobble = (f32::NAN.to_bits(), 0.0f32);
+        for &[start, end] in &lay.firings {
+            let idx = start as usize..end as usize;
+            let jitter = if da.is_some() && self.jitter_deg > 0.0 {
+                self.jitter_deg * normal(rng)
+            } else {
+                0.0
+            };
+            let az = &lay.azimuth[idx.clone()];
+            let mut shift = (az.first().map_or(0, |a| !a.to_bits()), 0.0f32);
+            let mut shift_at = |az: f32| {
+                if az.to_bits() != shift.0 {
+                    shift = (az.to_bits(), shift_of(az, jitter));
+                }
+                shift.1
+            };
+            let mut wobble_at = |az: f32| {
+                if az.to_bits() != wobble.0 {
+                    wobble = (az.to_bits(), wobble_of(az));
+                }
+                wobble.1
+            };
+            // A firing whose returns share one azimuth (no azimuth interpolation, or a
+            // synthetic frame) gets one shift and one wobble, evaluated at its first
+            // return exactly as the loops below would, and added in a loop free of
+            // tests (the loops below would add the same values).
+            if let Some(&first) = az.first() {
+                if az.iter().all(|a| a.to_bits() == first.to_bits()) {
+                    if let Some(da) = da.as_deref_mut() {
+                        let s = shift_at(first);
+                        da[idx.clone()].iter_mut().for_each(|d| *d += s);
                     }
-                    *d += last.map_or(0.0, |(_, s)| s);
+                    if let Some(de) = de.as_deref_mut() {
+                        let w = wobble_at(first);
+                        de[idx].iter_mut().for_each(|e| *e += w);
+                    }
+                    continue;
                 }
             }
-        }
-        if let Some(de) = de {
-            let mut last = (f32::NAN, 0.0f32);
-            for (d, &az) in de.iter_mut().zip(&lay.azimuth) {
-                if az.to_bits() != last.0.to_bits() {
-                    let a = f64::from(az).to_radians();
-                    last = (az, (self.wobble_deg * (a + self.phases[1]).sin()) as f32);
+            match (da.as_deref_mut(), de.as_deref_mut()) {
+                (Some(da), Some(de)) => {
+                    for ((d, e), &a) in da[idx.clone()].iter_mut().zip(&mut de[idx]).zip(az) {
+                        *d += shift_at(a);
+                        *e += wobble_at(a);
+                    }
                 }
-                *d += last.1;
+                (Some(da), None) => {
+                    for (d, &a) in da[idx].iter_mut().zip(az) {
+                        *d += shift_at(a);
+                    }
+                }
+                (None, Some(de)) => {
+                    for (e, &a) in de[idx].iter_mut().zip(az) {
+                        *e += wobble_at(a);
+                    }
+                }
+                (None, None) => {}
             }
         }
     }
@@ -161,3 +200,152 @@ pub const KIND: StageKind = StageKind {
     ],
     build,
 };
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A return of zeros.
+    fn blank() -> Return {
+        Return {
+            x: 0.0,
+            y: 0.0,
+            z: 0.0,
+            range: 0.0,
+            azimuth: 0.0,
+            elevation: 0.0,
+            time: 0.0,
+            packet: 0,
+            raw_distance: 0,
+            intensity: 0,
+            laser: 0,
+            ring: 0,
+            block: 0,
+            kind: crate::frame::ReturnKind::Strongest,
+        }
+    }
+    use crate::frame::Return;
+    use crate::noise::{stage_rng, IdealPower};
+
+    /// The stage as it was written before the one-pass loop and the uniform firings:
+    /// two passes, memos reset as described there.
+    fn reference(m: &Mechanics, clean: &[Return], rng: &mut ChaCha8Rng) -> [Vec<f32>; 2] {
+        let n = clean.len();
+        let spin = if m.spin_rate_sigma > 0.0 {
+            m.spin_rate_sigma * normal(rng)
+        } else {
+            0.0
+        };
+        let a_start = clean.first().map_or(0.0, |r| f64::from(r.azimuth));
+        let (mut da, mut de) = (vec![0.0f32; n], vec![0.0f32; n]);
+        let mut start = 0;
+        while start < n {
+            let key = (clean[start].packet, clean[start].block);
+            let mut end = start;
+            while end < n && (clean[end].packet, clean[end].block) == key {
+                end += 1;
+            }
+            let jitter = if m.jitter_deg > 0.0 {
+                m.jitter_deg * normal(rng)
+            } else {
+                0.0
+            };
+            let mut last: Option<(u32, f32)> = None;
+            for i in start..end {
+                let az = clean[i].azimuth;
+                if last.is_none_or(|(bits, _)| bits != az.to_bits()) {
+                    let a = f64::from(az);
+                    let swept = (a - a_start).rem_euclid(360.0);
+                    last = Some((
+                        az.to_bits(),
+                        (m.azimuth_offset_deg
+                            + m.eccentricity_deg * (a.to_radians() + m.phases[0]).sin()
+                            + jitter
+                            + spin * swept) as f32,
+                    ));
+                }
+                da[i] += last.map_or(0.0, |(_, s)| s);
+            }
+            start = end;
+        }
+        let mut last = (f32::NAN, 0.0f32);
+        for (d, r) in de.iter_mut().zip(clean) {
+            if r.azimuth.to_bits() != last.0.to_bits() {
+                let a = f64::from(r.azimuth).to_radians();
+                last = (r.azimuth, (m.wobble_deg * (a + m.phases[1]).sin()) as f32);
+            }
+            *d += last.1;
+        }
+        [da, de]
+    }
+
+    #[test]
+    fn one_pass_and_uniform_firings_give_the_two_pass_values() {
+        // Firings of one azimuth, of interpolated azimuths, of a repeated azimuth
+        // across firings, and of one return.
+        let mut clean = Vec::new();
+        for f in 0..120u32 {
+            let len = if f % 17 == 3 { 1 } else { 32 - (f % 4) };
+            for j in 0..len {
+                let base = (f / 3) as f32 * 0.5;
+                let azimuth = match f % 3 {
+                    0 => base,
+                    1 => base + j as f32 * 0.004,
+                    _ => base + if j < 16 { 0.0 } else { 0.1 },
+                };
+                clean.push(Return {
+                    azimuth,
+                    range: 5.0,
+                    packet: f / 12,
+                    block: (f % 12) as u8,
+                    laser: j as u8,
+                    ..blank()
+                });
+            }
+        }
+        let ideal = IdealPower::new(
+            &Default::default(),
+            &Default::default(),
+            &Default::default(),
+        );
+        let m = Mechanics {
+            azimuth_offset_deg: 0.3,
+            eccentricity_deg: 0.01,
+            jitter_deg: 0.005,
+            wobble_deg: 0.02,
+            spin_rate_sigma: 0.001,
+            phases: [0.7, 4.1],
+        };
+        let wobble_only = Mechanics {
+            azimuth_offset_deg: 0.0,
+            eccentricity_deg: 0.0,
+            jitter_deg: 0.0,
+            spin_rate_sigma: 0.0,
+            ..m.clone()
+        };
+        let shift_only = Mechanics {
+            wobble_deg: 0.0,
+            ..m.clone()
+        };
+        for (k, m) in [m, wobble_only, shift_only].iter().enumerate() {
+            let mut frame = NoisyFrame::with_layout(2, clean.clone(), &ideal);
+            m.apply(&mut frame, &mut stage_rng(9, 2, 5));
+            let [da, de] = reference(m, &clean, &mut stage_rng(9, 2, 5));
+            for (got, want) in [
+                (&frame.moved.azimuth_deg, da),
+                (&frame.moved.elevation_deg, de),
+            ] {
+                if let Some(got) = got {
+                    assert!(
+                        got.iter()
+                            .zip(&want)
+                            .all(|(a, b)| a.to_bits() == b.to_bits()),
+                        "{k}"
+                    );
+                } else {
+                    assert!(want.iter().all(|&x| x == 0.0), "{k}");
+                }
+            }
+        }
+    }
+}

@@ -86,7 +86,11 @@ impl NoiseStage for Receiver {
             || self.range_noise_m != 0.0;
         if any {
             // Per-laser power factor, formed once per frame (same product as per return).
-            let factor = self.gains.map(|g| self.responsivity * g);
+            // Entries 32..64 are 1 for dead returns (see below).
+            let mut factor = [1.0f64; 64];
+            for (f, g) in factor.iter_mut().zip(self.gains) {
+                *f = self.responsivity * g;
+            }
             let (draw_det, draw_range) = (self.sigma_noise > 0.0, self.range_noise_m > 0.0);
             let noise_sd = self.sigma_noise * p_th;
             // Draws per return, in stream order: detection noise, then range noise (each
@@ -117,14 +121,19 @@ impl NoiseStage for Receiver {
                 fill_normals(rng, draws);
                 let (power, fate) = (&mut power[start..end], &mut fate[start..end]);
                 if scale_power {
-                    // Branch free, so it vectorises: dead returns keep their power.
+                    // Dead returns keep their power: they are multiplied by 1, which
+                    // gives back every f64 bit for bit (signalling NaNs aside, which no
+                    // arithmetic makes). Why not a select: the compiler turned every
+                    // form of it (`if`, a select of bits, `select_unpredictable`) into a
+                    // branch over the product, which missed on the fates that the drops
+                    // of earlier stages leave.
                     for ((p, f), &l) in power
                         .iter_mut()
                         .zip(fate.iter())
                         .zip(&lay.laser[start..end])
                     {
-                        let g = factor[usize::from(l & 31)];
-                        *p = if f.is_alive() { *p * g } else { *p };
+                        let dead = usize::from(!f.is_alive());
+                        *p *= factor[usize::from(l & 31) | dead << 5];
                     }
                 }
                 let s_r = &mut s_r[..end - start];
@@ -140,23 +149,24 @@ impl NoiseStage for Receiver {
                         *s = k / s.sqrt();
                     }
                 }
-                // The range update is a select, not a branch on the fate and the drop
-                // test, which the branch predictor kept missing (the values are those
-                // of the branches: dead and dropped returns keep their range).
                 let (range, cause) = (&mut range[start..end], &mut cause[start..end]);
-                for k in 0..end - start {
-                    let alive = fate[k].is_alive();
-                    let n_det = if draw_det { draws[per * k] } else { 0.0 };
-                    let dropped = alive && power[k] + noise_sd * n_det < cut;
-                    if dropped {
-                        // As `NoisyFrame::set_fate` (the frame is borrowed field by field).
-                        fate[k] = Fate::BelowPower;
-                        cause[k] = *stage;
+                let detect = Detect {
+                    cut,
+                    noise_sd,
+                    stage: *stage,
+                };
+                // One loop per combination of draws, so the stride and the optional
+                // parts are constants of the loop (they were per-return tests).
+                match (draw_det, draw_range) {
+                    (true, true) => detect.run::<true, true>(draws, power, fate, cause, range, s_r),
+                    (true, false) => {
+                        detect.run::<true, false>(draws, power, fate, cause, range, s_r)
                     }
-                    if draw_range {
-                        let n_range = draws[per * k + per - 1];
-                        let moved = (f64::from(range[k]) + f64::from(s_r[k]) * n_range) as f32;
-                        range[k] = if alive && !dropped { moved } else { range[k] };
+                    (false, true) => {
+                        detect.run::<false, true>(draws, power, fate, cause, range, s_r)
+                    }
+                    (false, false) => {
+                        detect.run::<false, false>(draws, power, fate, cause, range, s_r)
                     }
                 }
                 start = end;
@@ -171,6 +181,56 @@ impl NoiseStage for Receiver {
                 .get_or_insert_with(|| lay.intensity.clone());
             for x in v.iter_mut() {
                 *x = scale_byte(*x, g);
+            }
+        }
+    }
+}
+
+/// The detection test and range noise of one chunk of returns.
+struct Detect {
+    /// Effective threshold (1 + floor) p_th.
+    cut: f64,
+    /// SD of the detection noise, sigma_noise p_th.
+    noise_sd: f64,
+    /// Index of the stage in the chain (the cause of its drops).
+    stage: u8,
+}
+
+impl Detect {
+    /// Drops (fate and cause) and range noise of a chunk. `draws` holds the chunk's
+    /// normals in stream order, `DET as usize + RNG as usize` per return (detection
+    /// noise first); `s_r` the range SDs when `RNG`. The values are those of the
+    /// per-return branches they replace: a dead return keeps fate, cause and range, a
+    /// return dropped here keeps its range, the others move by `s_r n`.
+    #[inline(always)]
+    fn run<const DET: bool, const RNG: bool>(
+        &self,
+        draws: &[f64],
+        power: &[f64],
+        fate: &mut [Fate],
+        cause: &mut [u8],
+        range: &mut [f32],
+        s_r: &[f32],
+    ) {
+        let per = usize::from(DET) + usize::from(RNG);
+        let n = fate.len();
+        let (power, cause, range) = (&power[..n], &mut cause[..n], &mut range[..n]);
+        let draws = &draws[..per * n];
+        let s_r = &s_r[..if RNG { n } else { 0 }];
+        for k in 0..n {
+            let alive = fate[k].is_alive();
+            let n_det = if DET { draws[per * k] } else { 0.0 };
+            // `&`, not `&&`: both sides are evaluated anyway, and no branch is made.
+            let dropped = alive & (power[k] + self.noise_sd * n_det < self.cut);
+            if dropped {
+                // As `NoisyFrame::set_fate` (the frame is borrowed field by field).
+                fate[k] = Fate::BelowPower;
+                cause[k] = self.stage;
+            }
+            if RNG {
+                let n_range = draws[per * k + per - 1];
+                let moved = (f64::from(range[k]) + f64::from(s_r[k]) * n_range) as f32;
+                range[k] = if alive & !dropped { moved } else { range[k] };
             }
         }
     }
@@ -205,3 +265,37 @@ pub const KIND: StageKind = StageKind {
     ],
     build,
 };
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_product_with_one_gives_back_every_power_bit_for_bit() {
+        // Dead returns are multiplied by 1 instead of being skipped: the product must be
+        // the value itself for every kind of f64 (quiet NaNs with their payload too).
+        let mut values = vec![
+            0.0,
+            -0.0,
+            f64::MIN_POSITIVE,
+            f64::MIN_POSITIVE / 3.0,
+            -5e-324,
+            1.0,
+            0.1,
+            f64::MAX,
+            f64::MIN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            -f64::NAN,
+            f64::from_bits(0x7ff8_0000_dead_beef),
+            f64::from_bits(0xfff8_0000_0000_0001),
+        ];
+        let mut x = 1e-300f64;
+        while x < 1e300 {
+            values.extend([x, -x, x * 1.234_567, x.next_up()]);
+            x *= 7.3;
+        }
+        for v in values {
+            assert_eq!((v * 1.0).to_bits(), v.to_bits(), "{v:e}");
+        }
+    }
+}

@@ -86,6 +86,33 @@ fn bench_chain(c: &mut Criterion) {
         "pdiagram-sensor config without its stages, 50k returns",
         |b| b.iter(|| black_box(bare_chain.process(black_box(&frame)))),
     );
+    // The same pair on a real frame (the shared capture's first full sweep, about
+    // 50,000 returns with their own firing times and azimuths): the synthetic frame's
+    // returns all have time 0, which some stages' shortcuts favour.
+    let capture = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/hdl32e/monterey.pcap");
+    if capture.exists() {
+        let options = lidar_noise::hdl32e::frames::DecoderOptions::default();
+        let real = lidar_noise::hdl32e::frames::FrameReader::open(&capture, &options)
+            .expect("monterey.pcap opens")
+            .next()
+            .expect("a frame")
+            .expect("decodes");
+        let n = real.returns.len();
+        c.bench_function(
+            &format!("pdiagram-sensor chain + filters, monterey frame ({n} returns)"),
+            |b| b.iter(|| black_box(sensor_chain.process(black_box(&real)))),
+        );
+        c.bench_function(
+            &format!("pdiagram-sensor config without its stages, monterey frame ({n} returns)"),
+            |b| b.iter(|| black_box(bare_chain.process(black_box(&real)))),
+        );
+    } else {
+        eprintln!(
+            "SKIPPED: {} is absent (real-frame sensor chain)",
+            capture.display()
+        );
+    }
     let out = sensor_chain.process(&frame);
     c.bench_function("survivors after the sensor chain, 50k returns", |b| {
         b.iter(|| black_box(black_box(&out).survivors()))

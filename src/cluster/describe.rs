@@ -431,15 +431,18 @@ mod tests {
     use super::*;
     use crate::frame::ReturnKind;
 
+    /// The high 24 bits of the next step of a 64-bit LCG (tests need no RNG crate).
+    fn lcg(state: &mut u64) -> u64 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        *state >> 40
+    }
+
     #[test]
     fn dropping_interior_points_keeps_the_hull() {
         let mut state = 7u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 40) % 200) as f64 * 0.05
-        };
+        let mut next = || (lcg(&mut state) % 200) as f64 * 0.05;
         for n in [16, 17, 40, 300, 2000] {
             for _ in 0..50 {
                 // Coarse coordinates make ties, duplicates and collinear runs common.
@@ -454,12 +457,7 @@ mod tests {
     #[test]
     fn the_f32_hull_equals_the_general_hull() {
         let mut state = 11u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            state >> 40
-        };
+        let mut next = || lcg(&mut state);
         // Total-order keys round-trip and order as `total_cmp` does, zeros included.
         let specials = [-0.0f32, 0.0, -1.5, 1.5, f32::MIN, f32::MAX, 1e-45, -1e-45];
         for &a in &specials {

@@ -205,24 +205,9 @@ pub const KIND: StageKind = StageKind {
 mod tests {
     use super::*;
 
-    /// A return of zeros.
+    /// A return of zeros (the decoder's filler).
     fn blank() -> Return {
-        Return {
-            x: 0.0,
-            y: 0.0,
-            z: 0.0,
-            range: 0.0,
-            azimuth: 0.0,
-            elevation: 0.0,
-            time: 0.0,
-            packet: 0,
-            raw_distance: 0,
-            intensity: 0,
-            laser: 0,
-            ring: 0,
-            block: 0,
-            kind: crate::frame::ReturnKind::Strongest,
-        }
+        crate::hdl32e::decode::BLANK
     }
     use crate::frame::Return;
     use crate::noise::{stage_rng, IdealPower};

@@ -104,9 +104,22 @@ impl NoiseStage for Mechanics {
         let shift_with = |sine: f64, swept: f64, jitter: f64| {
             (self.azimuth_offset_deg + self.eccentricity_deg * sine + jitter + spin * swept) as f32
         };
+        // `rem_euclid(360)` without its `fmod` call where |v| < 360: there `v % 360` is
+        // `v` exactly, and `rem_euclid` adds 360 to a negative remainder.
+        let swept_of = |v: f64| {
+            if v.abs() < 360.0 {
+                if v < 0.0 {
+                    v + 360.0
+                } else {
+                    v
+                }
+            } else {
+                v.rem_euclid(360.0)
+            }
+        };
         let shift_of = |az: f32, jitter: f64, anchor: Option<&Anchor>| {
             let a = f64::from(az);
-            let swept = (a - a_start).rem_euclid(360.0);
+            let swept = swept_of(a - a_start);
             let x = a.to_radians() + self.phases[0];
             if let Some((lo, hi)) = anchor.and_then(|an| an.bracket(x)) {
                 let l = shift_with(lo, swept, jitter);

@@ -24,3 +24,15 @@ pub mod signals;
 pub mod sweep;
 pub mod synth;
 pub mod writers;
+
+/// Helpers shared by unit tests.
+#[cfg(test)]
+pub(crate) mod test_util {
+    /// Next uniform number in [0, 1) of a 64-bit LCG (unit tests need no RNG crate).
+    pub(crate) fn lcg_unit(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}

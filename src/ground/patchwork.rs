@@ -829,12 +829,7 @@ mod tests {
     #[test]
     fn closed_form_eigen_agrees_with_jacobi() {
         let mut rng = 12345u64;
-        let mut next = || {
-            rng = rng
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (rng >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = || crate::test_util::lcg_unit(&mut rng) - 0.5;
         for _ in 0..1000 {
             let (x, y, z) = (next(), next(), next() * 0.01);
             let m = [

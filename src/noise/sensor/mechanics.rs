@@ -300,12 +300,7 @@ mod tests {
     #[test]
     fn anchored_brackets_hold_libm_sine_with_room() {
         let mut state = 9u64;
-        let mut unit = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut unit = || crate::test_util::lcg_unit(&mut state);
         let mut worst = 0.0f64;
         for _ in 0..100_000 {
             // Azimuths as the stage makes them (f32 degrees, radians, a phase < 2 pi),

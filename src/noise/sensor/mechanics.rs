@@ -121,23 +121,11 @@ impl NoiseStage for Mechanics {
             let a = f64::from(az);
             let swept = swept_of(a - a_start);
             let x = a.to_radians() + self.phases[0];
-            if let Some((lo, hi)) = anchor.and_then(|an| an.bracket(x)) {
-                let l = shift_with(lo, swept, jitter);
-                if l.to_bits() == shift_with(hi, swept, jitter).to_bits() {
-                    return l;
-                }
-            }
-            shift_with(x.sin(), swept, jitter)
+            of_sine(x, anchor, |sine| shift_with(sine, swept, jitter))
         };
         let wobble_of = |az: f32, anchor: Option<&Anchor>| {
             let x = f64::from(az).to_radians() + self.phases[1];
-            if let Some((lo, hi)) = anchor.and_then(|an| an.bracket(x)) {
-                let l = (self.wobble_deg * lo) as f32;
-                if l.to_bits() == ((self.wobble_deg * hi) as f32).to_bits() {
-                    return l;
-                }
-            }
-            (self.wobble_deg * x.sin()) as f32
+            of_sine(x, anchor, |sine| (self.wobble_deg * sine) as f32)
         };
         // The shift is evaluated again at the first return of every firing (the jitter
         // changes there) and where the azimuth changes; the wobble where the azimuth
@@ -218,6 +206,20 @@ impl NoiseStage for Mechanics {
             }
         }
     }
+}
+
+/// `value(x.sin())` with libm's sine, for a `value` that does not decrease as the sine
+/// grows: taken at both ends of the anchor's bracket of the sine where they give the same
+/// `f32` (so does every sine between them), from libm `sin` otherwise.
+#[inline(always)]
+fn of_sine(x: f64, anchor: Option<&Anchor>, value: impl Fn(f64) -> f32) -> f32 {
+    if let Some((lo, hi)) = anchor.and_then(|an| an.bracket(x)) {
+        let l = value(lo);
+        if l.to_bits() == value(hi).to_bits() {
+            return l;
+        }
+    }
+    value(x.sin())
 }
 
 /// sin and cos at one argument (a firing's first azimuth plus a phase), from which the

@@ -337,6 +337,12 @@ impl TimeStretch {
     pub fn apply(&self, t: f64) -> f64 {
         self.t0 + (t - self.t0) * self.scale + self.offset
     }
+
+    /// Time `t` of return `i` through the stretches of `all` that cover `i`, in order.
+    #[inline]
+    pub fn apply_all(all: &[TimeStretch], i: usize, t: f64) -> f64 {
+        all.iter().filter(|s| i < s.len).fold(t, |t, s| s.apply(t))
+    }
 }
 
 impl Moved {
@@ -345,11 +351,9 @@ impl Moved {
     #[inline]
     pub fn reported_time(&self, i: usize, clean: f64) -> f64 {
         let t = self.time.as_ref().map_or(clean, |v| v[i]);
-        self.time_stretch
-            .iter()
-            .filter(|s| i < s.len)
-            .fold(t, |t, s| s.apply(t))
+        TimeStretch::apply_all(&self.time_stretch, i, t)
     }
+
     /// The azimuth changes, allocated as zeros on first use.
     pub fn azimuth_mut(&mut self, n: usize) -> &mut Vec<f32> {
         self.azimuth_deg.get_or_insert_with(|| vec![0.0; n])
@@ -605,11 +609,7 @@ impl<'a> View<'a> {
             out.time = t[i];
         }
         // As `Moved::reported_time` (here with `time` resolved once).
-        for s in self.time_stretch {
-            if i < s.len {
-                out.time = s.apply(out.time);
-            }
-        }
+        out.time = TimeStretch::apply_all(self.time_stretch, i, out.time);
         if let Some(v) = self.intensity {
             out.intensity = v[i];
         }

@@ -15,7 +15,7 @@ use super::{float, number, scale_byte, CHUNK};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
-use crate::noise::{NoiseStage, NoisyFrame, StageKind};
+use crate::noise::{Fate, NoiseStage, NoisyFrame, StageKind};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 use toml::Value;
@@ -82,10 +82,7 @@ impl NoiseStage for Emitter {
             for (p, fate) in power.iter_mut().zip(fate.iter()) {
                 *p = if fate.is_alive() { *p * f0 } else { *p };
             }
-            for (v, fate) in inten.iter_mut().zip(fate.iter()) {
-                let e = table.bytes[usize::from(*v)] as u8;
-                *v = if fate.is_alive() { e } else { *v };
-            }
+            table.look_up_alive(inten, fate);
             return;
         }
         let mut f = [0.0f64; CHUNK];
@@ -112,10 +109,7 @@ impl NoiseStage for Emitter {
                 .iter()
                 .fold(true, |all, &f| all & (f >= table.lo) & (f <= table.hi));
             if inside && table.complete {
-                for (v, fate) in inten.iter_mut().zip(fate) {
-                    let e = table.bytes[usize::from(*v)] as u8;
-                    *v = if fate.is_alive() { e } else { *v };
-                }
+                table.look_up_alive(inten, fate);
                 continue;
             }
             for ((v, fate), &f) in inten.iter_mut().zip(fate).zip(f.iter()) {
@@ -143,6 +137,16 @@ struct ByteTable {
 const AMBIGUOUS: u16 = 256;
 
 impl ByteTable {
+    /// Each live return's byte replaced by its table entry, branch free (dead returns
+    /// keep theirs). For a complete table and factors inside its range.
+    fn look_up_alive(&self, inten: &mut [u8], fate: &[Fate]) {
+        debug_assert!(self.complete);
+        for (v, fate) in inten.iter_mut().zip(fate) {
+            let e = self.bytes[usize::from(*v)] as u8;
+            *v = if fate.is_alive() { e } else { *v };
+        }
+    }
+
     /// The table of the factors between `a` and `b` (in either order); empty (every
     /// byte computed) unless both are finite.
     fn between(a: f64, b: f64) -> ByteTable {
@@ -202,7 +206,7 @@ pub const KIND: StageKind = StageKind {
 mod tests {
     use super::*;
     use crate::frame::{Return, ReturnKind};
-    use crate::noise::{Fate, IdealPower};
+    use crate::noise::IdealPower;
 
     /// Powers and bytes of `e` applied to returns of the given times (every third one
     /// dead), with those of the model's formula per return.

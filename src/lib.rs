@@ -28,11 +28,17 @@ pub mod writers;
 /// Helpers shared by unit tests.
 #[cfg(test)]
 pub(crate) mod test_util {
-    /// Next uniform number in [0, 1) of a 64-bit LCG (unit tests need no RNG crate).
-    pub(crate) fn lcg_unit(state: &mut u64) -> f64 {
+    /// Next state of a 64-bit LCG (unit tests need no RNG crate); its high bits are the
+    /// random ones.
+    pub(crate) fn lcg(state: &mut u64) -> u64 {
         *state = state
             .wrapping_mul(6364136223846793005)
             .wrapping_add(1442695040888963407);
-        (*state >> 11) as f64 / (1u64 << 53) as f64
+        *state
+    }
+
+    /// Next uniform number in [0, 1) of [`lcg`].
+    pub(crate) fn lcg_unit(state: &mut u64) -> f64 {
+        (lcg(state) >> 11) as f64 / (1u64 << 53) as f64
     }
 }

@@ -310,8 +310,8 @@ fn from_total_key(k: u32) -> f32 {
     f32::from_bits(if k >> 31 == 1 { k & !(1 << 31) } else { !k })
 }
 
-/// [`convex_hull`] of points whose coordinates are widened `f32` (cluster members), equal
-/// to it: each point is packed into one `u64` of [`total_key`]s, which sorts as a plain
+/// The convex hull (as `convex_hull`, the tests' reference) of points whose coordinates
+/// are widened `f32` (cluster members): each point is packed into one `u64` of [`total_key`]s, which sorts as a plain
 /// integer (the stable comparison sort of `[f64; 2]` was about 7 % of a `run`). Widening
 /// is exact and monotone, so `f64::total_cmp` of the widened values orders as
 /// `f32::total_cmp` of the originals (NaN payloads aside, and non-finite points are
@@ -431,12 +431,9 @@ mod tests {
     use super::*;
     use crate::frame::ReturnKind;
 
-    /// The high 24 bits of the next step of a 64-bit LCG (tests need no RNG crate).
+    /// The high 24 bits of the next LCG state.
     fn lcg(state: &mut u64) -> u64 {
-        *state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        *state >> 40
+        crate::test_util::lcg(state) >> 40
     }
 
     #[test]

@@ -13,7 +13,7 @@
 //! order). Range, azimuth and time fields stay as reported. Source: Zhang and Singh,
 //! LOAM, RSS 2014; vibration values engineering assumption.
 
-use super::{float, number, FiringPose, Pose, Poses};
+use super::{float, number, sin_plus, FiringPose, Pose, Poses, SineTrack};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -101,12 +101,18 @@ impl NoiseStage for Motion {
         // The pose is a function of the firing's time alone: consecutive firings with the
         // same time (frames whose returns carry no firing time) share one entry.
         let mut last_dt = None;
+        // sin and cos of w dt carried from firing to firing ([`SineTrack`], within 1e-13
+        // of libm's; a 20 Hz phase moves 0.006 rad per firing), the phases added by
+        // angle addition: two libm sines per firing were most of this stage's time.
+        let phases = phi.map(f64::sin_cos);
+        let mut track = SineTrack::default();
         for &[start, end] in &lay.firings {
             let dt = lay.time[start as usize] - t_ref;
             if last_dt != Some(dt.to_bits()) {
                 last_dt = Some(dt.to_bits());
-                let roll = vib * (w * dt + phi[0]).sin();
-                let pitch = vib * (w * dt + phi[1]).sin();
+                let sc = track.at(w * dt);
+                let roll = vib * sin_plus(sc, phases[0]);
+                let pitch = vib * sin_plus(sc, phases[1]);
                 let ego = Pose::from_small_rpy(0.0, 0.0, -omega * dt, [0.0; 3]);
                 let rot = Pose::from_small_rpy(roll, pitch, 0.0, [0.0; 3]).then_after(&ego);
                 let velocity = [0, 1, 2].map(|k| -self.speed_mps * rot.r[k][0]);

@@ -196,8 +196,9 @@ fn every_return_has_one_fate_and_cluster_counts_add_up_under_all_four_configs() 
 #[test]
 fn forks_on_a_pool_change_no_result() {
     // On a thread of a rayon pool, `process` forks the frame's independent parts (noise
-    // summary beside segmentation, the clusters' descriptions in two halves) and the
-    // pool's idle thread takes them; everything it returns must equal the one-thread path.
+    // summary beside segmentation, the voxel links and the clusters' descriptions in two
+    // halves each) and the pool's idle thread takes them; everything it returns must equal
+    // the one-thread path.
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(2)
         .build()
@@ -216,7 +217,10 @@ fn forks_on_a_pool_change_no_result() {
                 pipeline.process(frame.clone()).unwrap(),
                 pool.install(|| pipeline.process(frame)).unwrap(),
             );
-            assert!(!a.clusters.is_empty(), "{name}: the halves have clusters to split");
+            assert!(
+                !a.clusters.is_empty(),
+                "{name}: the halves have clusters to split"
+            );
             assert_eq!(a.noise, b.noise, "{name} frame {}", a.noisy.index);
             assert_eq!(a.counts, b.counts);
             assert_eq!(a.survivors, b.survivors);

@@ -19,6 +19,7 @@ pub mod hdl32e;
 pub mod loader;
 pub mod noise;
 pub mod options;
+pub mod par;
 pub mod pipeline;
 pub mod signals;
 pub mod sweep;

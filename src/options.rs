@@ -184,8 +184,8 @@ pub fn set_worker_threads(n: usize) {
 
 /// Worker threads to use: `--threads`, else `RAYON_NUM_THREADS` (when a positive number),
 /// else one per core, as rayon decides. Unlike `rayon::current_num_threads` it does not
-/// start rayon's pool, whose idle threads would spin beside the streaming workers of
-/// `run` and `convert`, which use none of it.
+/// start rayon's global pool, whose idle threads would spin beside the streaming workers
+/// of `run` and `convert` (a pool of their own, of this size).
 pub fn worker_threads() -> usize {
     if let Some(&n) = THREADS.get() {
         return n;

@@ -194,9 +194,15 @@ fn every_return_has_one_fate_and_cluster_counts_add_up_under_all_four_configs() 
 }
 
 #[test]
-fn a_spare_core_changes_no_result() {
-    // `process_with(_, true)` computes the noise summary on a second thread (the last
-    // frames of a run); everything it returns must equal the one-thread path.
+fn forks_on_a_pool_change_no_result() {
+    // On a thread of a rayon pool, `process` forks the frame's independent parts (noise
+    // summary beside segmentation, the voxel links and the clusters' descriptions in two
+    // halves each) and the pool's idle thread takes them; everything it returns must equal
+    // the one-thread path.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
     for name in ["paper", "clear"] {
         let config = config(name);
         let pipeline = Pipeline::new(&config);
@@ -209,7 +215,11 @@ fn a_spare_core_changes_no_result() {
             let frame = frame.unwrap();
             let (a, b) = (
                 pipeline.process(frame.clone()).unwrap(),
-                pipeline.process_with(frame, true).unwrap(),
+                pool.install(|| pipeline.process(frame)).unwrap(),
+            );
+            assert!(
+                !a.clusters.is_empty(),
+                "{name}: the halves have clusters to split"
             );
             assert_eq!(a.noise, b.noise, "{name} frame {}", a.noisy.index);
             assert_eq!(a.counts, b.counts);

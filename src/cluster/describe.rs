@@ -171,13 +171,20 @@ fn describe_members<'a>(
                 *slot += 1;
             }
         }
-        return Ok((0..k)
-            .filter(|&id| start[id + 1] > start[id])
-            .map(|id| {
-                let group = &members[start[id] as usize..start[id + 1] as usize];
-                summarize(id as i32, group)
-            })
-            .collect());
+        let describe = |ids: std::ops::Range<usize>| -> Vec<ClusterInfo> {
+            ids.filter(|&id| start[id + 1] > start[id])
+                .map(|id| {
+                    let group = &members[start[id] as usize..start[id + 1] as usize];
+                    summarize(id as i32, group)
+                })
+                .collect()
+        };
+        // Clusters are independent: the ids in two halves of about as many members each
+        // are a fork an idle worker may take (see `crate::par::join`), in id order still.
+        let mid = start.partition_point(|&s| s < start[k] / 2).min(k);
+        let (mut clusters, high) = crate::par::join(|| describe(0..mid), || describe(mid..k));
+        clusters.extend(high);
+        return Ok(clusters);
     }
     let mut groups: BTreeMap<i32, Vec<&Return>> = BTreeMap::new();
     for (i, &l) in labels.iter().enumerate() {

@@ -332,7 +332,6 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
     cell_start.push(m as u32);
     // Sentinel above every neighbour key (keys use at most 62 bits): walks need no bounds test.
     cell_key.push(u64::MAX);
-    let mut sets = UnionFind::new(n_cells);
     // Squared distances up to `t` link for sure; above `t_hi` never; in between (adaptive
     // passes only) the exact pair rule decides.
     let t = squared_threshold(rule.lo);
@@ -346,52 +345,136 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
     // in z, skipped by their z field. One pointer per span instead of one per column:
     // the pointer walks were most of this function's time.
     let pack = |dx: i64, dy: i64, dz: i64| -> u64 { ((dx << sx) + (dy << sy) + dz) as u64 };
-    let columns: [(u64, u64); 3] = [
-        (pack(0, 1, -2), pack(0, 2, 2)),
-        (pack(1, -2, -2), pack(1, 2, 2)),
-        (pack(2, -2, -2), pack(2, 2, 2)),
-    ];
-    let z_mask = (1u64 << wz) - 1;
-    let mut ptr = [0usize; 3];
-
-    let walk = Walk {
-        cell_box: &cell_box,
-        cell_start: &cell_start,
-        sp: &sp,
-        sr: &sr,
-        t,
-        t_hi,
-        adaptive,
-        cutoff_m: rule.cutoff_m,
-        per_m: rule.per_m,
+    let links = Links {
+        walk: Walk {
+            cell_box: &cell_box,
+            cell_start: &cell_start,
+            sp: &sp,
+            sr: &sr,
+            t,
+            t_hi,
+            adaptive,
+            cutoff_m: rule.cutoff_m,
+            per_m: rule.per_m,
+        },
+        cell_key: &cell_key,
+        columns: [
+            (pack(0, 1, -2), pack(0, 2, 2)),
+            (pack(1, -2, -2), pack(1, 2, 2)),
+            (pack(2, -2, -2), pack(2, 2, 2)),
+        ],
+        z_mask: (1u64 << wz) - 1,
     };
-    for c in 0..n_cells {
-        let key = cell_key[c];
-        // Only this loop's own joins can change `c`'s root, and `try_link` reports them.
-        let mut root = sets.find(c as u32);
-        let mut q = c + 1;
-        while cell_key[q] <= key + 2 {
-            root = walk.try_link(&mut sets, root, c, q);
-            q += 1;
+    // Every key is below the sentinel: no key bound.
+    let all = (0, u64::MAX - 1);
+    // The voxels in two halves at an x boundary (keys sort by x first, so each half is an
+    // index range): a fork an idle worker may take (see `crate::par::join`). A voxel's
+    // forward neighbours have larger keys, so the upper half links within itself; the
+    // lower half links within itself too, and the pairs across the boundary (dx = 1, 2
+    // from the lower half's last two x columns) are linked after. The partition is the
+    // connected components of the linking voxel pairs, which does not depend on the order
+    // the pairs are tested in, so it is the same as one pass's (as are the labels, numbered
+    // by smallest input index).
+    let x_of = |c: usize| cell_key[c] >> sx;
+    let split = (n_cells >= SPLIT_MIN_CELLS)
+        .then(|| (n_cells / 2..n_cells).find(|&c| x_of(c) != x_of(c - 1)))
+        .flatten();
+    let sets = match split {
+        None => {
+            let mut sets = UnionFind::new(n_cells);
+            links.link(&mut sets, 0, 0..n_cells, all, 0..3);
+            sets
         }
-        let z = key & z_mask;
-        for (j, &(lo_off, hi_off)) in columns.iter().enumerate() {
-            let (klo, khi) = (key.wrapping_add(lo_off), key.wrapping_add(hi_off));
-            let mut p = ptr[j];
-            while cell_key[p] < klo {
-                p += 1;
-            }
-            ptr[j] = p;
-            while cell_key[p] <= khi {
-                if (cell_key[p] & z_mask).abs_diff(z) <= 2 {
-                    root = walk.try_link(&mut sets, root, c, p);
+        Some(half) => {
+            let limit = x_of(half) << sx;
+            let (mut sets, upper) = crate::par::join(
+                || {
+                    let mut sets = UnionFind::new(half);
+                    links.link(&mut sets, 0, 0..half, (0, limit - 1), 0..3);
+                    sets
+                },
+                || {
+                    let mut sets = UnionFind::new(n_cells - half);
+                    links.link(&mut sets, half, half..n_cells, all, 0..3);
+                    sets
+                },
+            );
+            sets.append(upper);
+            // Pairs across the boundary: from the lower half's voxels two x columns or
+            // less below it (x fields are at least 2, so `limit` is above two columns), to
+            // the upper half's, on the dx = 1, 2 spans only (the others stay in a column).
+            let near = limit - (2u64 << sx);
+            let from = cell_key[..half].partition_point(|&k| k < near);
+            links.link(&mut sets, 0, from..half, (limit, u64::MAX - 1), 1..3);
+            sets
+        }
+    };
+
+    Some((cell_of, sets))
+}
+
+/// Fewest voxels for [`link_cells`] to link in two halves: below it the fork is not worth
+/// its bookkeeping. Small, so that tests of small point sets take the split path too.
+const SPLIT_MIN_CELLS: usize = 256;
+
+/// The forward-neighbour walks of [`link_cells`] over the sorted voxel keys.
+struct Links<'a> {
+    walk: Walk<'a>,
+    /// Sorted voxel keys and a `u64::MAX` sentinel.
+    cell_key: &'a [u64],
+    /// Key offsets of the first and last voxel of each forward neighbour span.
+    columns: [(u64, u64); 3],
+    /// The z field of a key.
+    z_mask: u64,
+}
+
+impl Links<'_> {
+    /// Links each voxel of `cells` with its forward neighbours whose keys lie in `keys`
+    /// (both included), on the neighbour spans `spans` (0 the voxel's own column above it
+    /// and the dx = 0 span, 1 and 2 the dx = 1, 2 spans); `sets` holds the voxels from
+    /// `off` on (voxel `c` is its element `c - off`).
+    fn link(
+        &self,
+        sets: &mut UnionFind,
+        off: usize,
+        cells: std::ops::Range<usize>,
+        keys: (u64, u64),
+        spans: std::ops::Range<usize>,
+    ) {
+        let (cell_key, walk, z_mask) = (self.cell_key, &self.walk, self.z_mask);
+        // Forward neighbours have larger keys than the voxel, so the walks start at it.
+        let mut ptr = [cells.start; 3];
+        for c in cells {
+            let key = cell_key[c];
+            // Only this loop's own joins can change `c`'s root, and `try_link` reports them.
+            let mut root = sets.find((c - off) as u32);
+            if spans.start == 0 {
+                // The voxel's own column above it (same x, below any key bound of a half).
+                let mut q = c + 1;
+                while cell_key[q] <= key + 2 {
+                    root = walk.try_link(sets, root, c, q, off);
+                    q += 1;
                 }
-                p += 1;
+            }
+            let z = key & z_mask;
+            for j in spans.clone() {
+                let (lo_off, hi_off) = self.columns[j];
+                let klo = key.wrapping_add(lo_off).max(keys.0);
+                let khi = key.wrapping_add(hi_off).min(keys.1);
+                let mut p = ptr[j];
+                while cell_key[p] < klo {
+                    p += 1;
+                }
+                ptr[j] = p;
+                while cell_key[p] <= khi {
+                    if (cell_key[p] & z_mask).abs_diff(z) <= 2 {
+                        root = walk.try_link(sets, root, c, p, off);
+                    }
+                    p += 1;
+                }
             }
         }
     }
-
-    Some((cell_of, sets))
 }
 
 /// What the voxel-pair test of [`link_cells`] reads: a struct with methods rather than a
@@ -410,10 +493,11 @@ struct Walk<'a> {
 
 impl Walk<'_> {
     /// Tests one voxel pair (`ra` the current root of `a`'s set) and joins it when some
-    /// point pair links; returns the root of `a`'s set afterwards.
+    /// point pair links; returns the root of `a`'s set afterwards. `sets` holds the voxels
+    /// from `off` on.
     #[inline(always)]
-    fn try_link(&self, sets: &mut UnionFind, ra: u32, a: usize, b: usize) -> u32 {
-        let rb = sets.find(b as u32);
+    fn try_link(&self, sets: &mut UnionFind, ra: u32, a: usize, b: usize, off: usize) -> u32 {
+        let rb = sets.find((b - off) as u32);
         if ra == rb {
             return ra;
         }
@@ -478,6 +562,39 @@ mod tests {
             let t = squared_threshold(c);
             assert!(t.sqrt() <= c, "{c}");
             assert!(f64::from_bits(t.to_bits() + 1).sqrt() > c, "{c}");
+        }
+    }
+
+    /// Number of sets of a union-find.
+    fn set_count(sets: &mut UnionFind) -> usize {
+        let n = sets.len() as u32;
+        (0..n).filter(|&i| sets.find(i) == i).count()
+    }
+
+    #[test]
+    fn voxels_linked_in_two_halves_join_across_the_boundary() {
+        // Lines along x with points 0.2 m apart, cutoff 0.5 m: each line is one set, and
+        // only the links across the halves' x boundary make it one.
+        let rule = |c: f64| Rule {
+            cutoff_m: c,
+            per_m: 0.0,
+            ranges: None,
+            lo: c,
+            hi: c,
+        };
+        for lines in [1usize, 2, 3] {
+            let mut points = Vec::new();
+            for l in 0..lines {
+                for i in 0..2000 {
+                    points.push([i as f32 * 0.2, 5.0 * l as f32, 0.1 * (i % 3) as f32]);
+                }
+            }
+            let (_, mut sets) = link_cells(&points, &rule(0.5)).unwrap();
+            assert!(sets.len() >= 2 * SPLIT_MIN_CELLS, "the halves are taken");
+            assert_eq!(set_count(&mut sets), lines, "{lines} lines");
+            // Below the 0.2 m spacing no two points link: every voxel is its own set.
+            let (_, mut sets) = link_cells(&points, &rule(0.19)).unwrap();
+            assert_eq!(set_count(&mut sets), sets.len(), "no voxel links at 0.19 m");
         }
     }
 

@@ -144,6 +144,13 @@ impl UnionFind {
         ra
     }
 
+    /// Appends the elements of `other`, numbered after this one's, with their sets.
+    pub(crate) fn append(&mut self, other: UnionFind) {
+        let n = self.parent.len() as u32;
+        self.parent.extend(other.parent.iter().map(|&p| p + n));
+        self.size.extend(other.size);
+    }
+
     /// Number of elements.
     pub(crate) fn len(&self) -> usize {
         self.parent.len()

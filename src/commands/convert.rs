@@ -167,7 +167,7 @@ fn convert_one(
     let mut written = 0u32;
     // Decoding on this thread, PLY encoding and writing on the workers, overlapped
     // (see `run::stream_frames`); the frame's buffer comes back for the decoder to reuse.
-    let work = |frame: Frame, _spare: bool| -> Result<Frame> {
+    let work = |frame: Frame| -> Result<Frame> {
         let name = output.file_name(frame.index);
         crate::writers::atomic::refuse_inputs(&target.join(&name), &[capture])?;
         let path = dir.join(name);

@@ -382,12 +382,12 @@ fn run_capture(
     } else {
         None
     };
-    let work = |f: Frame, spare: bool| -> Result<(SpoolEntry, Vec<crate::frame::Return>)> {
-        let result = plan.pipeline.process_with(f, spare)?;
+    let work = |f: Frame| -> Result<(SpoolEntry, Vec<crate::frame::Return>)> {
+        let result = plan.pipeline.process(f)?;
         if let Some(p) = &pcap {
             p.encode_frame(&result.noisy);
         }
-        frame_outputs(plan, result, source, dir, inputs, spare)
+        frame_outputs(plan, result, source, dir, inputs)
     };
     stream_frames(
         &mut reader,
@@ -550,57 +550,66 @@ pub(super) fn frame_outputs(
     source: &str,
     dir: &Path,
     inputs: &[&Path],
-    spare_core: bool,
 ) -> Result<(SpoolEntry, Vec<crate::frame::Return>)> {
     let clusters = FrameClusters {
         index: result.noisy.index,
         clusters: std::mem::take(&mut result.clusters),
     };
-    let entry = std::thread::scope(|scope| -> Result<SpoolEntry> {
-        let result = &result;
-        // With a spare core (the last frames of a capture), the frame file is written on a
-        // second thread beside the reports; errors still come in the same order.
-        let ply = (plan.ply && spare_core)
-            .then(|| scope.spawn(|| write_ply(plan, result, source, dir, inputs)));
-        if plan.ply && !spare_core {
-            write_ply(plan, result, source, dir, inputs)?;
-        }
-        let reports = (|| {
-            if plan.linkage {
-                write_linkage(plan, result, dir, inputs)?;
+    let r = &result;
+    // The frame file and the reports are a fork an idle worker may take (see
+    // `crate::par::join`); the frame file's error comes first, as when they run in turn.
+    let (ply, reports) = crate::par::join(
+        || {
+            if plan.ply {
+                write_ply(plan, r, source, dir, inputs)?;
             }
-            SpoolEntry::of(FrameReport::of(result), &clusters)
-        })();
-        if let Some(h) = ply {
-            h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))?;
-        }
-        reports
-    })?;
+            Ok::<(), anyhow::Error>(())
+        },
+        || {
+            if plan.linkage {
+                write_linkage(plan, r, dir, inputs)?;
+            }
+            SpoolEntry::of(FrameReport::of(r), &clusters)
+        },
+    );
+    ply?;
+    let entry = reports?;
     // The frame's buffer goes back to the reader for the next frame.
     Ok((entry, result.noisy.clean))
 }
 
 /// Runs `work` on every frame in `frames` as a bounded pipeline: the calling thread
 /// decodes frames and hands them to `options::worker_threads()` workers, and hands
-/// each result to `done` (with the reader, to recycle buffers) in frame order as soon as every earlier frame's is in. Decoding,
-/// processing (with each frame's own files) and the ordered report append overlap, with
-/// no barrier between groups of frames: a slow frame holds back only the report append,
-/// never the workers. At most `2 x workers + 1` frames are in flight (decoded, queued,
-/// processed or waiting for an earlier one), so memory stays bounded whatever the
-/// capture's length. Errors come in frame order: a frame's processing error before a
-/// decoding error further on; after the first error no new frame is started.
+/// each result to `done` (with the reader, to recycle buffers) in frame order as soon as
+/// every earlier frame's is in. Decoding, processing (with each frame's own files) and the
+/// ordered report append overlap, with no barrier between groups of frames: a slow frame
+/// holds back only the report append, never the workers. At most `2 x workers + 1` frames
+/// are in flight (decoded, queued, processed or waiting for an earlier one), so memory
+/// stays bounded whatever the capture's length. Errors come in frame order: a frame's
+/// processing error before a decoding error further on; after the first error no new
+/// frame is started.
+///
+/// The workers are the threads of one rayon pool, one frame loop each, so that `work`'s
+/// forks ([`crate::par::join`]) can be taken by a worker that has no frame left: at the
+/// end of a capture the last frames then use every core, not one frame per core.
 pub(crate) fn stream_frames<T: Send>(
     reader: &mut FrameReader,
     frames: &RangeInclusive<u32>,
-    work: impl Fn(Frame, bool) -> Result<T> + Sync,
+    work: impl Fn(Frame) -> Result<T> + Sync,
     mut done: impl FnMut(T, &mut FrameReader) -> Result<()>,
 ) -> Result<()> {
     use std::collections::BTreeMap;
     use std::panic::AssertUnwindSafe;
-    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    use std::sync::atomic::{AtomicBool, Ordering};
     use std::sync::{mpsc, Mutex};
     let workers = crate::options::worker_threads();
     let window = 2 * workers + 1;
+    // A pool of its own, of exactly `workers` threads: the global pool may have another
+    // size (set before `--threads` was read) and would also take other rayon work.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(workers)
+        .build()
+        .with_context(|| format!("cannot start {workers} worker threads"))?;
     let (frame_tx, frame_rx) = mpsc::sync_channel::<(usize, Frame)>(workers);
     let frame_rx = Mutex::new(frame_rx);
     // A worker's panic travels to the calling thread and resumes there.
@@ -608,34 +617,29 @@ pub(crate) fn stream_frames<T: Send>(
     let (result_tx, result_rx) = mpsc::channel::<(usize, Outcome<T>)>();
     // Set on the first error: queued frames are then skipped, not processed.
     let stop = AtomicBool::new(false);
-    // Frames sent and not yet taken by a worker, and whether the reader has no more: a
-    // worker that takes the last queued frame of an exhausted reader has a core to spare
-    // (the other workers finish and find nothing), and `work` may use it.
-    let queued = AtomicUsize::new(0);
-    let exhausted = AtomicBool::new(false);
-    std::thread::scope(|scope| -> Result<()> {
-        for _ in 0..workers {
-            let (frame_rx, result_tx, work, stop) = (&frame_rx, result_tx.clone(), &work, &stop);
-            let (queued, exhausted) = (&queued, &exhausted);
-            scope.spawn(move || loop {
+    // The calling thread is no thread of the pool: it decodes and keeps frame order while
+    // the pool's threads run the frames (and, when idle, the forks of other frames).
+    pool.in_place_scope(|scope| -> Result<()> {
+        let (frame_rx, result_tx, work, stop) = (&frame_rx, &result_tx, &work, &stop);
+        // One frame loop on each thread of the pool (a broadcast, so that no thread can
+        // run a second loop inside a fork it waits for).
+        scope.spawn_broadcast(move |_, _| {
+            let result_tx = result_tx.clone();
+            loop {
                 // The lock is held only while taking one frame off the queue.
                 let next = frame_rx.lock().unwrap_or_else(|e| e.into_inner()).recv();
                 let Ok((seq, frame)) = next else {
                     return;
                 };
-                let left = queued.fetch_sub(1, Ordering::SeqCst) - 1;
-                // One worker has no neighbour whose core could be spare.
-                let spare = workers > 1 && left == 0 && exhausted.load(Ordering::SeqCst);
                 if stop.load(Ordering::Relaxed) {
                     continue;
                 }
-                let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| work(frame, spare)));
+                let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| work(frame)));
                 if result_tx.send((seq, outcome)).is_err() {
                     return;
                 }
-            });
-        }
-        drop(result_tx);
+            }
+        });
         let mut frame_tx = Some(frame_tx);
         // Results that arrived before an earlier frame's, by sequence number.
         let mut pending: BTreeMap<usize, Outcome<T>> = BTreeMap::new();
@@ -663,12 +667,10 @@ pub(crate) fn stream_frames<T: Send>(
                         Some(frame) => {
                             let tx = frame_tx.as_ref().expect("checked above");
                             // The workers only leave once the queue is closed.
-                            queued.fetch_add(1, Ordering::SeqCst);
                             tx.send((sent, frame)).expect("workers are running");
                             sent += 1;
                         }
                         None => {
-                            exhausted.store(true, Ordering::SeqCst);
                             frame_tx = None;
                         }
                     },

@@ -412,9 +412,9 @@ fn compute_unit(
     };
     let mut totals = Totals::default();
     let (mut summary, mut clusters, mut csv) = (Vec::new(), Vec::new(), Vec::new());
-    let work = |f: crate::frame::Frame, spare: bool| {
-        let result = plan.pipeline.process_with(f, spare)?;
-        single::frame_outputs(plan, result, &job.source, dir, inputs, spare)
+    let work = |f: crate::frame::Frame| {
+        let result = plan.pipeline.process(f)?;
+        single::frame_outputs(plan, result, &job.source, dir, inputs)
     };
     single::stream_frames(&mut reader, range, work, |(entry, returns), reader| {
         reader.recycle(crate::frame::Frame {

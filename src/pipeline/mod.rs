@@ -105,30 +105,23 @@ impl Pipeline {
         &self.chain
     }
 
-    /// Runs every stage on one frame.
+    /// Runs every stage on one frame. On a thread of a rayon pool, the parts of the frame
+    /// that do not depend on each other are forks an idle thread may take (see
+    /// [`crate::par::join`]); the results are the same on any thread.
     pub fn process(&self, frame: Frame) -> Result<FrameResult> {
-        self.process_with(frame, false)
-    }
-
-    /// Runs every stage on one frame; with `spare_core`, the frame's noise summary is
-    /// computed on a second thread beside ground removal and clustering (same results).
-    pub fn process_with(&self, frame: Frame, spare_core: bool) -> Result<FrameResult> {
         let noisy = self.chain.process_owned(frame);
-        // The summary reads the noisy frame only: on the last frames of a capture, when the
-        // other workers have nothing left to do, it runs beside the rest.
-        std::thread::scope(|scope| {
-            let summary = spare_core.then(|| scope.spawn(|| noisy.summary()));
-            let rest = self.segment(&noisy)?;
-            let noise = match summary {
-                Some(h) => h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)),
-                None => noisy.summary(),
-            };
-            Ok((rest, noise))
-        })
-        .map(|(rest, noise)| FrameResult {
+        // The noise summary and the survivors' indices read the noisy frame only: they are
+        // the fork beside ground removal and clustering.
+        let (rest, (noise, kept)) = crate::par::join(
+            || self.segment(&noisy),
+            || (noisy.summary(), noisy.kept_indices()),
+        );
+        let rest = rest?;
+        debug_assert_eq!(kept.len(), rest.survivors.len());
+        Ok(FrameResult {
             noisy,
             survivors: rest.survivors,
-            kept: rest.kept,
+            kept,
             ground: rest.ground,
             labels: rest.labels,
             clusters: rest.clusters,
@@ -140,8 +133,6 @@ impl Pipeline {
     /// Survivors, ground, clusters and counts of a noisy frame.
     fn segment(&self, noisy: &NoisyFrame) -> Result<Segmented> {
         let survivors = noisy.survivors();
-        let kept = noisy.kept_indices();
-        debug_assert_eq!(kept.len(), survivors.len());
         let mut rng = stage_rng(self.seed, noisy.index, self.ground_tag);
         let ground = ground::segment(&survivors, &self.ground, &mut rng);
         // The non-ground survivors by index, and their points for the clustering, in one
@@ -184,7 +175,6 @@ impl Pipeline {
         SCRATCH.set((non_ground_buf, points_buf));
         Ok(Segmented {
             survivors,
-            kept,
             ground,
             labels,
             clusters,
@@ -201,10 +191,9 @@ thread_local! {
         const { std::cell::Cell::new((Vec::new(), Vec::new())) };
 }
 
-/// A [`FrameResult`] but for the noise summary.
+/// A [`FrameResult`] but for the noise summary and the survivors' indices.
 struct Segmented {
     survivors: Vec<Return>,
-    kept: Vec<u32>,
     ground: Vec<bool>,
     labels: Vec<i32>,
     clusters: Vec<ClusterInfo>,

@@ -1,0 +1,23 @@
+//! Fork points inside one frame's work: `run` processes frames on the threads of one
+//! rayon pool, so that a worker with no frame left takes the second half of a fork in
+//! another worker's frame instead of idling at the end of a capture (see
+//! `commands::run::stream_frames`).
+
+/// Runs `a` and `b` and returns both results. On a thread of a rayon pool it is a
+/// `rayon::join`: `a` runs here and `b` waits to be taken by an idle thread of the pool,
+/// or runs here after `a` when none is idle (a join costs next to nothing then). On any
+/// other thread both run here in turn, since a join there would start rayon's global pool
+/// and wait for it. `a` and `b` must be independent; the results are the same either way.
+pub fn join<A, B, RA, RB>(a: A, b: B) -> (RA, RB)
+where
+    A: FnOnce() -> RA + Send,
+    B: FnOnce() -> RB + Send,
+    RA: Send,
+    RB: Send,
+{
+    if rayon::current_thread_index().is_some() {
+        rayon::join(a, b)
+    } else {
+        (a(), b())
+    }
+}

@@ -57,6 +57,29 @@ impl Pose {
         )
     }
 
+    /// `Pose::from_small_rpy(roll, pitch, 0, 0)` after `Pose::from_small_rpy(0, 0, yaw, 0)`
+    /// (motion's rotation of a firing: the ego yaw, then the vibration's roll and pitch),
+    /// written out. The general product also adds products with the zeros of the two
+    /// factors and multiplies by their ones; leaving those out changes no entry that is
+    /// not zero (x + (+-0) = x, x * 1 = x, and the sums keep their order), and an entry
+    /// that is exactly zero (only with zero angles) at most in its sign. Per firing this
+    /// was most of `motion`'s time.
+    pub fn tilt_after_yaw(roll: f64, pitch: f64, yaw: f64) -> Pose {
+        use crate::noise::small_sin_cos;
+        let (sr, cr) = small_sin_cos(roll);
+        let (sp, cp) = small_sin_cos(pitch);
+        let (sy, cy) = small_sin_cos(yaw);
+        let (spsr, spcr, cpsr) = (sp * sr, sp * cr, cp * sr);
+        Pose {
+            r: [
+                [cp * cy + spsr * sy, -(cp * sy) + spsr * cy, spcr],
+                [cr * sy, cr * cy, -sr],
+                [-(sp * cy) + cpsr * sy, sp * sy + cpsr * cy, cp * cr],
+            ],
+            t: [0.0; 3],
+        }
+    }
+
     fn from_sin_cos(
         (sr, cr): (f64, f64),
         (sp, cp): (f64, f64),
@@ -403,7 +426,31 @@ pub fn frame_start(frame: &super::NoisyFrame) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use super::{scale_byte, sin_plus, SineTrack};
+    use super::{scale_byte, sin_plus, Pose, SineTrack};
+
+    #[test]
+    fn tilt_after_yaw_is_the_general_product() {
+        // Small angles as motion makes them, larger ones (libm branch), and zeros of
+        // both signs; entries equal (+0 == -0), and bit for bit where not zero.
+        let mut state = 11u64;
+        let mut unit = || crate::test_util::lcg_unit(&mut state);
+        let mut angle = |k: u32| match k % 7 {
+            0 => 0.0,
+            1 => -0.0,
+            2 => (unit() - 0.5) * 0.2,
+            _ => (unit() - 0.5) * 0.004,
+        };
+        for k in 0..20_000u32 {
+            let (roll, pitch, yaw) = (angle(k), angle(k / 7), angle(k / 49));
+            let want = Pose::from_small_rpy(roll, pitch, 0.0, [0.0; 3])
+                .then_after(&Pose::from_small_rpy(0.0, 0.0, yaw, [0.0; 3]));
+            let got = Pose::tilt_after_yaw(roll, pitch, yaw);
+            for (g, w) in got.r.iter().flatten().zip(want.r.iter().flatten()) {
+                assert!(g == w && (*w == 0.0 || g.to_bits() == w.to_bits()), "{k}");
+            }
+            assert_eq!(got.t, want.t, "{k}");
+        }
+    }
 
     #[test]
     fn sine_track_stays_within_1e_13_of_libm() {

@@ -113,8 +113,7 @@ impl NoiseStage for Motion {
                 let sc = track.at(w * dt);
                 let roll = vib * sin_plus(sc, phases[0]);
                 let pitch = vib * sin_plus(sc, phases[1]);
-                let ego = Pose::from_small_rpy(0.0, 0.0, -omega * dt, [0.0; 3]);
-                let rot = Pose::from_small_rpy(roll, pitch, 0.0, [0.0; 3]).then_after(&ego);
+                let rot = Pose::tilt_after_yaw(roll, pitch, -omega * dt);
                 let velocity = [0, 1, 2].map(|k| -self.speed_mps * rot.r[k][0]);
                 firings.push(FiringPose {
                     pose: rot,

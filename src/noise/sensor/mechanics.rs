@@ -8,10 +8,11 @@
 //! w' = w + W sin(a_f + phi_w). phi1 and phi_w are drawn uniform once per seed (unit
 //! stream); e ~ N(0, s_e^2) once per frame (the doc's slow random walk of the rate,
 //! frozen over one 0.1 s rotation), then one normal per firing when s_a > 0 (drawn
-//! together, see `fill_normals`), from the frame stream. `a_start` is the azimuth of the frame's first return; the swept angle
-//! is taken modulo 360. Source: Glennie and Lichti, Remote Sensing 3(3), 2011 (encoder
-//! misalignment found only marginally significant); magnitudes are engineering
-//! assumptions below the 0.01 deg reporting step and the 0.166 deg firing step.
+//! together, see `fill_normals`), from the frame stream. `a_start` is the azimuth of the
+//! frame's first return; the swept angle is taken modulo 360. Source: Glennie and
+//! Lichti, Remote Sensing 3(3), 2011 (encoder misalignment found only marginally
+//! significant); magnitudes are engineering assumptions below the 0.01 deg reporting step
+//! and the 0.166 deg firing step.
 
 use super::{fill_normals, float, normal, number, sigma, sin_plus, SineTrack};
 use crate::config::reader::Section;
@@ -118,9 +119,9 @@ impl NoiseStage for Mechanics {
             // firing span about 0.003 rad, so taking the sines at each of them instead
             // would move the shift by at most A1 * 0.003 (3e-5 deg at the default A1),
             // far below the 0.01 deg reporting step; it cost two libm sines per return
-            // on real captures, most of the sensor chain's time.
-            // sin and cos of a_f carried from firing to firing ([`SineTrack`], within
-            // 1e-13 of libm's), the phases added by angle addition.
+            // on real captures, most of the sensor chain's time. sin and cos of a_f are
+            // carried from firing to firing ([`SineTrack`], within 1e-13 of libm's), the
+            // phases added by angle addition.
             let sc = track.at(f64::from(first).to_radians());
             if let Some(da) = da.as_deref_mut() {
                 let base = self.azimuth_offset_deg

@@ -45,8 +45,9 @@ impl Pose {
     }
 
     /// Same as [`Pose::from_rpy`] with sin and cos from a series for small angles (see
-    /// `small_sin_cos`; exact `sin_cos` above 0.01 rad): for the per-firing poses of
-    /// `motion`, where the angles are tiny and libm calls dominated.
+    /// `small_sin_cos`; exact `sin_cos` above 0.01 rad): the general form that
+    /// `Pose::tilt_after_yaw`, motion's per-firing rotation, is tested against.
+    #[cfg(test)]
     pub fn from_small_rpy(roll: f64, pitch: f64, yaw: f64, t: [f64; 3]) -> Pose {
         use crate::noise::small_sin_cos;
         Pose::from_sin_cos(

@@ -621,7 +621,7 @@ impl<'a> View<'a> {
 /// (within one turn of [0, 360)): the same value, since `a - 360` is exact there and
 /// `a + 360` is the rounded sum `rem_euclid` also returns.
 #[inline]
-fn wrap_360(a: f64) -> f64 {
+pub(crate) fn wrap_360(a: f64) -> f64 {
     if (0.0..360.0).contains(&a) {
         a
     } else if a > -360.0 && a < 0.0 {
@@ -812,11 +812,6 @@ impl NoiseChain {
 mod tests {
     use super::*;
 
-    /// A return of zeros (the decoder's filler).
-    fn blank() -> Return {
-        crate::hdl32e::decode::BLANK
-    }
-
     #[test]
     fn small_sin_cos_agrees_with_sin_cos() {
         for i in -300..=300 {
@@ -869,7 +864,7 @@ mod tests {
                     intensity: (k % 101) as u8,
                     laser: (k % 29) as u8 + 3 * u8::from(k.is_multiple_of(5)),
                     block: ((k / 29) % 12) as u8,
-                    ..blank()
+                    ..crate::hdl32e::decode::BLANK
                 }
             })
             .collect()

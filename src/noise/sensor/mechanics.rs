@@ -18,7 +18,7 @@ use super::{fill_normals, float, normal, number, sigma, sin_plus, SineTrack};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
-use crate::noise::{NoiseStage, NoisyFrame, StageKind};
+use crate::noise::{wrap_360, NoiseStage, NoisyFrame, StageKind};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
@@ -128,17 +128,18 @@ impl NoiseStage for Mechanics {
                     + self.eccentricity_deg * sin_plus(sc, phases[0])
                     + jitter;
                 let da = &mut da[idx.clone()];
-                // Azimuths within a turn of `a_start` (every decoded one): the swept
-                // angle by a select the loop vectorises; others (or a NaN) by `swept`.
-                let within = az
-                    .iter()
-                    .fold(true, |w, &a| w & ((f64::from(a) - a_start).abs() < 360.0));
+                // The spin-rate error stretches the azimuth swept since the frame's first
+                // return, `wrap_360(a - a_start)`: per return, as the decoder
+                // interpolates per return. For azimuths within a turn of `a_start`
+                // (every decoded one) that is a select the loop vectorises.
+                let within = || {
+                    az.iter()
+                        .fold(true, |w, &a| w & ((f64::from(a) - a_start).abs() < 360.0))
+                };
                 if spin == 0.0 {
                     let s = base as f32;
                     da.iter_mut().for_each(|d| *d += s);
-                } else if within {
-                    // The spin-rate error stretches the azimuth swept since the frame's
-                    // first return: per return, as the decoder interpolates per return.
+                } else if within() {
                     for (d, &a) in da.iter_mut().zip(az) {
                         let v = f64::from(a) - a_start;
                         let v = if v < 0.0 { v + 360.0 } else { v };
@@ -146,7 +147,7 @@ impl NoiseStage for Mechanics {
                     }
                 } else {
                     for (d, &a) in da.iter_mut().zip(az) {
-                        *d += (base + spin * swept(f64::from(a) - a_start)) as f32;
+                        *d += (base + spin * wrap_360(f64::from(a) - a_start)) as f32;
                     }
                 }
             }
@@ -155,21 +156,6 @@ impl NoiseStage for Mechanics {
                 de[idx].iter_mut().for_each(|e| *e += w);
             }
         }
-    }
-}
-
-/// `v.rem_euclid(360.0)` without its `fmod` call where |v| < 360: there `v % 360` is
-/// `v` exactly, and `rem_euclid` adds 360 to a negative remainder.
-#[inline]
-fn swept(v: f64) -> f64 {
-    if v.abs() < 360.0 {
-        if v < 0.0 {
-            v + 360.0
-        } else {
-            v
-        }
-    } else {
-        v.rem_euclid(360.0)
     }
 }
 
@@ -204,11 +190,6 @@ pub const KIND: StageKind = StageKind {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A return of zeros (the decoder's filler).
-    fn blank() -> Return {
-        crate::hdl32e::decode::BLANK
-    }
     use crate::frame::Return;
     use crate::noise::{stage_rng, IdealPower};
 
@@ -266,6 +247,9 @@ mod tests {
                 // From 355 degrees across north, so the swept angle wraps.
                 let base = (355.0 + (f / 3) as f32 * 0.5) % 360.0;
                 let azimuth = match f % 3 {
+                    // One firing two turns beyond the others (no decoder makes it), so the
+                    // swept angle also takes its general path.
+                    _ if f == 50 => base + 720.0 + j as f32 * 0.004,
                     0 => base,
                     1 => base + j as f32 * 0.004,
                     _ => base + if j < 16 { 0.0 } else { 0.1 },
@@ -276,7 +260,7 @@ mod tests {
                     packet: f / 12,
                     block: (f % 12) as u8,
                     laser: j as u8,
-                    ..blank()
+                    ..crate::hdl32e::decode::BLANK
                 });
             }
         }

@@ -58,11 +58,14 @@ impl NoiseStage for Emitter {
         // Times and intensities from the frame's compact columns (not the 48-byte returns).
         let lay = frame.layout();
         let factor = |t: f64| {
-            let h = t / 3600.0;
+            // A product with the rounded 1/3600, not the quotient: h is within about an
+            // ulp of it (2e-16 relative, so the factor moves by drift x that at most),
+            // and the division was a third of the stage's time on real firing times.
+            let h = t * (1.0 / 3600.0);
             (self.power_factor * (1.0 - self.drift_per_hour * h)).max(0.0)
         };
         // The intensity bytes of every factor the frame's times give, tabled once per
-        // frame (see `ByteTable`): f is monotone in t (a division by a positive constant,
+        // frame (see `ByteTable`): f is monotone in t (a product with a positive constant,
         // a product with a constant, a subtraction from 1, a product with
         // power_factor >= 0 and max(0), each monotone), so the factor of every time in
         // the frame's range lies between the factors of its two ends.
@@ -244,7 +247,8 @@ mod tests {
         e.apply(&mut frame, &mut crate::noise::stage_rng(1, 0, 0));
         let inten = frame.moved.intensity.as_ref().expect("intensity");
         for (i, r) in clean.iter().enumerate() {
-            let f = (e.power_factor * (1.0 - e.drift_per_hour * (r.time / 3600.0))).max(0.0);
+            let f =
+                (e.power_factor * (1.0 - e.drift_per_hour * (r.time * (1.0 / 3600.0)))).max(0.0);
             let (p, v) = if frame.fate[i].is_alive() {
                 (before[i] * f, scale_byte(r.intensity, f))
             } else {

@@ -637,12 +637,16 @@ pub(crate) fn wrap_360(a: f64) -> f64 {
 /// sin and cos of `t` radians; a Taylor series for the small angles sensor stages use
 /// (|t| < 0.01: truncation error below 1e-13, far under f32 precision), which is several
 /// times faster than `sin_cos` in the per-return loop of [`NoisyFrame::survivors`].
+///
+/// The series multiplies by rounded reciprocals instead of dividing by 6, 20 and 12 (and
+/// by 0.5 for 2, which is exact): three divisions per call were most of its time, and a
+/// rounded reciprocal moves a term by an ulp, 1e-16 of a term itself under 2e-5.
 pub(crate) fn small_sin_cos(t: f64) -> (f64, f64) {
     if t.abs() < 0.01 {
         let t2 = t * t;
         (
-            t * (1.0 - t2 / 6.0 * (1.0 - t2 / 20.0)),
-            1.0 - t2 / 2.0 * (1.0 - t2 / 12.0),
+            t * (1.0 - t2 * (1.0 / 6.0) * (1.0 - t2 * (1.0 / 20.0))),
+            1.0 - t2 * 0.5 * (1.0 - t2 * (1.0 / 12.0)),
         )
     } else {
         t.sin_cos()
@@ -811,6 +815,28 @@ impl NoiseChain {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn small_sin_cos_is_within_1e_13_of_libm_and_is_libm_above_its_range() {
+        // A dense walk over (-0.01, 0.01) with the ends and signed zeros; the bound is the
+        // one the callers rely on (a wrong coefficient, e.g. 1/7 for 1/6, is off by 2e-8
+        // at 0.01).
+        let mut ts = vec![0.0, -0.0, 1e-300, -1e-300, 0.009_999_999, -0.009_999_999];
+        ts.extend((-20_000..=20_000).map(|k| f64::from(k) * 4.999_9e-7));
+        for t in ts {
+            let ((s, c), (ls, lc)) = (small_sin_cos(t), t.sin_cos());
+            assert!((s - ls).abs() < 1e-13 && (c - lc).abs() < 1e-13, "{t:e}");
+            assert_eq!(s.to_bits() >> 63, ls.to_bits() >> 63, "sign of sin {t:e}");
+        }
+        for t in [0.01, -0.01, 0.5, -3.0, 100.0] {
+            let ((s, c), (ls, lc)) = (small_sin_cos(t), t.sin_cos());
+            assert_eq!(
+                (s.to_bits(), c.to_bits()),
+                (ls.to_bits(), lc.to_bits()),
+                "{t}"
+            );
+        }
+    }
 
     #[test]
     fn small_sin_cos_agrees_with_sin_cos() {

@@ -606,8 +606,8 @@ pub(crate) fn stream_frames<T: Send>(
     // A worker that finishes needs one decoded frame ready, and one more lets a frame
     // finish before an earlier one without idling a worker; frames decoded further ahead
     // only hold memory (3.3 MB each), whose first-touched pages cost CPU time: on the
-    // shared capture `2 x workers + 1` (5 at 2 workers) peaked at 70 MB and took about
-    // 3 % more CPU than this (61-65 MB), in interleaved runs.
+    // shared capture `2 x workers + 1` (5 at 2 workers) peaked at 68-71 MB and took 1-4 %
+    // more CPU than this (66 MB) in four interleaved comparisons.
     let window = workers + 2;
     // A pool of its own, of exactly `workers` threads: the global pool may have another
     // size (set before `--threads` was read) and would also take other rayon work.

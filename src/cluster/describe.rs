@@ -320,10 +320,11 @@ fn from_total_key(k: u32) -> f32 {
 /// The convex hull (as `convex_hull`, the tests' reference) of points whose coordinates
 /// are widened `f32` (cluster members): each point is packed into one `u64` of
 /// [`total_key`]s, which sorts as a plain integer (the stable comparison sort of
-/// `[f64; 2]` was about 7 % of a `run`). Widening is exact and monotone, so `f64::total_cmp` of the widened values orders as
-/// `f32::total_cmp` of the originals (NaN payloads aside, and non-finite points are
-/// singleton clusters, where no order is taken); equal keys are identical points, so an
-/// unstable sort gives the same sequence as the stable one.
+/// `[f64; 2]` was about 7 % of a `run`). Widening is exact and monotone, so
+/// `f64::total_cmp` of the widened values orders as `f32::total_cmp` of the originals
+/// (NaN payloads aside, and non-finite points are singleton clusters, where no order is
+/// taken); equal keys are identical points, so an unstable sort gives the same sequence
+/// as the stable one.
 fn hull_of_f32(pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
     if pts.len() < 2 {
         return pts;

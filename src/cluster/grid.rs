@@ -565,12 +565,6 @@ mod tests {
         }
     }
 
-    /// Number of sets of a union-find.
-    fn set_count(sets: &mut UnionFind) -> usize {
-        let n = sets.len() as u32;
-        (0..n).filter(|&i| sets.find(i) == i).count()
-    }
-
     #[test]
     fn voxels_linked_in_two_halves_join_across_the_boundary() {
         // Lines along x with points 0.2 m apart, cutoff 0.5 m: each line is one set, and
@@ -591,10 +585,14 @@ mod tests {
             }
             let (_, mut sets) = link_cells(&points, &rule(0.5)).unwrap();
             assert!(sets.len() >= 2 * SPLIT_MIN_CELLS, "the halves are taken");
-            assert_eq!(set_count(&mut sets), lines, "{lines} lines");
+            assert_eq!(sets.component_labels().1, lines, "{lines} lines");
             // Below the 0.2 m spacing no two points link: every voxel is its own set.
             let (_, mut sets) = link_cells(&points, &rule(0.19)).unwrap();
-            assert_eq!(set_count(&mut sets), sets.len(), "no voxel links at 0.19 m");
+            assert_eq!(
+                sets.component_labels().1,
+                sets.len(),
+                "no voxel links at 0.19 m"
+            );
         }
     }
 

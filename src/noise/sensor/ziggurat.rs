@@ -150,6 +150,12 @@ fn open01(rng: &mut ChaCha8Rng) -> f64 {
     ((rng.next_u64() >> 11) as f64 + 0.5) * (1.0 / 9_007_199_254_740_992.0)
 }
 
+/// A word's signed uniform (its high 24 bits, arithmetic shift) and layer (its low 8).
+#[inline(always)]
+fn split(w: u32) -> (i32, usize) {
+    ((w as i32) >> LAYER_BITS, (w & (LAYERS as u32 - 1)) as usize)
+}
+
 /// The rare case (about 1.5 % of draws): the wedge test, the tail beyond [`R`], or a
 /// fresh word; every further word or uniform comes from `rng`.
 #[cold]
@@ -174,9 +180,7 @@ fn slow(t: &Tables, mut hz: i32, mut iz: usize, rng: &mut ChaCha8Rng) -> f64 {
         if inside {
             return x;
         }
-        let w = rng.next_u32();
-        hz = (w as i32) >> LAYER_BITS;
-        iz = (w & (LAYERS as u32 - 1)) as usize;
+        (hz, iz) = split(rng.next_u32());
         if hz.unsigned_abs() < t.k[iz] {
             return f64::from(hz) * t.w[iz];
         }
@@ -193,8 +197,7 @@ pub fn fill(rng: &mut ChaCha8Rng, out: &mut [f64]) {
         let words = &mut buf[..out.len()];
         rng.fill(words);
         for (x, &w) in out.iter_mut().zip(words.iter()) {
-            let hz = (w as i32) >> LAYER_BITS;
-            let iz = (w & (LAYERS as u32 - 1)) as usize;
+            let (hz, iz) = split(w);
             *x = if hz.unsigned_abs() < t.k[iz] {
                 f64::from(hz) * t.w[iz]
             } else {

@@ -44,6 +44,22 @@ fn bin_of(abs_nm: u64) -> usize {
     }
 }
 
+/// [`bin_of`] of a change below 2^31 nm (the fast path of [`NoiseSummary::from_frame`]).
+///
+/// Why without branches: rain's range noise grows with range, so consecutive changes
+/// land in different decades at random and `bin_of`'s branches mispredicted; the three
+/// decades' bins are all computed and the right one picked by masks (on the shared
+/// capture's frames the summary took 0.29 ms a frame instead of 0.40).
+#[inline]
+fn bin_of_small(abs_nm: u32) -> usize {
+    let in1 = 0u32.wrapping_sub(u32::from(abs_nm >= 100_000_000));
+    let in2 = 0u32.wrapping_sub(u32::from(abs_nm >= 1_000_000_000));
+    let b0 = abs_nm / 100_000;
+    let b1 = 1000 + abs_nm.saturating_sub(100_000_000) / 1_000_000;
+    let b2 = 1900 + abs_nm.saturating_sub(1_000_000_000) / 10_000_000;
+    ((b0 & !in1) | (b1 & in1 & !in2) | (b2 & in2)) as usize
+}
+
 /// Upper edge of a histogram bin in nanometres (u64::MAX for the overflow bin).
 fn bin_upper_nm(bin: usize) -> u64 {
     let mut first_bin = 0u64;
@@ -328,7 +344,7 @@ impl NoiseSummary {
                     sq_small += u128::from(abs * abs);
                     n_small += 1;
                     max_small = max_small.max(abs);
-                    hist[bin_of(abs)] += 1;
+                    hist[bin_of_small(abs as u32)] += 1;
                 } else {
                     rc.add(delta_m);
                 }
@@ -514,6 +530,8 @@ mod tests {
                     1 => range + 2.147_483_5,
                     2 => 1.0e6,
                     3 => -range,
+                    // Decimetres to metres: changes across the histogram's decade edges.
+                    4 | 5 => range + rng.random_range(-1.5..1.5),
                     _ => range + rng.random_range(-0.05..0.05),
                 };
                 f.clean.push(Return {
@@ -553,6 +571,15 @@ mod tests {
             // Every value just under a bin's upper edge falls in that bin.
             assert_eq!(bin_of(bin_upper_nm(b) - 1), b, "bin {b}");
             assert_eq!(bin_of(bin_upper_nm(b)), b + 1, "bin {b}");
+            // The branch-free path agrees below its bound, edges included.
+            for v in [bin_upper_nm(b) - 1, bin_upper_nm(b)] {
+                if v < 1 << 31 {
+                    assert_eq!(bin_of_small(v as u32), bin_of(v), "{v} nm");
+                }
+            }
+        }
+        for v in [0u32, 1, (1 << 31) - 1, 2_000_000_000, 999_999_999, 99_999_999] {
+            assert_eq!(bin_of_small(v), bin_of(u64::from(v)), "{v} nm");
         }
     }
 }

@@ -176,3 +176,66 @@ fn strict_settings_lose_a_slope() {
     let (_, r) = precision_recall(&labels, &truth);
     assert!(r < 0.5, "settings ignored: recall {r}");
 }
+
+/// `segment` decides on approximate angles where they are decided by more than a margin
+/// and on the exact `atan2` angles otherwise: its labels must be those of the exact
+/// angles everywhere (margin infinite), and so must a very wide margin's (most
+/// comparisons then take the exact path), on noisy synthetic streets (several seeds,
+/// slopes, noise levels and settings, with and without the occluded band) and on the
+/// shared capture's frames through the paper chain.
+#[test]
+fn approximate_angles_decide_like_exact_ones() {
+    let check = |returns: &[lidar_noise::frame::Return], what: &str| {
+        for (initial, delta) in [(30.0, 5.0), (10.0, 1.0), (45.0, 0.5)] {
+            let exact = range_image::segment_with_margin(returns, initial, delta, f64::INFINITY);
+            let fast = range_image::segment(returns, initial, delta);
+            assert_eq!(fast, exact, "{what}, initial {initial}, delta {delta}");
+            let wide = range_image::segment_with_margin(returns, initial, delta, 30.0);
+            assert_eq!(
+                wide, exact,
+                "{what}, margin 30, initial {initial}, delta {delta}"
+            );
+            assert!(exact.iter().any(|&g| g), "{what}: some ground");
+        }
+    };
+    for seed in 0..6u64 {
+        let slope = [0.0, 5.0, -3.0][seed as usize % 3];
+        let band: &[u8] = if seed % 2 == 0 { &[] } else { &BAND };
+        let (mut returns, _) = Scene::street(slope).frame(0.2, band);
+        // Range noise from none to Goodin's 0.02 R at heavy rain.
+        let mut rng = ChaCha8Rng::seed_from_u64(100 + seed);
+        let per_m = [0.0, 0.001, 0.005, 0.02, 0.0005, 0.01][seed as usize];
+        let z = Normal::new(0.0, 1.0).unwrap();
+        for r in &mut returns {
+            let range = f64::from(r.range) * (1.0 + per_m * z.sample(&mut rng));
+            *r = make_return(
+                range,
+                f64::from(r.azimuth),
+                f64::from(r.elevation),
+                r.laser,
+                r.ring,
+            );
+        }
+        check(&returns, &format!("street seed {seed}"));
+    }
+    let capture = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/hdl32e/monterey.pcap");
+    if !capture.exists() {
+        eprintln!("SKIPPED: {} is absent (real frames)", capture.display());
+        return;
+    }
+    let (cfg, _) = lidar_noise::config::Config::load(
+        Some(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/paper.toml")),
+        &[],
+        None,
+    )
+    .expect("paper.toml");
+    let chain = lidar_noise::noise::NoiseChain::new(&cfg);
+    let options = lidar_noise::hdl32e::frames::DecoderOptions::default();
+    let reader = lidar_noise::hdl32e::frames::FrameReader::open(&capture, &options).unwrap();
+    for frame in reader.take(6) {
+        let frame = frame.unwrap();
+        let survivors = chain.process(&frame).survivors();
+        check(&survivors, &format!("monterey frame {}", frame.index));
+    }
+}

@@ -428,27 +428,32 @@ pub fn apply_min_points(partition: &[u32], min_points: usize) -> Clustering {
         .copied()
         .max()
         .map_or(0, |m| m as usize + 1);
-    let mut counts = vec![0usize; n_parts];
+    let mut counts = vec![0u32; n_parts];
     for &c in partition {
         counts[c as usize] += 1;
     }
-    let mut new_id = vec![-1i32; n_parts];
+    // Small parts are marked in `new_id` up front (-1 for good; -2 until numbered), so
+    // the loop over the points branches only on a part's first point, not on its size
+    // (noise and clusters alternate along the points, and that test mispredicted).
+    let mut new_id: Vec<i32> = counts
+        .iter()
+        .map(|&n| if (n as usize) < min_points { -1 } else { -2 })
+        .collect();
     let mut next = 0i32;
     let mut labels = Vec::with_capacity(partition.len());
-    let mut n_noise = 0;
     for &c in partition {
-        let c = c as usize;
-        if counts[c] < min_points {
-            labels.push(-1);
-            n_noise += 1;
-            continue;
-        }
-        if new_id[c] < 0 {
-            new_id[c] = next;
+        let id = &mut new_id[c as usize];
+        if *id == -2 {
+            *id = next;
             next += 1;
         }
-        labels.push(new_id[c]);
+        labels.push(*id);
     }
+    let n_noise = counts
+        .iter()
+        .filter(|&&n| (n as usize) < min_points)
+        .map(|&n| n as usize)
+        .sum();
     Clustering {
         labels,
         n_clusters: next as usize,
@@ -491,4 +496,41 @@ pub fn cluster(points: &[[f32; 3]], opts: &ClusterOptions) -> Result<Clustering>
 /// Points of decoded returns, for [`cluster`].
 pub fn points_of(returns: &[crate::frame::Return]) -> Vec<[f32; 3]> {
     returns.iter().map(|r| [r.x, r.y, r.z]).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// `apply_min_points` against the rule written out one point at a time, on random
+    /// partitions (parts of every size, interleaved) and thresholds.
+    #[test]
+    fn min_points_numbers_clusters_by_first_point() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        for case in 0..200 {
+            let n = rng.random_range(0..400);
+            let parts = rng.random_range(1..60u32);
+            let partition: Vec<u32> = (0..n).map(|_| rng.random_range(0..parts)).collect();
+            let min_points = [0, 1, 2, 3, 5, 8, 20][case % 7];
+            let got = apply_min_points(&partition, min_points);
+            let size = |c: u32| partition.iter().filter(|&&x| x == c).count();
+            let mut ids = std::collections::HashMap::new();
+            let want: Vec<i32> = partition
+                .iter()
+                .map(|&c| {
+                    if size(c) < min_points {
+                        -1
+                    } else {
+                        let next = ids.len() as i32;
+                        *ids.entry(c).or_insert(next)
+                    }
+                })
+                .collect();
+            assert_eq!(got.labels, want, "case {case}");
+            assert_eq!(got.n_clusters, ids.len(), "case {case}");
+            let noise = want.iter().filter(|&&l| l < 0).count();
+            assert_eq!(got.n_noise_points, noise, "case {case}");
+        }
+    }
 }

@@ -497,7 +497,13 @@ impl Walk<'_> {
     /// from `off` on.
     #[inline(always)]
     fn try_link(&self, sets: &mut UnionFind, ra: u32, a: usize, b: usize, off: usize) -> u32 {
-        let rb = sets.find((b - off) as u32);
+        // Most neighbours already in `a`'s set hang right under its root: seen without
+        // the walk (and the write) of `find`.
+        let b_el = (b - off) as u32;
+        if sets.parent(b_el) == ra {
+            return ra;
+        }
+        let rb = sets.find(b_el);
         if ra == rb {
             return ra;
         }

@@ -111,6 +111,12 @@ impl UnionFind {
         }
     }
 
+    /// Parent of `x` (its root when the path is short).
+    #[inline]
+    pub(crate) fn parent(&self, x: u32) -> u32 {
+        self.parent[x as usize]
+    }
+
     /// Root of `x`.
     #[inline]
     pub(crate) fn find(&mut self, mut x: u32) -> u32 {

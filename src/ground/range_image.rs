@@ -377,7 +377,10 @@ fn approx_slope_deg(dz: f32, dd: f32) -> f64 {
     }
     let t = lo / hi;
     let u = t * t;
-    let p = t * (C[0] + u * (C[1] + u * (C[2] + u * (C[3] + u * (C[4] + u * C[5])))));
+    // Estrin's scheme: three independent pairs, so the chain of dependent operations is
+    // half of Horner's.
+    let u2 = u * u;
+    let p = t * ((C[0] + u * C[1]) + u2 * ((C[2] + u * C[3]) + u2 * (C[4] + u * C[5])));
     let rad = if y <= x {
         p
     } else {

@@ -114,18 +114,21 @@ pub fn segment_with_margin(
     if n == 0 {
         return Vec::new();
     }
-    let rows = returns.iter().map(|r| r.ring as usize).max().unwrap_or(0) + 1;
     let cols = column_count(returns);
     let width = 360.0 / cols as f64;
 
-    // Per-ring bin phase: the first return of each ring sits at a bin centre.
+    // Per-ring bin phase: the first return of each ring sits at a bin centre. The number
+    // of rows (highest ring + 1) comes from the same pass over the returns.
     let mut phase = [f64::NAN; 256];
+    let mut top_ring = 0u8;
     for r in returns {
+        top_ring = top_ring.max(r.ring);
         let p = &mut phase[r.ring as usize];
         if p.is_nan() && r.azimuth.is_finite() {
             *p = f64::from(r.azimuth).rem_euclid(width);
         }
     }
+    let rows = usize::from(top_ring) + 1;
 
     // Column-major cells (col * stride + row) keep a column contiguous for the link scans;
     // the power-of-two stride makes a cell's row a mask, not a division (rows past `rows`

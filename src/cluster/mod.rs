@@ -434,16 +434,17 @@ pub fn apply_min_points(partition: &[u32], min_points: usize) -> Clustering {
         .copied()
         .max()
         .map_or(0, |m| m as usize + 1);
-    let mut counts = vec![0u32; n_parts];
+    let mut counts = vec![0usize; n_parts];
     for &c in partition {
         counts[c as usize] += 1;
     }
-    // Small parts are marked in `new_id` up front (-1 for good; -2 until numbered), so
-    // the loop over the points branches only on a part's first point, not on its size
-    // (noise and clusters alternate along the points, and that test mispredicted).
+    // Each part's label decided up front where it can be: -1 (noise) for the small
+    // parts, -2 (a cluster not numbered yet) for the others, so the loop over the points
+    // branches only on a cluster's first point, not on every point's part size (noise
+    // and clusters alternate along the points, and that test mispredicted).
     let mut new_id: Vec<i32> = counts
         .iter()
-        .map(|&n| if (n as usize) < min_points { -1 } else { -2 })
+        .map(|&n| if n < min_points { -1 } else { -2 })
         .collect();
     let mut next = 0i32;
     let mut labels = Vec::with_capacity(partition.len());
@@ -455,11 +456,7 @@ pub fn apply_min_points(partition: &[u32], min_points: usize) -> Clustering {
         }
         labels.push(*id);
     }
-    let n_noise = counts
-        .iter()
-        .filter(|&&n| (n as usize) < min_points)
-        .map(|&n| n as usize)
-        .sum();
+    let n_noise = counts.iter().filter(|&&n| n < min_points).sum();
     Clustering {
         labels,
         n_clusters: next as usize,

@@ -96,8 +96,8 @@ pub fn segment(returns: &[Return], initial_angle_deg: f64, max_angle_delta_deg: 
 
 /// Margin (degrees) of the approximate angles: a comparison whose approximate operands
 /// lie further than this from deciding the other way is decided on them; any other is
-/// decided on the exact angles. Twenty times the approximation's worst error (see
-/// [`approx_slope_deg`]).
+/// decided on the exact angles. More than ten times the worst gap between the two angles
+/// (see [`approx_slope_deg`] and the tests).
 const MARGIN_DEG: f64 = 2e-3;
 
 /// [`segment`] with the margin of its approximate angles: with `f64::INFINITY` every

@@ -195,6 +195,11 @@ fn approximate_angles_decide_like_exact_ones() {
                 wide, exact,
                 "{what}, margin 30, initial {initial}, delta {delta}"
             );
+            // Margins below the safe one (and NaN) are raised to it, not taken.
+            for small in [0.0, -1.0, f64::NAN] {
+                let got = range_image::segment_with_margin(returns, initial, delta, small);
+                assert_eq!(got, exact, "{what}, margin {small}");
+            }
             assert!(exact.iter().any(|&g| g), "{what}: some ground");
         }
     };

@@ -103,13 +103,15 @@ const MARGIN_DEG: f64 = 2e-3;
 /// [`segment`] with the margin of its approximate angles: with `f64::INFINITY` every
 /// comparison is made on the exact angles (`atan2` in `f32`, as the module notes define
 /// them), the reference the approximate path is tested against; both give the same
-/// labels for any margin at least [`segment`]'s.
+/// labels for any margin at least [`segment`]'s (smaller ones and NaN are raised to it).
 pub fn segment_with_margin(
     returns: &[Return],
     initial_angle_deg: f64,
     max_angle_delta_deg: f64,
     margin_deg: f64,
 ) -> Vec<bool> {
+    // A smaller margin could decide on the approximation where it is not decisive.
+    let margin_deg = margin_deg.max(MARGIN_DEG);
     let n = returns.len();
     if n == 0 {
         return Vec::new();

@@ -346,7 +346,7 @@ impl Slopes<'_> {
     /// The cell's angle in degrees as the module notes define it (NaN without links).
     fn exact(&self, cell: usize) -> f32 {
         self.legs(cell)
-            .map_or(f32::NAN, |(dz, dd)| dz.atan2(dd).to_degrees())
+            .map_or(f32::NAN, |(dz, dd)| slope_deg(dz, dd))
     }
 
     /// The cell's angle within a tenth of [`MARGIN_DEG`] of [`Slopes::exact`] (NaN
@@ -355,9 +355,14 @@ impl Slopes<'_> {
         match self.legs(cell) {
             None => f32::NAN,
             Some((dz, dd)) if dz.is_finite() && dd.is_finite() => approx_slope_deg(dz, dd) as f32,
-            Some((dz, dd)) => dz.atan2(dd).to_degrees(),
+            Some((dz, dd)) => slope_deg(dz, dd),
         }
     }
+}
+
+/// The angle of legs `(|dz|, |dd|)` in degrees, as the module notes define it.
+fn slope_deg(dz: f32, dd: f32) -> f32 {
+    dz.atan2(dd).to_degrees()
 }
 
 /// `atan2(dz, dd)` in degrees for finite `dz, dd >= 0` (NaN for NaN inputs), within
@@ -409,7 +414,7 @@ mod tests {
             let theta = f64::from(i) / 200_000.0 * std::f64::consts::FRAC_PI_2;
             for len in [0.003f64, 0.7, 13.0, 450.0] {
                 let (dz, dd) = ((len * theta.sin()) as f32, (len * theta.cos()) as f32);
-                let exact = f64::from(dz.atan2(dd).to_degrees());
+                let exact = f64::from(slope_deg(dz, dd));
                 // As cached: narrowed to f32.
                 let approx = f64::from(approx_slope_deg(dz, dd) as f32);
                 worst = worst.max((approx - exact).abs());
@@ -422,7 +427,7 @@ mod tests {
             (1e-30, 1.0),
             (1.0, 1e-30),
         ] {
-            let exact = f64::from(dz.atan2(dd).to_degrees());
+            let exact = f64::from(slope_deg(dz, dd));
             worst = worst.max((approx_slope_deg(dz, dd) - exact).abs());
         }
         assert!(worst < MARGIN_DEG / 10.0, "worst gap {worst} degrees");
@@ -432,7 +437,6 @@ mod tests {
     /// decides wrongly about half the time: the decisions must be the exact ones.
     #[test]
     fn decisions_at_the_limits_are_exact() {
-        let exact = |dz: f32, dd: f32| dz.atan2(dd).to_degrees();
         let (mut near, mut wrong_alone) = (0, 0);
         for limit in [30.0f32, 5.0, 45.0, 0.5] {
             let theta = f64::from(limit).to_radians();
@@ -441,7 +445,7 @@ mod tests {
                 // Walk dz over a few hundred f32 steps around the limit's slope.
                 for k in -300i32..=300 {
                     let dz = f32::from_bits((dz0.to_bits() as i32 + k) as u32);
-                    let (e, a) = (exact(dz, dd), approx_slope_deg(dz, dd) as f32);
+                    let (e, a) = (slope_deg(dz, dd), approx_slope_deg(dz, dd) as f32);
                     let truth = e <= limit;
                     assert_eq!(at_most(a, limit, MARGIN_DEG, || e), truth, "{dz} {dd}");
                     near += 1;

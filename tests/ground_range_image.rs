@@ -1,5 +1,6 @@
 //! Range-image ground segmentation against ray-cast HDL-32E frames with exact labels.
 
+mod common;
 mod ground_scene;
 
 use ground_scene::{make_return, precision_recall, precision_recall_where, Scene};
@@ -223,12 +224,9 @@ fn approximate_angles_decide_like_exact_ones() {
         }
         check(&returns, &format!("street seed {seed}"));
     }
-    let capture = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/hdl32e/monterey.pcap");
-    if !capture.exists() {
-        eprintln!("SKIPPED: {} is absent (real frames)", capture.display());
+    let Some(capture) = common::shared("hdl32e/monterey.pcap") else {
         return;
-    }
+    };
     let (cfg, _) = lidar_noise::config::Config::load(
         Some(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/paper.toml")),
         &[],

@@ -16,6 +16,16 @@ venv="${TMPDIR:-/tmp}/lidar-noise-peer-venv"
 [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
 "$venv/bin/pip" install --quiet --disable-pip-version-check velodyne-decoder numpy plyfile \
   pypatchworkpp open3d
+# Open3D's wheel links libusb-1.0, which a fresh Debian machine lacks: without it the peer
+# dies at import, and the comparison would print no peer line at all.
+if ! "$venv/bin/python" -c "import open3d" 2>/dev/null; then
+  if [ "$(id -u)" = 0 ]; then sudo=(); elif command -v sudo >/dev/null && sudo -n true 2>/dev/null; then sudo=(sudo -n); else
+    echo "realtime.sh: Open3D cannot be imported (libusb-1.0 missing?) and apt-get needs root or passwordless sudo: install libusb-1.0-0" >&2
+    exit 1
+  fi
+  { "${sudo[@]}" apt-get install -y -qq libusb-1.0-0 || { "${sudo[@]}" apt-get update -qq && DEBIAN_FRONTEND=noninteractive "${sudo[@]}" apt-get install -y -qq libusb-1.0-0; }; } >/dev/null
+  "$venv/bin/python" -c "import open3d" || { echo "realtime.sh: Open3D still cannot be imported (error above)" >&2; exit 1; }
+fi
 cargo build --quiet --release --bin lidar-noise
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
@@ -48,7 +58,8 @@ RAYON_NUM_THREADS=2 timeit "lidar-noise convert, 2 cores" \
   "$bin" --quiet convert -o "$out/o" "$capture"
 echo "== Python peer (same machine, same run)"
 for _ in 1 2 3; do
-  "$venv/bin/python" scripts/python_peer.py "$capture" "$out/peer" 2>/dev/null | grep peer
+  # Its errors are shown: a failing peer must not pass for a missing line.
+  "$venv/bin/python" scripts/python_peer.py "$capture" "$out/peer" | grep peer
 done
 "$venv/bin/python" - "$capture" "$out/conv" <<'PY'
 import os, sys, time

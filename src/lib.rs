@@ -17,6 +17,7 @@ pub mod frame;
 pub mod ground;
 pub mod hdl32e;
 pub mod loader;
+pub mod memory;
 pub mod noise;
 pub mod options;
 pub mod par;

@@ -3,5 +3,7 @@
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() {
+    // First, before the heap grows (see the function for why).
+    lidar_noise::memory::no_transparent_huge_pages();
     std::process::exit(lidar_noise::cli::main());
 }

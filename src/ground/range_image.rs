@@ -119,16 +119,41 @@ pub fn segment_with_margin(
     let cols = column_count(returns);
     let width = 360.0 / cols as f64;
 
-    // Per-ring bin phase: the first return of each ring sits at a bin centre. The number
-    // of rows (highest ring + 1) comes from the same pass over the returns.
+    // One pass over the returns (48 bytes each, read once) gathers what the cells need in
+    // compact columns: each valid return's column and ring, and its range. Per-ring bin
+    // phase: the first return of each ring (with a finite azimuth) sits at a bin centre;
+    // it comes before every other return of its ring, so the phase is known when they
+    // are binned. The number of rows (highest ring + 1) comes from the same pass.
     let mut phase = [f64::NAN; 256];
     let mut top_ring = 0u8;
-    for r in returns {
+    // Column << 8 | ring of each return, `NONE` for the invalid ones.
+    let mut cell_of = vec![NONE; n];
+    let mut range = Vec::with_capacity(n);
+    for (i, r) in returns.iter().enumerate() {
         top_ring = top_ring.max(r.ring);
-        let p = &mut phase[r.ring as usize];
+        range.push(r.range);
+        let ring = r.ring as usize;
+        let p = &mut phase[ring];
         if p.is_nan() && r.azimuth.is_finite() {
             *p = f64::from(r.azimuth).rem_euclid(width);
         }
+        if !(r.x.is_finite() && r.y.is_finite() && r.z.is_finite() && r.azimuth.is_finite()) {
+            continue;
+        }
+        // Nearest bin; the cast saturates and rem_euclid below keeps it in range.
+        // `floor` written out (it is a libm call on baseline x86-64); same value for every
+        // finite input, and the azimuth and phase are finite here.
+        let x = (f64::from(r.azimuth) - *p) / width + 0.5;
+        let t = x as i64;
+        let bin = if (t as f64) > x { t - 1 } else { t };
+        // Almost every bin is already in range: skip the integer division then.
+        let col = if (0..cols as i64).contains(&bin) {
+            bin as usize
+        } else {
+            bin.rem_euclid(cols as i64) as usize
+        };
+        // Columns are below 7200 (see `column_count`): 13 bits.
+        cell_of[i] = (col << 8 | ring) as u32;
     }
     let rows = usize::from(top_ring) + 1;
 
@@ -139,28 +164,14 @@ pub fn segment_with_margin(
     let row_mask = stride - 1;
     let cells = stride * cols;
     let mut rep = vec![NONE; cells];
-    let mut cell_of = vec![NONE; n];
-    for (i, r) in returns.iter().enumerate() {
-        if !(r.x.is_finite() && r.y.is_finite() && r.z.is_finite() && r.azimuth.is_finite()) {
+    for (i, c) in cell_of.iter_mut().enumerate() {
+        if *c == NONE {
             continue;
         }
-        let ring = r.ring as usize;
-        // Nearest bin; the cast saturates and rem_euclid below keeps it in range.
-        // `floor` written out (it is a libm call on baseline x86-64); same value for every
-        // finite input, and the azimuth and phase are finite here.
-        let x = (f64::from(r.azimuth) - phase[ring]) / width + 0.5;
-        let t = x as i64;
-        let bin = if (t as f64) > x { t - 1 } else { t };
-        // Almost every bin is already in range: skip the integer division then.
-        let col = if (0..cols as i64).contains(&bin) {
-            bin as usize
-        } else {
-            bin.rem_euclid(cols as i64) as usize
-        };
-        let cell = col * stride + ring;
-        cell_of[i] = cell as u32;
+        let cell = (*c as usize >> 8) * stride + (*c as usize & 255);
+        *c = cell as u32;
         let cur = rep[cell];
-        if cur == NONE || r.range < returns[cur as usize].range {
+        if cur == NONE || range[i] < range[cur as usize] {
             rep[cell] = i as u32;
         }
     }

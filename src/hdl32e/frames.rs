@@ -219,6 +219,8 @@ pub struct FrameReader {
     packet: Vec<u8>,
     /// Buffers of frames handed back through [`FrameReader::recycle`].
     spare: Vec<Vec<crate::frame::Return>>,
+    /// Returns in the largest frame finished so far: how much of a fresh buffer to fault in.
+    largest: usize,
     /// Set by [`FrameReader::next_batch`] once a frame beyond its range was seen.
     past_range: bool,
     /// Frames below this index are dropped uncounted: a reader resumed at a frame (see
@@ -334,6 +336,7 @@ impl FrameReader {
             done: false,
             packet: Vec::with_capacity(packet::DATA_PACKET_BYTES),
             spare: Vec::new(),
+            largest: 0,
             past_range: false,
             skip_before: 0,
         }
@@ -440,6 +443,7 @@ impl FrameReader {
         if b.frame.index < self.skip_before {
             return;
         }
+        self.largest = self.largest.max(b.frame.returns.len());
         let first_ok = b.frame.index > 0 || b.first_rel <= b.first_step.max(1);
         let last_ok = !last || b.last_rel + b.last_step.max(1) >= 36000;
         b.frame.partial = !(first_ok && last_ok);
@@ -464,7 +468,7 @@ impl FrameReader {
                 self.finish_frame(b, false);
             }
         }
-        let (next_index, spare) = (&mut self.next_index, &mut self.spare);
+        let (next_index, spare, largest) = (&mut self.next_index, &mut self.spare, self.largest);
         let b = self.building.get_or_insert_with(|| {
             let index = *next_index;
             *next_index += 1;
@@ -472,9 +476,13 @@ impl FrameReader {
                 frame: Frame {
                     index,
                     partial: false,
-                    returns: spare
-                        .pop()
-                        .unwrap_or_else(|| Vec::with_capacity(FRAME_CAPACITY)),
+                    returns: spare.pop().unwrap_or_else(|| {
+                        // A fresh buffer (the first frames, before buffers come back):
+                        // its pages faulted in by one call, sized by the frames so far.
+                        let mut v = Vec::with_capacity(FRAME_CAPACITY);
+                        crate::memory::prefault(&mut v, largest);
+                        v
+                    }),
                 },
                 first_rel: rel,
                 first_step: step,

@@ -53,6 +53,8 @@ fn synthetic_frame() -> Frame {
 }
 
 fn bench_chain(c: &mut Criterion) {
+    // As the binary does at start-up (src/main.rs), so the heap behaves as it does there.
+    lidar_noise::memory::no_transparent_huge_pages();
     let (config, _) = Config::load(None, &[], None).expect("built-in config");
     let chain = NoiseChain::new(&config);
     let frame = synthetic_frame();

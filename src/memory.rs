@@ -2,14 +2,15 @@
 
 /// Opts this process out of transparent huge pages (Linux; elsewhere nothing).
 ///
-/// Why: the binary's allocator, mimalloc, asks for huge pages on its whole arena
-/// (`madvise(MADV_HUGEPAGE)`), so every first touch of heap memory faults in and clears
-/// 2 MB. Where the kernel takes huge pages from memory it has handed back to the host (a
-/// VM with free page reporting, as on the machine this tool is measured on), each such
+/// Why: with huge pages every first touch of heap memory faults in and clears 2 MB.
+/// Where the kernel takes huge pages from memory it has handed back to the host (a VM
+/// with free page reporting, as on the machine this tool is measured on), each such
 /// fault also waits for the host: `run` on the shared capture, started after two idle
 /// seconds, took 122-137 ms (median) instead of 72-78 ms with 4 KB pages. Started back
 /// to back, huge pages were faster by up to 6 %; the opt-out trades that for run times
-/// that do not depend on the host's memory (README, "Benchmarks").
+/// that do not depend on the host's memory (README, "Benchmarks"). mimalloc is built
+/// without its own request for them (its `no_thp` feature: it used to `madvise` its
+/// whole arena); this covers kernels whose policy gives them to every process.
 pub fn no_transparent_huge_pages() {
     #[cfg(target_os = "linux")]
     // SAFETY: PR_SET_THP_DISABLE only sets a flag of this process and reads no memory of

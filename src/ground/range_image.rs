@@ -126,7 +126,8 @@ pub fn segment_with_margin(
     // are binned. The number of rows (highest ring + 1) comes from the same pass.
     let mut phase = [f64::NAN; 256];
     let mut top_ring = 0u8;
-    // Column << 8 | ring of each return, `NONE` for the invalid ones.
+    // Column << 8 | ring of each return (its cell once the stride is known, below),
+    // `NONE` for the invalid ones.
     let mut cell_of = vec![NONE; n];
     let mut range = Vec::with_capacity(n);
     for (i, r) in returns.iter().enumerate() {

@@ -209,7 +209,6 @@ pub fn segment_with_margin(
             (slopes.exact(cur), slopes.exact(nb))
         })
     };
-    let (up, down) = (|c: usize| slopes.up(c), |c: usize| slopes.down(c));
 
     // Seeds and growth.
     let mut ground = vec![false; cells];
@@ -238,7 +237,7 @@ pub fn segment_with_margin(
             };
             let right = if cur < wrap { cur + stride } else { cur - wrap };
             let a = angle_of(cur);
-            for nb in [up(cur), down(cur), left as u32, right as u32] {
+            for nb in [slopes.up(cur), slopes.down(cur), left as u32, right as u32] {
                 if nb == NONE || ground[nb as usize] {
                     continue;
                 }

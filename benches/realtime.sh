@@ -14,8 +14,9 @@
 #                  second: ours (T(all 17 frames) - T(first frame only)) / 16, the
 #                  peer's median time per full frame inside its loop;
 #   mixed          our whole process against the peer's loop after its imports over its
-#                  18 frames (the last a half frame): the first reading of the issue,
-#                  which charges our fixed costs and not the peer's.
+#                  18 frames (the last a half frame): the earlier rounds' reading, kept
+#                  for comparison with them, which charges our fixed costs and not the
+#                  peer's.
 #   bash benches/realtime.sh [RUNS]     # RUNS timed runs per setting (default 15)
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -57,9 +57,9 @@ for _ in range(runs):
 med, best = statistics.median(times), min(times)
 print(f"{label}: median {med*1e3:.1f} ms, best {best*1e3:.1f} ms, "
       f"{17/med:.1f} frames/s, {1.49/med:.1f}x real time (median of {runs})")
-# The median, for the comparison with the peer at the end.
-with open(f"{out}/median.{label.replace(' ', '_').replace(',', '')}", "w") as f:
-    f.write(f"{med}\n")
+# The median by label, for the comparison with the peer at the end.
+with open(f"{out}/medians.tsv", "a") as f:
+    f.write(f"{label}\t{med}\n")
 PY
 }
 bin=target/release/lidar-noise
@@ -67,10 +67,12 @@ bin=target/release/lidar-noise
 # decoder would overlap on the second core). Two: both cores, two workers.
 RAYON_NUM_THREADS=1 timeit "lidar-noise run, paper config, 1 core" \
   taskset -c 0 "$bin" --quiet run -c configs/paper.toml -o "$out/o" "$capture"
-RAYON_NUM_THREADS=2 timeit "lidar-noise run, paper config, 2 cores" \
+run_all="lidar-noise run, paper config, 2 cores"
+RAYON_NUM_THREADS=2 timeit "$run_all" \
   "$bin" --quiet run -c configs/paper.toml -o "$out/o" "$capture"
 # The first full frame alone: start-up, one frame's latency, exit (for the steady state).
-RAYON_NUM_THREADS=2 timeit "lidar-noise run, first frame only, 2 cores" \
+run_one="lidar-noise run, first frame only, 2 cores"
+RAYON_NUM_THREADS=2 timeit "$run_one" \
   "$bin" --quiet run -c configs/paper.toml --frames 1..1 -o "$out/o" "$capture"
 RAYON_NUM_THREADS=2 timeit "lidar-noise convert, 2 cores" \
   "$bin" --quiet convert -o "$out/o" "$capture"
@@ -83,13 +85,11 @@ for _ in 1 2 3; do
   t1=$(date +%s.%N)
   echo "python peer whole process: $(python3 -c "print(f'{$t1 - $t0:.3f}')") s" | tee -a "$out/peer.txt"
 done
-python3 - "$out" <<'PY'
+python3 - "$out" "$run_all" "$run_one" <<'PY'
 import re, statistics, sys
 out = sys.argv[1]
-def median_of(label):
-    return float(open(f"{out}/median.{label}").read())
-run_all = median_of("lidar-noise_run_paper_config_2_cores")
-run_one = median_of("lidar-noise_run_first_frame_only_2_cores")
+medians = dict(l.rstrip("\n").split("\t") for l in open(f"{out}/medians.tsv"))
+run_all, run_one = (float(medians[label]) for label in sys.argv[2:4])
 text = open(f"{out}/peer.txt").read()
 def peer(pattern):
     return statistics.median(float(v) for v in re.findall(pattern, text))

@@ -273,9 +273,11 @@ impl<'a> PlyFrame<'a> {
 
     /// Fills `buf` with the header and the binary payload (and nothing else).
     ///
-    /// Rows have a fixed stride; the base properties are written row by row and each
-    /// optional column in its own pass at its offset. Every payload byte is written, so
-    /// the buffer is only zero-filled where it grows beyond its earlier length.
+    /// Rows have a fixed stride and are written whole, one after the other, optional
+    /// columns included: the buffer (about 1.5 MB a frame) is written in one pass, where
+    /// a pass per optional column had read and written all of it again for each. Every
+    /// payload byte is written, so the buffer is only zero-filled where it grows beyond
+    /// its earlier length.
     fn encode_binary(&self, buf: &mut Vec<u8>) {
         let header = self.header();
         let stride = self.stride();
@@ -292,39 +294,34 @@ impl<'a> PlyFrame<'a> {
         let (head, payload) = buf.split_at_mut(header.len());
         head.copy_from_slice(header.as_bytes());
         let start = self.frame_start_time;
-        for (row, r) in payload.chunks_exact_mut(stride).zip(self.returns) {
-            let Some(row) = row.first_chunk_mut::<BASE_STRIDE>() else {
+        let c = self.columns;
+        for (i, (row, r)) in payload
+            .chunks_exact_mut(stride)
+            .zip(self.returns)
+            .enumerate()
+        {
+            let Some(base) = row.first_chunk_mut::<BASE_STRIDE>() else {
                 continue;
             };
-            row[0..4].copy_from_slice(&r.x.to_le_bytes());
-            row[4..8].copy_from_slice(&r.y.to_le_bytes());
-            row[8..12].copy_from_slice(&r.z.to_le_bytes());
-            row[12] = r.intensity;
-            row[13] = r.ring;
-            row[14] = r.laser;
-            row[15..19].copy_from_slice(&r.azimuth.to_le_bytes());
-            row[19..23].copy_from_slice(&r.range.to_le_bytes());
-            row[23..27].copy_from_slice(&((r.time - start) as f32).to_le_bytes());
-        }
-        let c = self.columns;
-        let mut at = BASE_STRIDE;
-        if let Some(v) = c.range_clean {
-            at = put_column(payload, stride, at, v, f32::to_le_bytes);
-        }
-        if let Some(v) = c.power {
-            at = put_column(payload, stride, at, v, f32::to_le_bytes);
-        }
-        if let Some(v) = c.fate {
-            at = put_column(payload, stride, at, v, |b| [b]);
-        }
-        if let Some(v) = c.cause {
-            at = put_column(payload, stride, at, v, |b| [b]);
-        }
-        if let Some(v) = c.ground {
-            at = put_column(payload, stride, at, v, |b| [b]);
-        }
-        if let Some(v) = c.cluster {
-            put_column(payload, stride, at, v, i32::to_le_bytes);
+            base[0..4].copy_from_slice(&r.x.to_le_bytes());
+            base[4..8].copy_from_slice(&r.y.to_le_bytes());
+            base[8..12].copy_from_slice(&r.z.to_le_bytes());
+            base[12] = r.intensity;
+            base[13] = r.ring;
+            base[14] = r.laser;
+            base[15..19].copy_from_slice(&r.azimuth.to_le_bytes());
+            base[19..23].copy_from_slice(&r.range.to_le_bytes());
+            base[23..27].copy_from_slice(&((r.time - start) as f32).to_le_bytes());
+            // The optional columns in file order; which are present is the same for every
+            // row, so these tests cost (almost) nothing. `check` gave each present column
+            // one value per row.
+            let mut at = BASE_STRIDE;
+            put(row, &mut at, c.range_clean, i, f32::to_le_bytes);
+            put(row, &mut at, c.power, i, f32::to_le_bytes);
+            put(row, &mut at, c.fate, i, |b| [b]);
+            put(row, &mut at, c.cause, i, |b| [b]);
+            put(row, &mut at, c.ground, i, |b| [b]);
+            put(row, &mut at, c.cluster, i, i32::to_le_bytes);
         }
     }
 
@@ -378,22 +375,23 @@ impl<'a> PlyFrame<'a> {
     }
 }
 
-/// Writes one optional column at byte offset `at` of every `stride`-byte row; returns the
-/// offset of the next column.
+/// Writes value `i` of an optional column (when present) at byte offset `at` of a row,
+/// and moves `at` past it.
 #[inline(always)]
-fn put_column<T: Copy, const W: usize>(
-    payload: &mut [u8],
-    stride: usize,
-    at: usize,
-    values: &[T],
+fn put<T: Copy, const W: usize>(
+    row: &mut [u8],
+    at: &mut usize,
+    column: Option<&[T]>,
+    i: usize,
     encode: impl Fn(T) -> [u8; W],
-) -> usize {
-    for (row, &v) in payload.chunks_exact_mut(stride).zip(values) {
-        if let Some(cell) = row.get_mut(at..at + W) {
-            cell.copy_from_slice(&encode(v));
-        }
+) {
+    let Some(values) = column else {
+        return;
+    };
+    if let (Some(cell), Some(&v)) = (row.get_mut(*at..*at + W), values.get(i)) {
+        cell.copy_from_slice(&encode(v));
     }
-    at + W
+    *at += W;
 }
 
 impl Output for PlyFrame<'_> {

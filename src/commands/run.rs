@@ -732,13 +732,15 @@ pub(super) struct SpoolEntry {
 
 impl SpoolEntry {
     fn of(report: FrameReport, clusters: &FrameClusters) -> Result<Self> {
-        let mut summary = Vec::new();
+        // Sized from the shared capture's reports (a frame's summary about 2 kB, a
+        // cluster's CSV row about 190 bytes, its JSON about 1.2 kB), so that the buffers
+        // seldom grow, each growth copying what they hold.
+        let mut summary = Vec::with_capacity(4096);
         write_element(&mut summary, "", &report)?;
-        // As `write_element` lays it out; clusters take about 1.2 kB each.
         let mut cluster_bytes = Vec::with_capacity(64 + 1280 * clusters.clusters.len());
         cluster_bytes.extend_from_slice(b"    ");
         write_frame_clusters_json(&mut cluster_bytes, 2, clusters);
-        let mut csv = Vec::new();
+        let mut csv = Vec::with_capacity(512 + 256 * clusters.clusters.len());
         write_cluster_csv(&mut csv, std::slice::from_ref(clusters));
         Ok(SpoolEntry {
             report,

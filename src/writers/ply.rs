@@ -250,56 +250,57 @@ impl<'a> PlyFrame<'a> {
         }
     }
 
-    /// Header and binary payload, encoded into one reused buffer and written at once:
-    /// a single large write passes the caller's buffer by (no copy) and costs one
-    /// system call, and reusing the buffer spares the page faults of a fresh one.
+    /// Header and binary payload, encoded a chunk of rows at a time into one reused
+    /// buffer and written chunk by chunk: a 160 kB buffer stays in the core's cache
+    /// between its encoding and its copy into the file, where the whole frame's 1.5 MB
+    /// did not, and a worker's memory is 1.3 MB smaller (fewer first-touch page faults);
+    /// each chunk is one system call, a large write passing the caller's buffer by.
     fn write_binary<W: Write + ?Sized>(&self, out: &mut W) -> std::io::Result<()> {
         thread_local! {
             static BUFFER: std::cell::RefCell<Vec<u8>> = const { std::cell::RefCell::new(Vec::new()) };
         }
+        let header = self.header();
+        let n = self.returns.len();
+        let mut write_chunks = |buf: &mut Vec<u8>| -> std::io::Result<()> {
+            let mut first = 0;
+            loop {
+                let rows = first..n.min(first + CHUNK_ROWS);
+                let head = if first == 0 { header.as_bytes() } else { &[] };
+                self.encode_binary(buf, head, rows.clone());
+                out.write_all(buf)?;
+                if rows.end == n {
+                    return Ok(());
+                }
+                first = rows.end;
+            }
+        };
         BUFFER.with(|cell| match cell.try_borrow_mut() {
-            Ok(mut buf) => {
-                self.encode_binary(&mut buf);
-                out.write_all(&buf)
-            }
+            Ok(mut buf) => write_chunks(&mut buf),
             // Only a writer that writes PLY from inside `write` would get here.
-            Err(_) => {
-                let mut buf = Vec::new();
-                self.encode_binary(&mut buf);
-                out.write_all(&buf)
-            }
+            Err(_) => write_chunks(&mut Vec::new()),
         })
     }
 
-    /// Fills `buf` with the header and the binary payload (and nothing else).
+    /// Fills `buf` with `head` and the binary rows `rows` (and nothing else).
     ///
     /// Rows have a fixed stride and are written whole, one after the other, optional
-    /// columns included: the buffer (about 1.5 MB a frame) is written in one pass, where
-    /// a pass per optional column had read and written all of it again for each. Every
-    /// payload byte is written, so the buffer is only zero-filled where it grows beyond
-    /// its earlier length.
-    fn encode_binary(&self, buf: &mut Vec<u8>) {
-        let header = self.header();
+    /// columns included: the buffer is written in one pass, where a pass per optional
+    /// column had read and written all of it again for each. Every byte is written, so
+    /// the buffer is only zero-filled where it grows beyond its earlier length.
+    fn encode_binary(&self, buf: &mut Vec<u8>, head: &[u8], rows: std::ops::Range<usize>) {
         let stride = self.stride();
-        let total = header.len() + stride * self.returns.len();
-        if buf.capacity() < total {
-            // A fresh buffer with headroom: growing the old one would copy its bytes.
-            *buf = Vec::with_capacity(total + total / 8);
-        }
+        let total = head.len() + stride * rows.len();
         if buf.len() < total {
             buf.resize(total, 0);
         } else {
             buf.truncate(total);
         }
-        let (head, payload) = buf.split_at_mut(header.len());
-        head.copy_from_slice(header.as_bytes());
+        let (h, payload) = buf.split_at_mut(head.len());
+        h.copy_from_slice(head);
         let start = self.frame_start_time;
         let c = self.columns;
-        for (i, (row, r)) in payload
-            .chunks_exact_mut(stride)
-            .zip(self.returns)
-            .enumerate()
-        {
+        let returns = self.returns.get(rows.clone()).unwrap_or_default();
+        for ((row, r), i) in payload.chunks_exact_mut(stride).zip(returns).zip(rows) {
             let Some(base) = row.first_chunk_mut::<BASE_STRIDE>() else {
                 continue;
             };
@@ -374,6 +375,10 @@ impl<'a> PlyFrame<'a> {
         (r.time - self.frame_start_time) as f32
     }
 }
+
+/// Rows a binary PLY payload is encoded and written in at a time (160 kB at 40 bytes a
+/// row: well inside a core's L2 cache).
+const CHUNK_ROWS: usize = 4096;
 
 /// Writes value `i` of an optional column (when present) at byte offset `at` of a row,
 /// and moves `at` past it.
@@ -505,6 +510,65 @@ mod tests {
             out.len(),
             frame.header().len() + returns.len() * (6 * 4 + 3 + 4)
         );
+    }
+
+    /// Rows encoded a chunk at a time read back as the rows given, around and across
+    /// chunk boundaries, with every optional column present.
+    #[test]
+    fn binary_rows_read_back_across_chunks() {
+        for n in [0, 1, CHUNK_ROWS - 1, CHUNK_ROWS, 2 * CHUNK_ROWS + 7] {
+            let returns: Vec<Return> = (0..n as u32).map(ret).collect();
+            let range_clean: Vec<f32> = (0..n).map(|i| i as f32 * 0.125).collect();
+            let power: Vec<f32> = (0..n).map(|i| 1.0 / (i as f32 + 1.0)).collect();
+            let fate: Vec<u8> = (0..n).map(|i| (i % 6) as u8).collect();
+            let cause: Vec<u8> = (0..n).map(|i| (i % 251) as u8).collect();
+            let ground: Vec<u8> = (0..n).map(|i| (i % 2) as u8).collect();
+            let cluster: Vec<i32> = (0..n).map(|i| i as i32 - 3).collect();
+            let mut frame = PlyFrame::new(&returns, "a.pcap", 2, 1200.0);
+            frame.columns = PlyColumns {
+                range_clean: Some(&range_clean),
+                power: Some(&power),
+                fate: Some(&fate),
+                cause: Some(&cause),
+                ground: Some(&ground),
+                cluster: Some(&cluster),
+            };
+            let mut out = Vec::new();
+            frame.write(&mut out).unwrap();
+            let header = frame.header();
+            assert!(out.starts_with(header.as_bytes()), "{n} rows");
+            let stride = frame.stride();
+            let payload = &out[header.len()..];
+            assert_eq!(payload.len(), n * stride, "{n} rows");
+            let f32_at =
+                |row: &[u8], at: usize| f32::from_le_bytes(row[at..at + 4].try_into().unwrap());
+            for (i, row) in payload.chunks_exact(stride).enumerate() {
+                let r = &returns[i];
+                assert_eq!(
+                    [f32_at(row, 0), f32_at(row, 4), f32_at(row, 8)],
+                    [r.x, r.y, r.z],
+                    "row {i} of {n}"
+                );
+                assert_eq!(
+                    row[12..15],
+                    [r.intensity, r.ring, r.laser],
+                    "row {i} of {n}"
+                );
+                assert_eq!([f32_at(row, 15), f32_at(row, 19)], [r.azimuth, r.range]);
+                assert_eq!(f32_at(row, 23), (r.time - 1200.0) as f32, "row {i} of {n}");
+                assert_eq!(
+                    [f32_at(row, 27), f32_at(row, 31)],
+                    [range_clean[i], power[i]]
+                );
+                assert_eq!(
+                    row[35..38],
+                    [fate[i], cause[i], ground[i]],
+                    "row {i} of {n}"
+                );
+                let c = i32::from_le_bytes(row[38..42].try_into().unwrap());
+                assert_eq!(c, cluster[i], "row {i} of {n}");
+            }
+        }
     }
 
     #[test]

@@ -48,7 +48,20 @@ fn sq3(dx: f64, dy: f64, dz: f64) -> f64 {
 /// lower bound of every rounded difference, so box tests never reject a linked pair.
 #[inline(always)]
 fn gap(lo: f64, hi: f64, v: f64) -> f64 {
-    (lo - v).max(v - hi).max(0.0)
+    max(max(lo - v, v - hi), 0.0)
+}
+
+/// The larger of two numbers that are not NaN (box gaps of finite points): one `maxsd`,
+/// where `f64::max`'s handling of NaN cost three more instructions in the pair tests.
+/// Where `f64::max` may return either zero of `max(-0.0, 0.0)`, this returns `b`; the
+/// gaps are only squared and compared, so the sign of a zero never matters.
+#[inline(always)]
+fn max(a: f64, b: f64) -> f64 {
+    if a > b {
+        a
+    } else {
+        b
+    }
 }
 
 /// `floor(f)` for `|f| <= CELL_LIMIT`, written out because `f64::floor` is a libm call on
@@ -529,9 +542,9 @@ impl Walk<'_> {
         let (ba, bb) = (&self.cell_box[a], &self.cell_box[b]);
         let bb: [f64; 6] = bb.map(f64::from);
         let g = sq3(
-            (bb[0] - ba[3] as f64).max(ba[0] as f64 - bb[3]).max(0.0),
-            (bb[1] - ba[4] as f64).max(ba[1] as f64 - bb[4]).max(0.0),
-            (bb[2] - ba[5] as f64).max(ba[2] as f64 - bb[5]).max(0.0),
+            max(max(bb[0] - ba[3] as f64, ba[0] as f64 - bb[3]), 0.0),
+            max(max(bb[1] - ba[4] as f64, ba[1] as f64 - bb[4]), 0.0),
+            max(max(bb[2] - ba[5] as f64, ba[2] as f64 - bb[5]), 0.0),
         );
         if g > self.t_hi {
             return ra;

@@ -462,7 +462,8 @@ impl Links<'_> {
         spans: std::ops::Range<usize>,
     ) {
         let (cell_key, walk, z_mask) = (self.cell_key, &self.walk, self.z_mask);
-        // Forward neighbours have larger keys than the voxel, so the walks start at it.
+        // Forward neighbours have larger keys than the voxel, so the walks start at it
+        // (span 0 starts at the voxel's next key and needs no pointer: `ptr[0]` is unused).
         let mut ptr = [cells.start; 3];
         for c in cells {
             let key = cell_key[c];
@@ -532,8 +533,9 @@ impl Walk<'_> {
     /// from `off` on.
     #[inline(always)]
     fn try_link(&self, sets: &mut UnionFind, ra: u32, a: usize, b: usize, off: usize) -> u32 {
-        // Most neighbours already in `a`'s set hang right under its root: seen without
-        // the walk (and the write) of `find`.
+        // The walk dropped the neighbours under the root as its batch started; a join
+        // earlier in the batch may have put this one there since: seen without the walk
+        // (and the write) of `find`.
         let b_el = (b - off) as u32;
         if sets.parent(b_el) == ra {
             return ra;

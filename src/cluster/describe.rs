@@ -242,38 +242,50 @@ fn describe_members<'a>(
 
 fn summarize(id: i32, members: &[Member]) -> ClusterInfo {
     let n = members.len() as f64;
-    let mut sum = [0.0f64; 3];
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
+    // One local per sum and bound, and no call in the loop: with arrays and a push on the
+    // rare path the sums and bounds lived on the stack, each update a store and a
+    // reload. Same operations in the same order per accumulator: the same values.
+    let (mut sx, mut sy, mut sz) = (0.0f64, 0.0f64, 0.0f64);
+    let (mut lx, mut ly, mut lz) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    let (mut hx, mut hy, mut hz) = (f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
     let mut min_range = f64::INFINITY;
     let mut range_sum = 0.0;
     let mut intensity_sum = 0.0;
     // Lasers as a bit set (ids are below 64 for every supported sensor; larger ones are
-    // collected apart), read out in ascending order: sorted and unique as before.
+    // collected apart, after the loop), read out in ascending order: sorted and unique.
     let mut laser_bits = 0u64;
-    let mut other_lasers = Vec::new();
-    let mut xy = Vec::with_capacity(members.len());
+    let mut high_lasers = false;
     for r in members {
-        let p = [r.x as f64, r.y as f64, r.z as f64];
-        for a in 0..3 {
-            sum[a] += p[a];
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
+        let (x, y, z) = (r.x as f64, r.y as f64, r.z as f64);
+        sx += x;
+        sy += y;
+        sz += z;
+        lx = lx.min(x);
+        ly = ly.min(y);
+        lz = lz.min(z);
+        hx = hx.max(x);
+        hy = hy.max(y);
+        hz = hz.max(z);
         min_range = min_range.min(r.range as f64);
         range_sum += r.range as f64;
         intensity_sum += r.intensity as f64;
-        if r.laser < 64 {
-            laser_bits |= 1 << r.laser;
-        } else {
-            other_lasers.push(r.laser);
-        }
-        xy.push([p[0], p[1]]);
+        laser_bits |=
+            1u64.wrapping_shl(u32::from(r.laser)) & u64::from(r.laser < 64).wrapping_neg();
+        high_lasers |= r.laser >= 64;
     }
+    let (sum, lo, hi) = ([sx, sy, sz], [lx, ly, lz], [hx, hy, hz]);
     let mut lasers: Vec<u8> = (0..64u8).filter(|l| laser_bits >> l & 1 == 1).collect();
-    other_lasers.sort_unstable();
-    other_lasers.dedup();
-    lasers.extend(other_lasers);
+    if high_lasers {
+        let mut other: Vec<u8> = members
+            .iter()
+            .map(|r| r.laser)
+            .filter(|&l| l >= 64)
+            .collect();
+        other.sort_unstable();
+        other.dedup();
+        lasers.extend(other);
+    }
+    let xy: Vec<[f64; 2]> = members.iter().map(|r| [r.x as f64, r.y as f64]).collect();
     let (center, length, width, yaw_deg) = min_area_rect(&hull_of_f32(drop_interior(xy)));
     ClusterInfo {
         id,
@@ -395,25 +407,26 @@ fn hull_of_sorted(mut pts: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
         return pts;
     }
     let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * pts.len());
-    for pass in 0..2 {
-        let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
-            Box::new(pts.iter())
-        } else {
-            Box::new(pts.iter().rev())
-        };
-        for &p in iter {
-            while hull.len() >= start + 2
-                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
-            {
-                hull.pop();
-            }
-            hull.push(p);
-        }
-        // The last point of each chain starts the other one.
-        hull.pop();
-    }
+    // Lower chain left to right, then upper chain right to left (each a plain loop: a
+    // boxed iterator for either direction cost a dynamic call per point).
+    chain(&mut hull, pts.iter());
+    chain(&mut hull, pts.iter().rev());
     hull
+}
+
+/// Appends the monotone chain of `pts` (in order) to `hull`, without its last point,
+/// which starts the next chain.
+#[inline(always)]
+fn chain<'a>(hull: &mut Vec<[f64; 2]>, pts: impl Iterator<Item = &'a [f64; 2]>) {
+    let start = hull.len();
+    for &p in pts {
+        while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+        {
+            hull.pop();
+        }
+        hull.push(p);
+    }
+    hull.pop();
 }
 
 /// Minimum-area enclosing rectangle of a convex polygon: (centre, length, width, yaw deg).

@@ -43,6 +43,42 @@ fn sq3(dx: f64, dy: f64, dz: f64) -> f64 {
     dx * dx + dy * dy + dz * dz
 }
 
+/// The `f32` bound of the voxel box test: a squared box gap computed in `f32` above it
+/// means the exact gap is above `t_hi`, so no point pair of the two voxels links.
+///
+/// Why `f32`: the boxes are `f32` (exact minima and maxima of `f32` coordinates), and
+/// the test in `f64` widened all six corners first. Each of the five `f32` operations
+/// (a difference, two squares, two sums; `max` is exact) errs by at most 2^-24 of its
+/// result and every result is non-negative, so the computed squared gap is at most
+/// (1 + 2^-24)^5 < 1 + 4e-7 times the exact one; a bound 1e-5 above `t_hi` (rounded up
+/// into `f32`) leaves the exact squared gap above `t_hi` whenever the test rejects.
+/// Underflow only lowers the computed gap, which keeps the pair (`points_link` decides).
+fn box_gate(t_hi: f64) -> f32 {
+    let g = (t_hi * (1.0 + 1e-5)) as f32;
+    // `as` rounds to nearest: step up when that went below.
+    if f64::from(g) < t_hi * (1.0 + 1e-5) {
+        f32::from_bits(g.to_bits() + 1)
+    } else {
+        g
+    }
+}
+
+/// [`sq3`] in `f32`, for the voxel box test ([`box_gate`]).
+#[inline(always)]
+fn sq3_f32(dx: f32, dy: f32, dz: f32) -> f32 {
+    dx * dx + dy * dy + dz * dz
+}
+
+/// [`max`] for `f32`.
+#[inline(always)]
+fn max_f32(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
 /// Gap between a coordinate interval and a value (0 inside): a lower bound of `|v - b|` for
 /// every `b` in `[lo, hi]`, and since `f64` rounding is monotone the rounded gap is also a
 /// lower bound of every rounded difference, so box tests never reject a linked pair.
@@ -285,28 +321,6 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
         let f = |a: usize| (p[a] as f64 * inv - off[a]) as i64 as u64;
         f(0) << sx | f(1) << sy | f(2)
     };
-    // Sorted (key, point index) pairs: packed in one u64 when both fit (one array to sort
-    // and scatter instead of two), else sorted as two arrays.
-    let ib = 32 - (m as u32).leading_zeros();
-    let sorted: Vec<(u64, u32)> = if total + ib <= 64 {
-        let idx_mask = (1u64 << ib) - 1;
-        let mut items: Vec<u64> = points
-            .iter()
-            .enumerate()
-            .map(|(i, p)| key_of(p) << ib | i as u64)
-            .collect();
-        radix_sort_packed(&mut items, ib, total);
-        items
-            .iter()
-            .map(|&k| (k >> ib, (k & idx_mask) as u32))
-            .collect()
-    } else {
-        let mut keys: Vec<u64> = points.iter().map(key_of).collect();
-        let mut order: Vec<u32> = (0..m as u32).collect();
-        radix_sort(&mut keys, &mut order, total);
-        keys.into_iter().zip(order).collect()
-    };
-
     // Voxels as runs of the sorted keys; points copied in voxel order for locality. Boxes
     // are kept in f32 (the coordinates are f32, so min and max are exact) and widened to
     // f64 where they are compared.
@@ -320,7 +334,8 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
     // Range of each point in voxel order (adaptive passes only).
     let mut sr: Vec<f64> = Vec::with_capacity(if rule.ranges.is_some() { m } else { 0 });
     let mut prev_key = u64::MAX;
-    for (k, &(key, i)) in sorted.iter().enumerate() {
+    // The `k`-th point in key order: point `i`, in voxel `key`.
+    let mut add = |k: usize, key: u64, i: u32| {
         let p = points[i as usize];
         if let Some(r) = rule.ranges {
             sr.push(r[i as usize]);
@@ -339,8 +354,30 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
         }
         cell_of[i as usize] = (cell_key.len() - 1) as u32;
         sp.push(p);
+    };
+    // The points in key order: (key, point index) packed in one u64 when both fit (one
+    // array to sort and scatter instead of two, read straight off the sorted array), else
+    // sorted as two arrays.
+    let ib = 32 - (m as u32).leading_zeros();
+    if total + ib <= 64 {
+        let idx_mask = (1u64 << ib) - 1;
+        let mut items: Vec<u64> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| key_of(p) << ib | i as u64)
+            .collect();
+        radix_sort_packed(&mut items, ib, total);
+        for (k, &item) in items.iter().enumerate() {
+            add(k, item >> ib, (item & idx_mask) as u32);
+        }
+    } else {
+        let mut keys: Vec<u64> = points.iter().map(key_of).collect();
+        let mut order: Vec<u32> = (0..m as u32).collect();
+        radix_sort(&mut keys, &mut order, total);
+        for (k, (&key, &i)) in keys.iter().zip(&order).enumerate() {
+            add(k, key, i);
+        }
     }
-    drop(sorted);
     let n_cells = cell_key.len();
     cell_start.push(m as u32);
     // Sentinel above every neighbour key (keys use at most 62 bits): walks need no bounds test.
@@ -369,6 +406,7 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
             sr: &sr,
             t,
             t_hi,
+            t_gate: box_gate(t_hi),
             adaptive,
             cutoff_m: rule.cutoff_m,
             per_m: rule.per_m,
@@ -522,6 +560,8 @@ struct Walk<'a> {
     sr: &'a [f64],
     t: f64,
     t_hi: f64,
+    /// `t_hi` with room for the rounding of the `f32` box test (see [`box_gate`]).
+    t_gate: f32,
     adaptive: bool,
     cutoff_m: f64,
     per_m: f64,
@@ -543,15 +583,15 @@ impl Walk<'_> {
         // The box test before `find`: three in four of the pairs that get here lie in
         // other sets with boxes too far apart, and the test spares their `find`.
         let (ba, bb) = (&self.cell_box[a], &self.cell_box[b]);
-        let bb: [f64; 6] = bb.map(f64::from);
-        let g = sq3(
-            max(max(bb[0] - ba[3] as f64, ba[0] as f64 - bb[3]), 0.0),
-            max(max(bb[1] - ba[4] as f64, ba[1] as f64 - bb[4]), 0.0),
-            max(max(bb[2] - ba[5] as f64, ba[2] as f64 - bb[5]), 0.0),
+        let g = sq3_f32(
+            max_f32(max_f32(bb[0] - ba[3], ba[0] - bb[3]), 0.0),
+            max_f32(max_f32(bb[1] - ba[4], ba[1] - bb[4]), 0.0),
+            max_f32(max_f32(bb[2] - ba[5], ba[2] - bb[5]), 0.0),
         );
-        if g > self.t_hi {
+        if g > self.t_gate {
             return ra;
         }
+        let bb: [f64; 6] = bb.map(f64::from);
         let rb = sets.find(b_el);
         if ra == rb || !self.points_link(a, b, &bb) {
             return ra;
@@ -608,6 +648,74 @@ mod tests {
             assert!(t.sqrt() <= c, "{c}");
             assert!(f64::from_bits(t.to_bits() + 1).sqrt() > c, "{c}");
         }
+    }
+
+    /// The `f32` box test rejects only voxel pairs whose exact box gap is above the largest
+    /// linking distance: on boxes whose gap lies within a few `f32` steps of the cutoff,
+    /// in every direction, wherever the boxes sit, the exact gap of a rejected pair
+    /// (computed in `f64`, then compared with the cutoff itself) is above the cutoff.
+    /// A gate of `t_hi` rounded to `f32` without the margin rejects linking pairs here.
+    #[test]
+    fn f32_box_test_never_rejects_a_linking_pair() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let (mut rejected, mut unsafe_gate) = (0, 0);
+        for &cutoff in &[0.5f64, 0.1, 1.0, 0.37, 2.5] {
+            let t_hi = squared_threshold(cutoff);
+            let gate = box_gate(t_hi);
+            assert!(f64::from(gate) > t_hi, "{cutoff}");
+            for _ in 0..20_000 {
+                // A box near some point, and one at about the cutoff from it along a
+                // random direction (its exact gap to the first is close to the cutoff).
+                let base = [0, 1, 2].map(|_| rng.random_range(-120.0f32..120.0));
+                let size = [0, 1, 2].map(|_| rng.random_range(0.0f32..0.28));
+                let a = [
+                    base[0],
+                    base[1],
+                    base[2],
+                    base[0] + size[0],
+                    base[1] + size[1],
+                    base[2] + size[2],
+                ];
+                let dir = [0, 1, 2].map(|_| rng.random_range(-1.0f64..1.0));
+                let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+                let scale = cutoff * (1.0 + rng.random_range(-4e-7..4e-7)) / len;
+                let mut b = [0f32; 6];
+                for k in 0..3 {
+                    let d = dir[k] * scale;
+                    // Beyond the box on the side the direction points to.
+                    let lo = if d >= 0.0 {
+                        f64::from(a[k + 3]) + d
+                    } else {
+                        f64::from(a[k]) + d
+                    };
+                    b[k] = lo as f32;
+                    b[k + 3] = b[k];
+                }
+                let g32 = sq3_f32(
+                    max_f32(max_f32(b[0] - a[3], a[0] - b[3]), 0.0),
+                    max_f32(max_f32(b[1] - a[4], a[1] - b[4]), 0.0),
+                    max_f32(max_f32(b[2] - a[5], a[2] - b[5]), 0.0),
+                );
+                let (af, bf) = (a.map(f64::from), b.map(f64::from));
+                let g64 = sq3(
+                    max(max(bf[0] - af[3], af[0] - bf[3]), 0.0),
+                    max(max(bf[1] - af[4], af[1] - bf[4]), 0.0),
+                    max(max(bf[2] - af[5], af[2] - bf[5]), 0.0),
+                );
+                if g32 > gate {
+                    rejected += 1;
+                    assert!(g64 > t_hi, "cutoff {cutoff}: {a:?} {b:?}");
+                }
+                if g32 > t_hi as f32 && g64 <= t_hi {
+                    unsafe_gate += 1;
+                }
+            }
+        }
+        // The boxes straddle the cutoff: some pairs are rejected, and a gate without its
+        // margin would have rejected some linking ones.
+        assert!(rejected > 1000, "{rejected}");
+        assert!(unsafe_gate > 0, "{unsafe_gate}");
     }
 
     #[test]

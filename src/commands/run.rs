@@ -392,6 +392,7 @@ fn run_capture(
     stream_frames(
         &mut reader,
         &plan.frames,
+        crate::memory::worker_warmup_bytes(),
         work,
         |(entry, returns), reader| {
             // Frames arrive here in order: the noisy capture can be written up to this one.
@@ -595,6 +596,7 @@ pub(super) fn frame_outputs(
 pub(crate) fn stream_frames<T: Send>(
     reader: &mut FrameReader,
     frames: &RangeInclusive<u32>,
+    warmup: usize,
     work: impl Fn(Frame) -> Result<T> + Sync,
     mut done: impl FnMut(T, &mut FrameReader) -> Result<()>,
 ) -> Result<()> {
@@ -630,9 +632,11 @@ pub(crate) fn stream_frames<T: Send>(
         // run a second loop inside a fork it waits for).
         scope.spawn_broadcast(move |_, _| {
             let result_tx = result_tx.clone();
+            // Until its first frame, the worker faults in `warmup` bytes of its heap (see
+            // `HeapWarmer`).
+            let mut warmer = crate::memory::HeapWarmer::new(warmup);
             loop {
-                // The lock is held only while taking one frame off the queue.
-                let next = frame_rx.lock().unwrap_or_else(|e| e.into_inner()).recv();
+                let next = next_frame(frame_rx, &mut warmer);
                 let Ok((seq, frame)) = next else {
                     return;
                 };
@@ -707,6 +711,41 @@ pub(crate) fn stream_frames<T: Send>(
         }
         decode_error.map_or(Ok(()), Err)
     })
+}
+
+/// The next item off the workers' queue. While `warmer` has pages left and no item is
+/// ready, it warms one slice between polls; it is dropped (its pages handed back to the
+/// heap) before an item is returned. The lock is held only while taking one item.
+fn next_frame<T>(
+    rx: &std::sync::Mutex<std::sync::mpsc::Receiver<T>>,
+    warmer: &mut Option<crate::memory::HeapWarmer>,
+) -> Result<T, std::sync::mpsc::RecvError> {
+    use std::sync::mpsc::{RecvError, TryRecvError};
+    use std::sync::TryLockError;
+    while let Some(w) = warmer.as_mut() {
+        let polled = match rx.try_lock() {
+            Ok(rx) => rx.try_recv(),
+            Err(TryLockError::Poisoned(e)) => e.into_inner().try_recv(),
+            // The other worker waits on the queue: nothing for this one yet.
+            Err(TryLockError::WouldBlock) => Err(TryRecvError::Empty),
+        };
+        match polled {
+            Ok(item) => {
+                *warmer = None;
+                return Ok(item);
+            }
+            Err(TryRecvError::Disconnected) => {
+                *warmer = None;
+                return Err(RecvError);
+            }
+            Err(TryRecvError::Empty) => {
+                if !w.step() {
+                    *warmer = None;
+                }
+            }
+        }
+    }
+    rx.lock().unwrap_or_else(|e| e.into_inner()).recv()
 }
 
 /// Per-frame reports written to disk as they come (summary frames, cluster frames and

@@ -416,38 +416,45 @@ fn compute_unit(
         let result = plan.pipeline.process(f)?;
         single::frame_outputs(plan, result, &job.source, dir, inputs)
     };
-    single::stream_frames(&mut reader, range, work, |(entry, returns), reader| {
-        reader.recycle(crate::frame::Frame {
-            returns,
-            ..crate::frame::Frame::default()
-        });
-        // As the run's report spool: elements comma-separated, one CSV header.
-        let sep: &[u8] = if part.frames == 0 { b"" } else { b",\n" };
-        summary.extend_from_slice(sep);
-        summary.extend_from_slice(&entry.summary);
-        clusters.extend_from_slice(sep);
-        clusters.extend_from_slice(&entry.clusters);
-        let start = if part.frames == 0 {
-            0
-        } else {
-            entry
-                .csv
-                .iter()
-                .position(|&b| b == b'\n')
-                .map_or(entry.csv.len(), |i| i + 1)
-        };
-        csv.extend_from_slice(&entry.csv[start..]);
-        totals.add(&entry.report);
-        let index = entry.report.index;
-        if plan.ply {
-            part.files.push(plan.output.file_name(index));
-        }
-        if plan.linkage {
-            part.files.push(format!("linkage_{index:05}.csv"));
-        }
-        part.frames += 1;
-        Ok(())
-    })?;
+    let warmup = crate::memory::worker_warmup_bytes();
+    single::stream_frames(
+        &mut reader,
+        range,
+        warmup,
+        work,
+        |(entry, returns), reader| {
+            reader.recycle(crate::frame::Frame {
+                returns,
+                ..crate::frame::Frame::default()
+            });
+            // As the run's report spool: elements comma-separated, one CSV header.
+            let sep: &[u8] = if part.frames == 0 { b"" } else { b",\n" };
+            summary.extend_from_slice(sep);
+            summary.extend_from_slice(&entry.summary);
+            clusters.extend_from_slice(sep);
+            clusters.extend_from_slice(&entry.clusters);
+            let start = if part.frames == 0 {
+                0
+            } else {
+                entry
+                    .csv
+                    .iter()
+                    .position(|&b| b == b'\n')
+                    .map_or(entry.csv.len(), |i| i + 1)
+            };
+            csv.extend_from_slice(&entry.csv[start..]);
+            totals.add(&entry.report);
+            let index = entry.report.index;
+            if plan.ply {
+                part.files.push(plan.output.file_name(index));
+            }
+            if plan.linkage {
+                part.files.push(format!("linkage_{index:05}.csv"));
+            }
+            part.frames += 1;
+            Ok(())
+        },
+    )?;
     part.totals = ExactTotals::of(&totals);
     let text = |b: Vec<u8>| String::from_utf8(b).map_err(|e| anyhow::anyhow!("internal: {e}"));
     part.summary_frames = text(summary)?;

@@ -85,11 +85,11 @@ pub fn worker_warmup_bytes() -> usize {
 /// first touch of a page costs a fault (about 1.25 us here, in the worker's time); the
 /// workers wait about 4 ms at start-up for their first frames while the calling thread
 /// starts and decodes. Faulted in then, in slices of [`HeapWarmer::SLICE`] bytes with
-/// `MADV_POPULATE_WRITE` (about 0.8 us a page), they cost the run no time: `run` on the
-/// shared capture, 2 threads, 31 interleaved runs, median 67.1 -> 65.2 ms with 12 MB
-/// (8 MB: 65.8, 16 MB: 65.6), page faults about 7,000 -> 2,700. The block stays below
-/// mimalloc's largest in-segment block (16 MiB): a larger one would be mapped apart and
-/// unmapped when freed.
+/// `MADV_POPULATE_WRITE` (about 0.8 us a page), they cost the run little time: `run` on
+/// the shared capture, 2 threads, 41 interleaved runs each, median 66.9 -> 66.3 ms and
+/// 68.4 -> 67.9 ms with 12 MB (8 MB: 66.6, 15 MB: 66.7), page faults about 7,000 ->
+/// 2,800-5,300 (README, "Warm worker heaps"). The block stays below mimalloc's largest
+/// in-segment block (16 MiB): a larger one would be mapped apart and unmapped when freed.
 pub struct HeapWarmer {
     block: Vec<u8>,
     done: usize,

@@ -41,6 +41,7 @@ fn populate_spare<T>(v: &mut Vec<T>, from: usize, bytes: usize) {
         let spare = v.spare_capacity_mut();
         let spare_bytes = std::mem::size_of_val(spare);
         let end = from.saturating_add(bytes).min(spare_bytes);
+        let from = from.min(end);
         let start = spare.as_mut_ptr() as usize;
         // Whole pages inside the spare capacity only.
         let (a, b) = (

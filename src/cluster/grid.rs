@@ -39,8 +39,25 @@ fn squared_threshold(cutoff: f64) -> f64 {
 
 /// Squared distance in the order `point_distance` sums it: `(dx*dx + dy*dy) + dz*dz`.
 #[inline(always)]
-fn sq3(dx: f64, dy: f64, dz: f64) -> f64 {
+fn sq3<T: Copy + std::ops::Mul<Output = T> + std::ops::Add<Output = T>>(dx: T, dy: T, dz: T) -> T {
     dx * dx + dy * dy + dz * dz
+}
+
+/// Squared gap between two voxel boxes (`[min x, min y, min z, max x, max y, max z]`, 0
+/// where they overlap), in the boxes' own type: a lower bound of every squared distance
+/// between a point of one and a point of the other. `try_link` takes it in `f32`.
+#[inline(always)]
+fn box_gap_sq<T>(a: &[T; 6], b: &[T; 6]) -> T
+where
+    T: Copy + PartialOrd + Default + std::ops::Sub<Output = T>,
+    T: std::ops::Mul<Output = T> + std::ops::Add<Output = T>,
+{
+    let zero = T::default();
+    sq3(
+        max(max(b[0] - a[3], a[0] - b[3]), zero),
+        max(max(b[1] - a[4], a[1] - b[4]), zero),
+        max(max(b[2] - a[5], a[2] - b[5]), zero),
+    )
 }
 
 /// The `f32` bound of the voxel box test: a squared box gap computed in `f32` above it
@@ -63,22 +80,6 @@ fn box_gate(t_hi: f64) -> f32 {
     }
 }
 
-/// [`sq3`] in `f32`, for the voxel box test ([`box_gate`]).
-#[inline(always)]
-fn sq3_f32(dx: f32, dy: f32, dz: f32) -> f32 {
-    dx * dx + dy * dy + dz * dz
-}
-
-/// [`max`] for `f32`.
-#[inline(always)]
-fn max_f32(a: f32, b: f32) -> f32 {
-    if a > b {
-        a
-    } else {
-        b
-    }
-}
-
 /// Gap between a coordinate interval and a value (0 inside): a lower bound of `|v - b|` for
 /// every `b` in `[lo, hi]`, and since `f64` rounding is monotone the rounded gap is also a
 /// lower bound of every rounded difference, so box tests never reject a linked pair.
@@ -92,7 +93,7 @@ fn gap(lo: f64, hi: f64, v: f64) -> f64 {
 /// Where `f64::max` may return either zero of `max(-0.0, 0.0)`, this returns `b`; the
 /// gaps are only squared and compared, so the sign of a zero never matters.
 #[inline(always)]
-fn max(a: f64, b: f64) -> f64 {
+fn max<T: PartialOrd>(a: T, b: T) -> T {
     if a > b {
         a
     } else {
@@ -615,12 +616,7 @@ impl Walk<'_> {
         // The box test before `find`: three in four of the pairs that get here lie in
         // other sets with boxes too far apart, and the test spares their `find`.
         let (ba, bb) = (&self.cell_box[a], &self.cell_box[b]);
-        let g = sq3_f32(
-            max_f32(max_f32(bb[0] - ba[3], ba[0] - bb[3]), 0.0),
-            max_f32(max_f32(bb[1] - ba[4], ba[1] - bb[4]), 0.0),
-            max_f32(max_f32(bb[2] - ba[5], ba[2] - bb[5]), 0.0),
-        );
-        if g > self.t_gate {
+        if box_gap_sq(ba, bb) > self.t_gate {
             return ra;
         }
         let bb: [f64; 6] = bb.map(f64::from);
@@ -724,17 +720,9 @@ mod tests {
                     b[k] = lo as f32;
                     b[k + 3] = b[k];
                 }
-                let g32 = sq3_f32(
-                    max_f32(max_f32(b[0] - a[3], a[0] - b[3]), 0.0),
-                    max_f32(max_f32(b[1] - a[4], a[1] - b[4]), 0.0),
-                    max_f32(max_f32(b[2] - a[5], a[2] - b[5]), 0.0),
-                );
-                let (af, bf) = (a.map(f64::from), b.map(f64::from));
-                let g64 = sq3(
-                    max(max(bf[0] - af[3], af[0] - bf[3]), 0.0),
-                    max(max(bf[1] - af[4], af[1] - bf[4]), 0.0),
-                    max(max(bf[2] - af[5], af[2] - bf[5]), 0.0),
-                );
+                // The test `try_link` runs, and the same gap widened to `f64`.
+                let g32 = box_gap_sq(&a, &b);
+                let g64 = box_gap_sq(&a.map(f64::from), &b.map(f64::from));
                 if g32 > gate {
                     rejected += 1;
                     assert!(g64 > t_hi, "cutoff {cutoff}: {a:?} {b:?}");

@@ -740,20 +740,14 @@ fn next_frame<T>(
             // The other worker waits on the queue: nothing for this one yet.
             Err(TryLockError::WouldBlock) => Err(TryRecvError::Empty),
         };
-        match polled {
-            Ok(item) => {
+        if let Err(TryRecvError::Empty) = polled {
+            if !w.step() {
                 *warmer = None;
-                return Ok(item);
             }
-            Err(TryRecvError::Disconnected) => {
-                *warmer = None;
-                return Err(RecvError);
-            }
-            Err(TryRecvError::Empty) => {
-                if !w.step() {
-                    *warmer = None;
-                }
-            }
+        } else {
+            // An item, or the queue closed: either way the warm-up is over.
+            *warmer = None;
+            return polled.map_err(|_| RecvError);
         }
     }
     rx.lock().unwrap_or_else(|e| e.into_inner()).recv()

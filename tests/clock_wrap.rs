@@ -137,3 +137,70 @@ fn hourly_wrap_at_every_position_on_the_shared_capture() {
     };
     check_every_position(&path);
 }
+
+/// The records in `order` (indices into `records`), re-written as a capture.
+fn reordered(records: &[Record], order: impl Iterator<Item = usize>) -> Vec<u8> {
+    let mut w = PcapWriter::new(Vec::new()).unwrap();
+    for i in order {
+        let r = &records[i];
+        w.write_udp(r.ts_us, r.ports.0, r.ports.1, &r.payload)
+            .unwrap();
+    }
+    w.into_inner().unwrap()
+}
+
+/// Summary of a capture read to the end.
+fn summary_of(bytes: Vec<u8>) -> lidar_noise::hdl32e::frames::CaptureSummary {
+    let mut reader = FrameReader::from_bytes(
+        Arc::from(bytes),
+        Path::new("reordered.pcap"),
+        &DecoderOptions::default(),
+    )
+    .unwrap();
+    for frame in reader.by_ref() {
+        frame.unwrap();
+    }
+    reader.summary()
+}
+
+#[test]
+fn a_clock_that_runs_backwards_gives_its_span_and_is_reported() {
+    // Issue 30, defect 6: reversed packets gave a negative duration (-1.493 s on the
+    // shared capture), and the fuzzer found a mutated timestamp doing the same.
+    let recs = records(&common::fixtures().join("crossroad.pcap"));
+    let forward = summary_of(reordered(&recs, 0..recs.len()));
+    assert_eq!(forward.clock_backward_steps, 0);
+    assert!(forward.duration_s > 0.05, "{}", forward.duration_s);
+    let backward = summary_of(reordered(&recs, (0..recs.len()).rev()));
+    let data = recs.iter().filter(|r| r.payload.len() == 1206).count() as u64;
+    // Every data packet but the first starts before the one read before it.
+    assert_eq!(backward.clock_backward_steps, data - 1);
+    // The span of the same firings: the forward duration.
+    assert!(
+        (backward.duration_s - forward.duration_s).abs() < 1e-9,
+        "{} vs {}",
+        backward.duration_s,
+        forward.duration_s
+    );
+    // One packet moved back in time: a single backward step, the span unchanged.
+    let mut order: Vec<usize> = (0..recs.len()).collect();
+    let late = (0..recs.len())
+        .rev()
+        .find(|&i| recs[i].payload.len() == 1206)
+        .unwrap();
+    let at = order.len() / 2;
+    let moved = order.remove(late);
+    order.insert(at, moved);
+    let one = summary_of(reordered(&recs, order.into_iter()));
+    assert!(
+        one.clock_backward_steps >= 1,
+        "{}",
+        one.clock_backward_steps
+    );
+    assert!((one.duration_s - forward.duration_s).abs() < 1e-9);
+    // The summary's JSON names the count only when the clock ran backwards.
+    let json = serde_json::to_string(&forward).unwrap();
+    assert!(!json.contains("clock_backward_steps"), "{json}");
+    let json = serde_json::to_string(&backward).unwrap();
+    assert!(json.contains("\"clock_backward_steps\""), "{json}");
+}

@@ -5,8 +5,17 @@
 //! nothing may panic. A panicking input is saved under `target/fuzz-findings/` and the
 //! test fails naming it; findings become regression tests.
 //!
-//! Time per target: `FUZZ_SECONDS` (default 1; CI runs longer), seed `FUZZ_SEED`
-//! (default fixed), so a run is reproducible for a given number of iterations.
+//! Every target first replays its corpus and every past finding (`fuzz/findings/<target>/`,
+//! inputs that once failed and were fixed), then checks `FUZZ_INPUTS` mutations (default
+//! [`DEFAULT_INPUTS`]) from the seed `FUZZ_SEED` (default fixed): a count, not a time, so
+//! `cargo test` tries the same inputs on any machine, loaded or not, and gives the same
+//! result. Files given as `extra` (the shared capture, when present) are replayed and used
+//! as splice material only, never as the base of a mutation, so the count costs the same
+//! with and without `../shared`.
+//!
+//! Longer fuzzing is a separate step (`.ci/run`): `FUZZ_SECONDS=N` makes each target run
+//! for N seconds instead of a count, with the seed printed; its findings are saved under
+//! `target/fuzz-findings/` to be added to `fuzz/findings/`.
 
 mod common;
 
@@ -15,6 +24,9 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+
+/// Mutations per target in `cargo test` (from a fixed seed).
+const DEFAULT_INPUTS: u64 = 2000;
 
 /// xorshift64*: small, seedable, no dependency.
 struct Rng(u64);
@@ -102,24 +114,39 @@ fn mutate(rng: &mut Rng, data: &mut Vec<u8>, corpus: &[Vec<u8>]) {
     }
 }
 
-fn corpus(target: &str, extra: &[PathBuf]) -> Vec<Vec<u8>> {
+/// The files of `fuzz/<kind>/<target>/`, sorted (none when the folder is absent).
+fn files(kind: &str, target: &str) -> Vec<PathBuf> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("fuzz/corpus")
+        .join("fuzz")
+        .join(kind)
         .join(target);
-    let mut paths: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
+    let mut paths: Vec<PathBuf> = match std::fs::read_dir(&dir) {
+        Ok(entries) => entries.map(|e| e.unwrap().path()).collect(),
+        Err(_) => Vec::new(),
+    };
     paths.sort();
-    paths.extend(extra.iter().cloned());
+    paths
+}
+
+/// The corpus and past findings of `target` (the bases of mutations).
+fn corpus(target: &str) -> Vec<Vec<u8>> {
+    let mut paths = files("corpus", target);
+    paths.extend(files("findings", target));
     paths.iter().map(|p| std::fs::read(p).unwrap()).collect()
 }
 
-fn seconds() -> f64 {
-    std::env::var("FUZZ_SECONDS")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(1.0)
+/// How long to run: `FUZZ_SECONDS` when set (the long CI step), else a count.
+enum Budget {
+    Inputs(u64),
+    Until(Instant),
+}
+
+fn budget() -> Budget {
+    let var = |name: &str| std::env::var(name).ok().and_then(|s| s.parse::<f64>().ok());
+    match var("FUZZ_SECONDS") {
+        Some(s) if s > 0.0 => Budget::Until(Instant::now() + Duration::from_secs_f64(s)),
+        _ => Budget::Inputs(var("FUZZ_INPUTS").map_or(DEFAULT_INPUTS, |n| n.max(0.0) as u64)),
+    }
 }
 
 fn seed(target: &str) -> u64 {
@@ -132,20 +159,23 @@ fn seed(target: &str) -> u64 {
     }) | 1
 }
 
-/// Runs `check` on every corpus entry, then on mutations until the time is up.
+/// Runs `check` on every corpus entry, past finding and `extra` file, then on mutations
+/// of the corpus entries (spliced with all of them) until the budget is spent.
 /// `check` returns Err(description) for a wrong (non-panicking) outcome.
 fn fuzz(target: &str, extra: &[PathBuf], check: impl Fn(&[u8]) -> Result<(), String>) {
-    let corpus = corpus(target, extra);
+    let bases = corpus(target);
+    let mut material = bases.clone();
+    material.extend(extra.iter().map(|p| std::fs::read(p).unwrap()));
     let mut rng = Rng(seed(target));
-    let deadline = Instant::now() + Duration::from_secs_f64(seconds());
+    let budget = budget();
     let mut runs = 0u64;
     let mut i = 0usize;
     loop {
-        let input = if i < corpus.len() {
-            corpus[i].clone()
+        let input = if i < material.len() {
+            material[i].clone()
         } else {
-            let mut d = corpus[rng.below(corpus.len())].clone();
-            mutate(&mut rng, &mut d, &corpus);
+            let mut d = bases[rng.below(bases.len())].clone();
+            mutate(&mut rng, &mut d, &material);
             d
         };
         i += 1;
@@ -166,7 +196,12 @@ fn fuzz(target: &str, extra: &[PathBuf], check: impl Fn(&[u8]) -> Result<(), Str
                 path.display()
             );
         }
-        if i >= corpus.len() && Instant::now() >= deadline {
+        let mutations = i.saturating_sub(material.len()) as u64;
+        let spent = match budget {
+            Budget::Inputs(n) => mutations >= n,
+            Budget::Until(deadline) => Instant::now() >= deadline,
+        };
+        if i >= material.len() && spent {
             break;
         }
     }
@@ -205,7 +240,7 @@ pub fn check_capture(bytes: &[u8]) -> Result<(), String> {
 #[test]
 fn fuzz_capture_reader_and_decoder() {
     let shared: Vec<PathBuf> = common::shared("hdl32e/monterey.pcap").into_iter().collect();
-    // The whole shared capture is large: mutate it only through splices (corpus[.] picks).
+    // The whole shared capture is large: replayed once and used as splice material only.
     fuzz("capture", &shared, check_capture);
 }
 

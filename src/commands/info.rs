@@ -103,6 +103,16 @@ fn write_text(out: &mut impl Write, path: &std::path::Path, s: &CaptureSummary) 
         s.returns, s.returns_in_full_frames, s.decode.zero_distance
     )?;
     writeln!(out, "  duration      {:.3} s", s.duration_s)?;
+    if s.clock_backward_steps > 0 {
+        writeln!(
+            out,
+            "  clock         not monotonic: {} data packet{} started before the previous one \
+             ended (reordered or duplicated packets, or a reset clock); the duration is the \
+             span from the earliest to the latest firing",
+            s.clock_backward_steps,
+            if s.clock_backward_steps == 1 { "" } else { "s" }
+        )?;
+    }
     match s.capture.truncated_at {
         Some(offset) => writeln!(out, "  truncated     at byte offset {offset}")?,
         None => writeln!(out, "  truncated     no")?,

@@ -86,8 +86,15 @@ pub struct CaptureSummary {
     pub returns: u64,
     /// Non-zero returns in full frames.
     pub returns_in_full_frames: u64,
-    /// Sensor time from the first to the last firing, in seconds.
+    /// Sensor time spanned by the firings, in seconds: from the first to the last firing,
+    /// or, when the sensor clock ran backwards between data packets
+    /// (`clock_backward_steps` > 0), from the earliest to the latest firing. Never negative.
     pub duration_s: f64,
+    /// Data packets whose first firing is earlier than the previous packet's: the sensor
+    /// clock is not monotonic (reordered or duplicated packets, a reset clock). Left out
+    /// of reports when 0.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub clock_backward_steps: u64,
     /// Decoder counters.
     pub decode: DecodeCounts,
     /// Container-level counters (records, fragments, truncation).
@@ -98,6 +105,11 @@ pub struct CaptureSummary {
     /// Returns per intensity byte value over the whole capture (256 bins, not in reports).
     #[serde(skip)]
     pub intensity_histogram: Vec<u64>,
+}
+
+/// True for 0 (serde: counters left out of reports when nothing happened).
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }
 
 /// Returns below this count say too little about the intensity distribution.
@@ -213,6 +225,8 @@ pub struct FrameReader {
     next_index: u32,
     sweep: SweepState,
     last_time_us: f64,
+    /// Earliest and latest firing time seen, microseconds (`[inf, -inf]` before any).
+    time_span_us: [f64; 2],
     summary: CaptureSummary,
     done: bool,
     /// Copy of the current data packet (the datagram borrows the reader).
@@ -309,6 +323,7 @@ impl FrameReader {
             next_index: 0,
             sweep: SweepState::default(),
             last_time_us: 0.0,
+            time_span_us: [f64::INFINITY, f64::NEG_INFINITY],
             summary: CaptureSummary {
                 format: Format::Pcap,
                 linktype: -1,
@@ -328,6 +343,7 @@ impl FrameReader {
                 returns: 0,
                 returns_in_full_frames: 0,
                 duration_s: 0.0,
+                clock_backward_steps: 0,
                 decode: DecodeCounts::default(),
                 capture: CaptureStats::default(),
                 returns_per_laser: vec![0; packet::LASERS],
@@ -431,7 +447,15 @@ impl FrameReader {
         s.linktype_name = crate::capture::link::link_name(s.linktype);
         s.capture = self.capture.stats().clone();
         if let Some(first) = self.sweep.first_time_us {
-            s.duration_s = (self.last_time_us - first) * 1e-6;
+            s.duration_s = if s.clock_backward_steps == 0 {
+                (self.last_time_us - first) * 1e-6
+            } else {
+                // A clock that ran backwards has no first-to-last duration: the span of
+                // the firing times is the time the capture covers at least.
+                (self.time_span_us[1] - self.time_span_us[0]) * 1e-6
+            };
+            // NaN-free and non-negative whatever the timestamps were.
+            s.duration_s = s.duration_s.max(0.0);
             if s.duration_s > 0.0 {
                 s.rotation_hz = Some(self.sweep.unwrapped_centideg as f64 / 36000.0 / s.duration_s);
             }
@@ -537,7 +561,12 @@ impl FrameReader {
         let time0 = self
             .sweep
             .on_packet(packet::timestamp_us(payload), first_firing_us(payload, n));
+        if self.time_span_us[1] >= self.time_span_us[0] && time0 < self.last_time_us {
+            self.summary.clock_backward_steps += 1;
+        }
         self.last_time_us = time0 + (n as f64 - 1.0) * packet::FIRING_US;
+        self.time_span_us[0] = self.time_span_us[0].min(time0);
+        self.time_span_us[1] = self.time_span_us[1].max(self.last_time_us);
         for firing in &firings[..n] {
             self.on_firing(firing.azimuth, firing.step);
             let (blocks, count) = self.decoder.blocks_of(mode, firing.index);

@@ -211,3 +211,40 @@ fn sweep_of_another_plan_refused_same_plan_resumes_force_replaces() {
         assert!(listed.contains(&p.as_str()), "stale plot {p}");
     }
 }
+
+#[test]
+fn a_capture_named_dot_pcap_gets_a_folder_of_its_own_and_reruns_do_not_hang() {
+    // Issue 30, defect 3: `..pcap` (stem `.`) made the results folder `DIR/.`, whose
+    // rename failed and deadlocked the process; a leftover `.NAME.old` of a killed run
+    // made every rerun hang the same way.
+    let dir = tempfile::tempdir().unwrap();
+    let capture = dir.path().join("..pcap");
+    std::fs::copy(crossroad(), &capture).unwrap();
+    let out = dir.path().join("out");
+    for extra in [&[][..], &["--force"][..]] {
+        let o = bin()
+            .args(["--quiet", "run"])
+            .arg(&capture)
+            .args(["--frames", "0", "-o"])
+            .arg(&out)
+            .args(extra)
+            .timeout(std::time::Duration::from_secs(300))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(out.join("capture./summary.json").is_file());
+    }
+    std::fs::create_dir_all(out.join(".crossroad.old/x")).unwrap();
+    for _ in 0..2 {
+        let o = bin()
+            .args(["--quiet", "run"])
+            .arg(crossroad())
+            .args(["--frames", "0", "--force", "-o"])
+            .arg(&out)
+            .timeout(std::time::Duration::from_secs(300))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    assert!(out.join("crossroad/summary.json").is_file());
+}

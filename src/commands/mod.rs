@@ -143,7 +143,9 @@ pub fn check_stdin_once(paths: &[std::path::PathBuf]) -> anyhow::Result<()> {
 }
 
 /// Output names of captures: each file's stem, with `-2`, `-3`, ... added where two
-/// captures share a stem, so every capture gets its own folder.
+/// captures share a stem, so every capture gets its own folder. A stem that is no usable
+/// folder name (``, `.`, `..`, or one starting with `.`, which would be hidden and could
+/// match the tool's own temporary names) gets a `capture` prefix.
 pub fn output_names(paths: &[std::path::PathBuf]) -> Vec<String> {
     let mut used = std::collections::HashSet::new();
     paths
@@ -157,6 +159,11 @@ pub fn output_names(paths: &[std::path::PathBuf]) -> Vec<String> {
                 || "capture".to_string(),
                 |s| s.to_string_lossy().into_owned(),
             );
+            let stem = if stem.is_empty() || stem.starts_with('.') {
+                format!("capture{stem}")
+            } else {
+                stem
+            };
             let mut name = stem.clone();
             let mut n = 2;
             while !used.insert(name.clone()) {

@@ -184,19 +184,45 @@ impl Drop for Staged {
 /// Renames every staging folder onto its target (replacing an earlier run's results),
 /// with signals held off so that no target is left half replaced.
 pub fn commit(staged: Vec<Staged>) -> Result<()> {
-    signals::critical(|g| {
-        for mut s in staged {
-            let old = s.path.with_extension("old");
-            if s.target.exists() {
-                fs::rename(&s.target, &old).map_err(|e| Error::io(&s.target, e))?;
+    // Folders not committed when a rename fails: dropped (unregistered and deleted) only
+    // after the registry's lock is released, since their `Drop` takes that lock (dropping
+    // them inside `critical` deadlocked, and the signal thread waited on the same lock).
+    let mut rest: Vec<Staged> = Vec::new();
+    let result = signals::critical(|g| {
+        let mut queue = staged.into_iter();
+        while let Some(mut s) = queue.next() {
+            // The earlier results move aside under a name of this process's own, so that
+            // a leftover of a killed run (a partly deleted old folder) never blocks the
+            // rename; the start-up clean-up removes such leftovers (`.*.staging-*`).
+            let mut old = s.path.clone().into_os_string();
+            old.push(".old");
+            let old = PathBuf::from(old);
+            let had_target = s.target.exists();
+            let moved = (|| {
+                if had_target {
+                    fs::rename(&s.target, &old).map_err(|e| Error::io(&s.target, e))?;
+                }
+                fs::rename(&s.path, &s.target).map_err(|e| {
+                    // Put the earlier results back: a failed commit changes nothing.
+                    if had_target {
+                        let _ = fs::rename(&old, &s.target);
+                    }
+                    Error::io(&s.target, e)
+                })
+            })();
+            if let Err(e) = moved {
+                rest.push(s);
+                rest.extend(queue);
+                return Err(e);
             }
-            fs::rename(&s.path, &s.target).map_err(|e| Error::io(&s.target, e))?;
             g.unregister(&s.path);
             s.done = true;
             signals::remove_path(&old);
         }
         Ok(())
-    })
+    });
+    drop(rest);
+    result
 }
 
 /// Moves every file of a staging folder into `dir` (the folder the files belong in, for
@@ -485,6 +511,49 @@ mod tests {
             .filter(|n| n.starts_with('.') && n != LOCK_FILE)
             .collect();
         assert!(hidden.is_empty(), "{hidden:?}");
+    }
+
+    #[test]
+    fn a_failed_commit_returns_an_error_and_restores_instead_of_deadlocking() {
+        // Issue 30, defect 3: a failed rename returned while the signal registry's lock
+        // was held, and dropping the remaining staging folders took the same lock.
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        fs::create_dir_all(out.join("b")).unwrap();
+        fs::write(out.join("b/old.ply"), "old b").unwrap();
+        // A leftover of a killed run under the old fixed name must not matter either.
+        fs::create_dir_all(out.join(".a.old/x")).unwrap();
+        let folder = OutputFolder::lock(&out).unwrap();
+        let a = folder.stage("a").unwrap();
+        fs::write(a.path().join("new.ply"), "new a").unwrap();
+        let b = folder.stage("b").unwrap();
+        let c = folder.stage("c").unwrap();
+        // b's staging folder vanishes: its rename fails.
+        fs::remove_dir_all(b.path()).unwrap();
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let r = commit(vec![a, b, c]);
+            tx.send(r.map_err(|e| e.to_string())).unwrap();
+        });
+        // Generous: it returns at once, or never when it deadlocks.
+        let r = rx
+            .recv_timeout(std::time::Duration::from_secs(120))
+            .expect("commit deadlocked");
+        let err = r.expect_err("the failed rename is an error");
+        assert!(err.contains("b"), "{err}");
+        // a was committed; b's earlier results are back; c was not committed and its
+        // staging folder is gone; the registry still works.
+        assert_eq!(fs::read_to_string(out.join("a/new.ply")).unwrap(), "new a");
+        assert_eq!(fs::read_to_string(out.join("b/old.ply")).unwrap(), "old b");
+        assert!(!out.join("c").exists());
+        let left: Vec<String> = fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(".staging-"))
+            .collect();
+        assert!(left.is_empty(), "{left:?}");
+        signals::register(&out.join("probe"));
+        signals::unregister(&out.join("probe"));
     }
 
     fn refused(r: anyhow::Result<Vec<String>>) -> String {

@@ -143,13 +143,10 @@ pub fn main() -> i32 {
         // compare has three outcomes (same, different, unusable), not two.
         Command::Compare(args) => return commands::compare::run(args, global),
         Command::Completions { shell } => {
-            clap_complete::generate(
-                shell,
-                &mut Cli::command(),
-                "lidar-noise",
-                &mut std::io::stdout(),
-            );
-            Ok(())
+            // Into memory first: clap_complete panics when its writer fails.
+            let mut script = Vec::new();
+            clap_complete::generate(shell, &mut Cli::command(), "lidar-noise", &mut script);
+            commands::write_stdout(script)
         }
         Command::Man => clap_mangen::Man::new(Cli::command())
             .render(&mut std::io::stdout())
@@ -176,7 +173,7 @@ pub fn main() -> i32 {
 }
 
 /// True when the error comes from writing to a closed pipe.
-fn is_broken_pipe(e: &anyhow::Error) -> bool {
+pub(crate) fn is_broken_pipe(e: &anyhow::Error) -> bool {
     e.chain().any(|c| {
         c.downcast_ref::<std::io::Error>()
             .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)

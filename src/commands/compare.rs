@@ -46,13 +46,17 @@ pub fn run(args: Args, global: Global) -> i32 {
         }
     }
     let text = report.human();
-    if report.same() {
-        if !global.quiet {
-            print!("{text}");
-        }
-        EXIT_OK
+    let printed = if report.same() && global.quiet {
+        Ok(())
     } else {
-        print!("{text}");
-        EXIT_ERROR
+        super::write_stdout(&text)
+    };
+    match printed {
+        Err(e) if !crate::cli::is_broken_pipe(&e) => {
+            eprintln!("lidar-noise: error: {e:#}");
+            EXIT_ERROR
+        }
+        _ if report.same() => EXIT_OK,
+        _ => EXIT_ERROR,
     }
 }

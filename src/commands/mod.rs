@@ -174,3 +174,13 @@ pub fn output_names(paths: &[std::path::PathBuf]) -> Vec<String> {
         })
         .collect()
 }
+
+/// Writes `text` to standard output, flushed; a failure (a full disk, a closed pipe) is an
+/// error naming standard output instead of the panic of `print!`.
+pub fn write_stdout(text: impl AsRef<[u8]>) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_ref())
+        .and_then(|()| out.flush())
+        .map_err(|e| anyhow::Error::new(e).context("cannot write to standard output"))
+}

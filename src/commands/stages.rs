@@ -46,6 +46,5 @@ pub fn listing(markdown: bool) -> String {
 
 /// Prints the listing to stdout.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    print!("{}", listing(args.markdown));
-    Ok(())
+    super::write_stdout(listing(args.markdown))
 }

@@ -37,26 +37,30 @@ pub fn run(args: Args, global: crate::cli::Global) -> anyhow::Result<()> {
     for w in &warnings {
         global.warn(w);
     }
+    use std::fmt::Write as _;
+    let mut out = String::new();
     if args.print {
-        println!(
+        let _ = writeln!(
+            out,
             "# effective configuration of {}\n# written by lidar-noise {} (validate --print)\n",
             config.provenance(),
             env!("CARGO_PKG_VERSION")
         );
-        print!("{}", config.effective_toml());
-        return Ok(());
+        out.push_str(&config.effective_toml());
+        return super::write_stdout(out);
     }
-    println!("{}: ok", config.source.display());
-    println!("seed {}", config.seed);
+    let _ = writeln!(out, "{}: ok", config.source.display());
+    let _ = writeln!(out, "seed {}", config.seed);
     if config.noise.is_empty() {
-        println!("no noise stages");
+        out.push_str("no noise stages\n");
     }
     for line in config.stage_lines() {
-        println!("{line}");
+        let _ = writeln!(out, "{line}");
     }
-    println!(
+    let _ = writeln!(
+        out,
         "detection: min_power {} of emitted power, min_range {} m",
         config.detection.min_power, config.detection.min_range_m
     );
-    Ok(())
+    super::write_stdout(out)
 }

@@ -17,6 +17,91 @@ use std::path::Path;
 /// VeloView's default distance unit, in centimetres (2 mm).
 const DEFAULT_DIST_LSB_CM: f64 = 0.2;
 
+/// Deepest element nesting accepted. VeloView files nest five levels; roxmltree builds
+/// and drops its tree recursively, so a file nested tens of thousands of levels deep
+/// overflowed the stack and aborted the process.
+pub const MAX_DEPTH: usize = 64;
+
+/// The line of the first element nested deeper than `max` levels, by a linear scan of the
+/// tags (comments, CDATA, declarations and processing instructions skipped, quoted
+/// attribute values read past): `None` when the nesting stays within `max`.
+fn too_deep(text: &str, max: usize) -> Option<usize> {
+    let b = text.as_bytes();
+    let (mut i, mut depth, mut line) = (0usize, 0usize, 1usize);
+    // Skips to just past `end`, counting lines; false when the text ends first.
+    let skip = |i: &mut usize, line: &mut usize, end: &[u8]| -> bool {
+        while *i < b.len() {
+            if b[*i..].starts_with(end) {
+                *i += end.len();
+                return true;
+            }
+            *line += usize::from(b[*i] == b'\n');
+            *i += 1;
+        }
+        false
+    };
+    while i < b.len() {
+        match b[i] {
+            b'\n' => {
+                line += 1;
+                i += 1;
+            }
+            b'<' if b[i..].starts_with(b"<!--") => {
+                if !skip(&mut i, &mut line, b"-->") {
+                    break;
+                }
+            }
+            b'<' if b[i..].starts_with(b"<![CDATA[") => {
+                if !skip(&mut i, &mut line, b"]]>") {
+                    break;
+                }
+            }
+            b'<' if b[i..].starts_with(b"<?") => {
+                if !skip(&mut i, &mut line, b"?>") {
+                    break;
+                }
+            }
+            b'<' if b[i..].starts_with(b"<!") || b[i..].starts_with(b"</") => {
+                let closing = b[i + 1] == b'/';
+                if !skip(&mut i, &mut line, b">") {
+                    break;
+                }
+                if closing {
+                    depth = depth.saturating_sub(1);
+                }
+            }
+            b'<' => {
+                // A start tag: read to its `>` past quoted values; `/>` closes it at once.
+                let mut quote = None;
+                let mut last = 0u8;
+                i += 1;
+                while i < b.len() {
+                    let c = b[i];
+                    line += usize::from(c == b'\n');
+                    match quote {
+                        Some(q) if c == q => quote = None,
+                        Some(_) => {}
+                        None if c == b'"' || c == b'\'' => quote = Some(c),
+                        None if c == b'>' => break,
+                        None => {}
+                    }
+                    last = c;
+                    i += 1;
+                }
+                i += 1;
+                if last != b'/' {
+                    depth += 1;
+                    if depth > max {
+                        return Some(line);
+                    }
+                }
+            }
+            _ => i += 1,
+        }
+    }
+    None
+}
+
 /// Parses VeloView XML calibration text; `path` is only used in messages and as the source.
 pub fn parse_str(text: &str, path: &Path) -> Result<Calibration> {
     let err = |message: String| Error::Config {
@@ -29,6 +114,12 @@ pub fn parse_str(text: &str, path: &Path) -> Result<Calibration> {
         allow_dtd: true,
         ..Default::default()
     };
+    if let Some(line) = too_deep(text, MAX_DEPTH) {
+        return Err(err(format!(
+            "elements nested more than {MAX_DEPTH} levels deep at line {line}: not a VeloView \
+             calibration file (they nest five levels)"
+        )));
+    }
     // roxmltree's message already ends with "at L:C".
     let doc = Document::parse_with_options(text, options)
         .map_err(|e| err(format!("not a well-formed XML file: {e}")))?;
@@ -120,6 +211,29 @@ fn number(node: Node, line_of: &dyn Fn(Node) -> u32) -> std::result::Result<f64,
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn deep_nesting_is_an_error_naming_the_line_not_a_stack_overflow() {
+        // Issue 30, defect 2: 50,000 nested elements aborted the process.
+        let n = 50_000;
+        let text = format!("<a>\n{}{}</a>", "<b>".repeat(n), "</b>".repeat(n));
+        let e = parse_str(&text, Path::new("deep.xml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("deep.xml") && e.contains("nested more than 64"),
+            "{e}"
+        );
+        assert!(e.contains("line 2"), "{e}");
+        // The scan reads comments, CDATA, quoted '>' and empty elements as XML does.
+        let ok = format!(
+            "<?xml version='1.0'?><!DOCTYPE x><r a=\"x>y\">{}<e/><!-- <q><q> --><![CDATA[<z>]]>{}</r>",
+            "<i>".repeat(60),
+            "</i>".repeat(60)
+        );
+        assert_eq!(too_deep(&ok, 64), None);
+        assert!(too_deep(&ok, 60).is_some());
+    }
     use crate::calibration::BUILTIN_ELEVATION_DEG;
     use std::path::PathBuf;
 

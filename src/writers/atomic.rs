@@ -29,6 +29,7 @@ where
     F: FnOnce(&mut dyn Write) -> std::io::Result<()>,
 {
     refuse_inputs(path, protected_inputs)?;
+    refuse_special(path)?;
     // Registered so that SIGINT/SIGTERM deletes it; created under the registry's lock so
     // that no temporary file can appear unregistered.
     let mut tmp = crate::signals::critical(|g| {
@@ -66,6 +67,7 @@ impl AtomicFile {
     /// Starts writing `path`, refusing to overwrite any of `protected_inputs`.
     pub fn create(path: &Path, protected_inputs: &[&Path]) -> Result<Self> {
         refuse_inputs(path, protected_inputs)?;
+        refuse_special(path)?;
         let tmp = crate::signals::critical(|g| {
             let tmp = temp_file_for(path)?;
             g.register(tmp.path());
@@ -128,6 +130,30 @@ pub fn temp_file_for(path: &Path) -> Result<tempfile::NamedTempFile> {
         builder.permissions(fs::Permissions::from_mode(0o644));
     }
     builder.tempfile_in(&dir).map_err(|e| Error::io(path, e))
+}
+
+/// Refuses to replace anything but a regular file at `path`: renaming over a device node,
+/// a FIFO or a symbolic link would replace it with our file (as root, `/dev/full` itself).
+pub fn refuse_special(path: &Path) -> Result<()> {
+    let Ok(meta) = fs::symlink_metadata(path) else {
+        return Ok(());
+    };
+    let t = meta.file_type();
+    if t.is_file() {
+        return Ok(());
+    }
+    let kind = if t.is_symlink() {
+        "a symbolic link"
+    } else if t.is_dir() {
+        "a folder"
+    } else {
+        "a special file (device, FIFO or socket)"
+    };
+    Err(Error::Invalid(format!(
+        "{}: is {kind}; lidar-noise writes regular files only: give the path of a new or \
+         regular file",
+        path.display()
+    )))
 }
 
 /// Errors when `target` names the same file as one of `inputs`.

@@ -46,6 +46,7 @@ impl OutputFolder {
     }
 
     fn lock_as(dir: &Path, exclusive: bool) -> Result<Self> {
+        refuse_system_folder(dir)?;
         if dir.exists() && !dir.is_dir() {
             return Err(Error::Invalid(format!(
                 "{}: the output folder is a file, not a folder",
@@ -55,12 +56,26 @@ impl OutputFolder {
         let created = !dir.exists();
         fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         let lock_path = dir.join(LOCK_FILE);
-        let file = File::options()
-            .create(true)
-            .truncate(false)
-            .write(true)
-            .open(&lock_path)
-            .map_err(|e| Error::io(&lock_path, e))?;
+        let mut options = File::options();
+        options.create(true).truncate(false).write(true);
+        // Never through a link: a (dangling) link at the lock's name would make us create
+        // or lock a file outside the output folder.
+        #[cfg(target_os = "linux")]
+        {
+            use std::os::unix::fs::OpenOptionsExt;
+            options.custom_flags(libc::O_NOFOLLOW);
+        }
+        let file = options.open(&lock_path).map_err(|e| {
+            if fs::symlink_metadata(&lock_path).is_ok_and(|m| m.file_type().is_symlink()) {
+                Error::Invalid(format!(
+                    "{}: is a symbolic link; lidar-noise does not follow links for its lock \
+                     file: remove it",
+                    lock_path.display()
+                ))
+            } else {
+                Error::io(&lock_path, e)
+            }
+        })?;
         let locked = if exclusive {
             file.try_lock()
         } else {
@@ -113,7 +128,28 @@ impl OutputFolder {
             })
         })
     }
+}
 
+/// Refuses the root folder and the system's top-level folders as output folders: the
+/// run's clean-up and `--force` act on what is in the folder.
+fn refuse_system_folder(dir: &Path) -> Result<()> {
+    const SYSTEM: [&str; 16] = [
+        "/", "/bin", "/boot", "/dev", "/etc", "/home", "/lib", "/lib32", "/lib64", "/proc",
+        "/root", "/run", "/sbin", "/sys", "/usr", "/var",
+    ];
+    let resolved = fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+    if SYSTEM.iter().any(|s| resolved == Path::new(s)) {
+        return Err(Error::Invalid(format!(
+            "{}: refusing a system folder ({}) as the output folder; give a folder of its \
+             own, e.g. -o lidar-noise-out",
+            dir.display(),
+            resolved.display()
+        )));
+    }
+    Ok(())
+}
+
+impl OutputFolder {
     /// Called when the run failed: removes the folder again if this run created it and
     /// nothing but the lock file is in it.
     pub fn abandon(self) {

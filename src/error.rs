@@ -46,3 +46,40 @@ impl Error {
         }
     }
 }
+
+/// Largest configuration, calibration, scene or labels file read (bytes): far above any
+/// real one (a configuration is a few kB, a labels file of a long synthesized capture a
+/// few MB), and small enough that `-c /dev/zero` is refused at once instead of filling
+/// memory.
+pub const MAX_TEXT_INPUT_BYTES: u64 = 64 << 20;
+
+/// Reads the whole of `path`, refusing more than [`MAX_TEXT_INPUT_BYTES`] (a device such
+/// as `/dev/zero` is refused after that many bytes, not read until memory runs out).
+pub fn read_bounded(path: &std::path::Path) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut bytes = Vec::new();
+    file.take(MAX_TEXT_INPUT_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| Error::io(path, e))?;
+    if bytes.len() as u64 > MAX_TEXT_INPUT_BYTES {
+        return Err(Error::Invalid(format!(
+            "{}: larger than {} MiB, far more than such a file holds: is it the right file?",
+            path.display(),
+            MAX_TEXT_INPUT_BYTES >> 20
+        )));
+    }
+    Ok(bytes)
+}
+
+/// [`read_bounded`] as UTF-8 text (the error names the byte offset of the first invalid
+/// byte).
+pub fn read_text_bounded(path: &std::path::Path) -> Result<String> {
+    String::from_utf8(read_bounded(path)?).map_err(|e| Error::Config {
+        path: path.to_path_buf(),
+        message: format!(
+            "not a text file (invalid UTF-8 at byte {})",
+            e.utf8_error().valid_up_to()
+        ),
+    })
+}

@@ -72,7 +72,7 @@ impl Calibration {
     /// A file whose first non-blank character is `<` is XML, anything else is YAML; the
     /// extension is not trusted because users rename these files freely.
     pub fn from_file(path: &Path) -> Result<Self> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::error::read_bounded(path)?;
         let text = String::from_utf8(bytes).map_err(|e| Error::Config {
             path: path.to_path_buf(),
             message: format!(
@@ -153,14 +153,28 @@ impl RawLaser {
 /// Real HDL-32E files (ROS `32db.yaml`, VeloView `HDL-32.xml`) carry 64 entries of
 /// which ids 32..63 are all-zero placeholders; those are skipped. Any non-zero entry
 /// outside 0..31 is an error, as is a missing or repeated id in 0..31.
+/// Smallest distance unit accepted (m).
+pub const MIN_DISTANCE_RESOLUTION_M: f64 = 1e-4;
+/// Largest distance unit accepted (m).
+pub const MAX_DISTANCE_RESOLUTION_M: f64 = 0.1;
+/// Largest per-laser distance correction accepted (m).
+pub const MAX_DISTANCE_OFFSET_M: f64 = 10.0;
+
 fn assemble(path: &Path, raw: Vec<RawLaser>, distance_resolution_m: f64) -> Result<Calibration> {
     let err = |message: String| Error::Config {
         path: path.to_path_buf(),
         message,
     };
-    if !(distance_resolution_m.is_finite() && distance_resolution_m > 0.0) {
+    // Velodyne sensors count distance in 2 mm (HDL-32E, VLP-16, HDL-64E) or 4 mm (VLS-128)
+    // units: a unit outside 0.1 mm..10 cm is a unit mistake, and would drop or scatter
+    // every return.
+    if !(distance_resolution_m.is_finite()
+        && (MIN_DISTANCE_RESOLUTION_M..=MAX_DISTANCE_RESOLUTION_M).contains(&distance_resolution_m))
+    {
         return Err(err(format!(
-            "distance resolution must be a positive number of metres, got {distance_resolution_m}"
+            "distance resolution (ROS `distance_resolution`, VeloView `distLSB_` in cm) is \
+             {distance_resolution_m} m, outside the physically possible {MIN_DISTANCE_RESOLUTION_M} \
+             to {MAX_DISTANCE_RESOLUTION_M} m (the HDL-32E's is 0.002 m)"
         )));
     }
     let mut slots: [Option<LaserCal>; LASERS] = [None; LASERS];
@@ -206,6 +220,20 @@ fn assemble(path: &Path, raw: Vec<RawLaser>, distance_resolution_m: f64) -> Resu
                     laser.place
                 )));
             }
+        }
+        if laser.azimuth_offset_deg.abs() > 180.0 {
+            return Err(err(format!(
+                "{}: laser {id}: rotational correction {} degrees is outside [-180, 180] \
+                 (real corrections are a few degrees)",
+                laser.place, laser.azimuth_offset_deg
+            )));
+        }
+        if laser.distance_offset_m.abs() > MAX_DISTANCE_OFFSET_M {
+            return Err(err(format!(
+                "{}: laser {id}: distance correction {} m is outside +-{MAX_DISTANCE_OFFSET_M} m \
+                 (real corrections are under 2 m; centimetres and metres mixed up?)",
+                laser.place, laser.distance_offset_m
+            )));
         }
         if laser.elevation_deg.abs() > 90.0 {
             return Err(err(format!(

@@ -154,10 +154,7 @@ impl Config {
         seed: Option<u64>,
     ) -> Result<(Config, Vec<String>)> {
         let (text, file) = match path {
-            Some(p) => (
-                std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?,
-                p.to_path_buf(),
-            ),
+            Some(p) => (crate::error::read_text_bounded(p)?, p.to_path_buf()),
             None => (DEFAULT_TOML.to_string(), PathBuf::from(DEFAULT_LABEL)),
         };
         Self::parse_str(&text, &file, sets, seed)

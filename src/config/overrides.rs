@@ -160,6 +160,13 @@ pub fn stage_shorthand(root: &mut Table, key: &str) -> Option<String> {
 /// to append a new table (e.g. a new `[[noise]]` stage). The key may be the stage
 /// shorthand of [`stage_shorthand`].
 pub fn apply_set(root: &mut Table, arg: &str, locator: &mut Locator) -> Result<(), String> {
+    // A value is parsed as the TOML line `v = VALUE`: a line break would let the rest of
+    // the argument be read as other keys and silently dropped.
+    if arg.contains(['\n', '\r']) {
+        return Err(
+            "holds a line break: give one key=value per --set (repeat --set for more)".into(),
+        );
+    }
     let (path, text) = arg
         .split_once('=')
         .ok_or_else(|| "expected key=value".to_string())?;

@@ -257,10 +257,7 @@ impl BaseConfig {
     /// and the configuration's warnings.
     pub fn load(path: Option<&Path>, sets: &[String]) -> Result<(BaseConfig, Vec<String>)> {
         let (text, source) = match path {
-            Some(p) => (
-                std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?,
-                p.to_path_buf(),
-            ),
+            Some(p) => (crate::error::read_text_bounded(p)?, p.to_path_buf()),
             None => (DEFAULT_TOML.to_string(), PathBuf::from(DEFAULT_LABEL)),
         };
         // Validating the text as given first gives errors with file lines.

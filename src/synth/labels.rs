@@ -135,6 +135,46 @@ impl<W: Write> LabelWriter<W> {
     }
 }
 
+/// Longest line of a labels file read (bytes): a row is about 20 bytes; a file with no
+/// line break (`/dev/zero`) is refused here instead of read into one line until memory
+/// runs out.
+const MAX_LINE_BYTES: u64 = 4096;
+
+/// The lines of `reader` without their line break, each at most [`MAX_LINE_BYTES`] long
+/// (a longer one is an `InvalidData` error, and the iteration ends after it).
+fn bounded_lines(mut reader: impl BufRead) -> impl Iterator<Item = std::io::Result<String>> {
+    let mut done = false;
+    std::iter::from_fn(move || {
+        if done {
+            return None;
+        }
+        let mut line = String::new();
+        match reader.by_ref().take(MAX_LINE_BYTES).read_line(&mut line) {
+            Ok(0) => None,
+            Ok(n) if n as u64 == MAX_LINE_BYTES && !line.ends_with('\n') => {
+                done = true;
+                Some(Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidData,
+                    format!("a line longer than {MAX_LINE_BYTES} bytes: not a labels file"),
+                )))
+            }
+            Ok(_) => {
+                if line.ends_with('\n') {
+                    line.pop();
+                    if line.ends_with('\r') {
+                        line.pop();
+                    }
+                }
+                Some(Ok(line))
+            }
+            Err(e) => {
+                done = true;
+                Some(Err(e))
+            }
+        }
+    })
+}
+
 /// Reads a labels file (gzip-compressed or plain CSV); `origin` names it in errors.
 pub fn read_labels<R: Read>(input: R, origin: &Path) -> Result<Vec<LabelRow>> {
     let mut reader = BufReader::new(input);
@@ -153,7 +193,7 @@ pub fn read_labels<R: Read>(input: R, origin: &Path) -> Result<Vec<LabelRow>> {
     let mut rows = Vec::new();
     let mut old: Option<bool> = None;
     let mut firings = Firings::default();
-    for (i, line) in reader.lines().enumerate() {
+    for (i, line) in bounded_lines(reader).enumerate() {
         let line = line.map_err(|e| Error::io(origin, e))?;
         let n = i + 1;
         if n == 1 {

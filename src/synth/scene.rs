@@ -384,7 +384,7 @@ fn line_of(source: &str, span: std::ops::Range<usize>) -> usize {
 impl Scene {
     /// Reads and validates a scene file; the name defaults to the file stem.
     pub fn from_file(path: &Path) -> Result<Scene> {
-        let source = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let source = crate::error::read_text_bounded(path)?;
         let stem = path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())

@@ -1,0 +1,129 @@
+//! Hostile inputs of issue 30 (defects 6, 7 and 8): impossible calibration values, reads
+//! without a size limit, and a `--set` whose value hides a second line.
+
+use std::process::Command;
+
+fn bin() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_lidar-noise"));
+    c.current_dir(env!("CARGO_MANIFEST_DIR"));
+    c
+}
+
+fn fails_with(args: &[&str], needles: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let o = bin()
+        .args(args)
+        .arg("-o")
+        .arg(dir.path().join("out"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+    for n in needles {
+        assert!(err.contains(n), "{args:?}: {err}");
+    }
+    assert!(!dir.path().join("out").exists(), "{args:?}: output written");
+}
+
+#[test]
+fn impossible_calibration_values_are_refused_naming_the_value() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let xml = std::fs::read_to_string(format!(
+        "{root}/fuzz/corpus/calibration/hdl32e_veloview.xml"
+    ))
+    .unwrap();
+    let yaml =
+        std::fs::read_to_string(format!("{root}/fuzz/corpus/calibration/hdl32e_ros.yaml")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let cases: Vec<(String, &str, &str)> = vec![
+        (
+            regex_free_replace(&xml, "<distLSB_>", "</distLSB_>", "1e9"),
+            "xml",
+            "distance resolution",
+        ),
+        (
+            regex_free_replace(&xml, "<distLSB_>", "</distLSB_>", "1e-320"),
+            "xml",
+            "distance resolution",
+        ),
+        (
+            regex_free_replace(&xml, "<rotCorrection_>", "</rotCorrection_>", "1e308"),
+            "xml",
+            "rotational correction",
+        ),
+        (
+            yaml.replacen("distance_resolution: 0.002", "distance_resolution: 1e9", 1),
+            "yaml",
+            "distance resolution",
+        ),
+    ];
+    for (k, (text, ext, needle)) in cases.into_iter().enumerate() {
+        let path = dir.path().join(format!("cal{k}.{ext}"));
+        std::fs::write(&path, &text).unwrap();
+        let p = path.to_string_lossy().into_owned();
+        fails_with(
+            &[
+                "--quiet",
+                "convert",
+                "fixtures/crossroad.pcap",
+                "--frames",
+                "0",
+                "--calibration",
+                &p,
+            ],
+            &[needle, &format!("cal{k}.{ext}")],
+        );
+    }
+}
+
+/// `text` with the content between the first `open` and the next `close` set to `value`.
+fn regex_free_replace(text: &str, open: &str, close: &str, value: &str) -> String {
+    let a = text.find(open).expect("tag") + open.len();
+    let b = a + text[a..].find(close).expect("closing tag");
+    format!("{}{value}{}", &text[..a], &text[b..])
+}
+
+#[test]
+fn endless_inputs_are_refused_after_a_bounded_read() {
+    if !std::path::Path::new("/dev/zero").exists() {
+        eprintln!("SKIPPED: /dev/zero is absent on this system");
+        return;
+    }
+    fails_with(
+        &["--quiet", "run", "-c", "/dev/zero"],
+        &["/dev/zero", "larger than"],
+    );
+    fails_with(
+        &[
+            "--quiet",
+            "convert",
+            "fixtures/crossroad.pcap",
+            "--calibration",
+            "/dev/zero",
+        ],
+        &["/dev/zero", "larger than"],
+    );
+    fails_with(
+        &["--quiet", "synth", "/dev/zero"],
+        &["/dev/zero", "larger than"],
+    );
+    let labels = lidar_noise::synth::labels::read_labels_file(std::path::Path::new("/dev/zero"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        labels.contains("/dev/zero") && labels.contains("longer than"),
+        "{labels}"
+    );
+}
+
+#[test]
+fn a_set_with_a_line_break_is_refused() {
+    let o = bin()
+        .args(["validate", "--print", "--set", "seed=1\nseed=2"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("line break"), "{err}");
+    assert!(o.stdout.is_empty());
+}

@@ -4,6 +4,7 @@
 pub mod crosstalk;
 pub mod emi;
 pub mod fog;
+pub mod fog_droplets;
 pub mod lens_damage;
 pub mod mie;
 pub mod multipath;

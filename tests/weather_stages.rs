@@ -135,10 +135,10 @@ fn fog_extinction_at_mor_is_minus_ln_005_over_mor() {
         // One-way transmission over V is the 5 % contrast that defines the MOR.
         assert!(((-alpha * v).exp() - 0.05).abs() < 1e-12);
     }
-    // On a frame: the hard-target power falls by exp(-2 alpha R) (no echoes: gain 0).
+    // On a frame: the hard-target power falls by exp(-2 alpha R) (no echoes: beta_r 0).
     let f = turn(1);
     let base = run("seed = 5\n", &f);
-    let out = run(&stage("fog", "visibility_m = 200\ngain = 0"), &f);
+    let out = run(&stage("fog", "visibility_m = 200\nbeta_r = 0"), &f);
     let alpha = 20f64.ln() / 200.0;
     for i in (0..f.returns.len()).step_by(97) {
         let want = base.power[i] * (-2.0 * alpha * f64::from(f.returns[i].range)).exp();
@@ -158,7 +158,7 @@ fn fog_echo_power_follows_the_paper_integral_within_1_percent() {
         (300.0, 25.0, 0.9, 2.0, 10.0),
     ] {
         let body = format!(
-            "visibility_m = {v}\noverlap_start_m = {r1}\noverlap_full_m = {r2}\ntau_h_ns = {tau}\nempty_slots = false"
+            "visibility_m = {v}\noverlap = \"linear\"\noverlap_start_m = {r1}\noverlap_full_m = {r2}\ntau_h_ns = {tau}\nempty_slots = false"
         );
         // A dark target, far: the echo is proposed in its slot.
         let f = proposals(
@@ -179,13 +179,13 @@ fn fog_echo_power_follows_the_paper_integral_within_1_percent() {
             echo.range
         );
     }
-    // The gain multiplies the echo power.
+    // The echo power is proportional to beta = beta_r / V.
     let one = proposals(
         &stage("fog", "visibility_m = 100"),
         vec![ret(0, 50.0, 0, 0, ReturnKind::Strongest)],
     );
     let three = proposals(
-        &stage("fog", "visibility_m = 100\ngain = 3"),
+        &stage("fog", "visibility_m = 100\nbeta_r = 0.138"),
         vec![ret(0, 50.0, 0, 0, ReturnKind::Strongest)],
     );
     assert!((three.candidates[0].echo.power / one.candidates[0].echo.power - 3.0).abs() < 1e-12);
@@ -193,9 +193,9 @@ fn fog_echo_power_follows_the_paper_integral_within_1_percent() {
 
 #[test]
 fn strongest_return_keeps_a_strong_near_target_and_replaces_a_weak_far_one() {
-    // V = 300 m: the fog echo (about 0.03 of emitted power at 1.6 m) beats a 10 %
-    // target at 25 m (0.016 x exp(-2 alpha 25) = 0.0097, detectable without fog echo)
-    // but not a 100 % target at 8 m.
+    // Hahner's overlap (linear, 0.9..1.0 m), V = 300 m: the fog echo (about 0.03 of
+    // emitted power at 1.6 m) beats a 10 % target at 25 m (0.016 x exp(-2 alpha 25) =
+    // 0.0097, detectable without fog echo) but not a 100 % target at 8 m.
     let weak = ret(3, 25.0, 10, 0, ReturnKind::Strongest);
     let strong = ret(4, 8.0, 100, 0, ReturnKind::Strongest);
     let f = Frame {
@@ -203,7 +203,7 @@ fn strongest_return_keeps_a_strong_near_target_and_replaces_a_weak_far_one() {
         partial: false,
         returns: vec![weak, strong],
     };
-    let body = "visibility_m = 300\nempty_slots = false";
+    let body = "visibility_m = 300\nempty_slots = false\noverlap = \"linear\"";
     let out = run(&stage("fog", body), &f);
     assert_eq!(out.fate, vec![Fate::Replaced, Fate::Kept]);
     assert_eq!(out.cause, vec![0, NO_CAUSE]);
@@ -214,7 +214,7 @@ fn strongest_return_keeps_a_strong_near_target_and_replaces_a_weak_far_one() {
     let p_h = 0.001 * (0.1 / 0.1) * (100.0f64 / 25.0).powi(2) * (-2.0 * alpha * 25.0).exp();
     assert!(out.power[0] > p_h, "echo {} vs target {p_h}", out.power[0]);
     // Without the echo the weak target was detectable: the fog echo hid it.
-    let no_echo = run(&stage("fog", "visibility_m = 300\ngain = 0"), &f);
+    let no_echo = run(&stage("fog", "visibility_m = 300\nbeta_r = 0"), &f);
     assert_eq!(no_echo.fate, vec![Fate::Kept, Fate::Kept]);
     assert!((no_echo.power[0] / p_h - 1.0).abs() < 1e-12);
     // Last-return mode reports the farthest echo: the target stays.
@@ -267,16 +267,14 @@ fn zero_weather_is_the_identity() {
     for extra in [
         "[[noise]]\ntype = \"fog\"\nvisibility_m = inf\n",
         "[[noise]]\ntype = \"snow\"\nrate_mm_h = 0\n",
-        "[[noise]]\ntype = \"fog\"\nvisibility_m = 100\ngain = 0\nbeta_r = 0\n",
+        "[[noise]]\ntype = \"fog\"\nvisibility_m = 100\nbeta_r = 0\n",
     ] {
         let text = format!("seed = 5\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 7\n{extra}");
         let out = run(&text, &f);
-        if !extra.contains("gain") {
-            assert!(
-                !NoiseChain::new(&config(&text)).proposes_echoes(),
-                "{extra}"
-            );
-        }
+        assert!(
+            !NoiseChain::new(&config(&text)).proposes_echoes(),
+            "{extra}"
+        );
         if extra.contains("inf") || extra.contains("rate_mm_h = 0") {
             assert_eq!(out.fate, base.fate, "{extra}");
             assert_eq!(out.power, base.power, "{extra}");
@@ -390,10 +388,23 @@ fn weather_chain_is_deterministic_and_thread_independent() {
 fn bad_weather_options_name_key_and_line() {
     let cases = [
         ("fog", "visibility_m = -5", "visibility_m", "outside"),
-        ("fog", "visibility_m = 100\ngain = nan", "gain", "nan"),
+        ("fog", "visibility_m = 100\nbeta_r = nan", "beta_r", "nan"),
         (
             "fog",
-            "visibility_m = 100\noverlap_start_m = 2.0\noverlap_full_m = 1.0",
+            "visibility_m = 100\nrx_fov_mrad = 4\noverlap = \"linear\"",
+            "rx_fov_mrad",
+            "not an option of overlap = \"linear\"",
+        ),
+        (
+            "fog",
+            "visibility_m = 100\noverlap_full_m = 2",
+            "overlap_full_m",
+            "not an option of overlap = \"biaxial\"",
+        ),
+        ("fog", "visibility_m = 100\ngain = 1", "gain", "unknown"),
+        (
+            "fog",
+            "visibility_m = 100\noverlap = \"linear\"\noverlap_start_m = 2.0\noverlap_full_m = 1.0",
             "overlap_full_m",
             "below",
         ),
@@ -440,7 +451,7 @@ fn weather_stages_are_sweepable_and_toggleable() {
     for (k, key) in [
         ("fog", "visibility_m"),
         ("snow", "rate_mm_h"),
-        ("fog", "gain"),
+        ("fog", "beta_r"),
     ] {
         assert!(
             Vary::parse(&format!("{k}.{key}=50,100")).is_ok(),
@@ -472,7 +483,13 @@ fn dual_mode_reports_the_fog_echo_and_the_target() {
         partial: false,
         returns: vec![last, strongest],
     };
-    let out = run(&stage("fog", "visibility_m = 300\nempty_slots = false"), &f);
+    let out = run(
+        &stage(
+            "fog",
+            "visibility_m = 300\nempty_slots = false\noverlap = \"linear\"",
+        ),
+        &f,
+    );
     assert_eq!(out.fate, vec![Fate::Kept, Fate::Replaced]);
     assert_eq!(out.range[0], 25.0);
     assert!(out.range[1] < 2.0, "{}", out.range[1]);

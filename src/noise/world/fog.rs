@@ -1,43 +1,97 @@
 //! Fog (p-diagram 11): extinction of the hard-target power and the soft-target
 //! backscatter echo of the fog itself, after Hahner, Sakaridis, Dai and Van Gool, "Fog
 //! Simulation on Real LiDAR Point Clouds for 3D Object Detection in Adverse Weather",
-//! ICCV 2021 (pdiagram-models.md, "11 Weather: fog").
+//! ICCV 2021 (pdiagram-models.md, "11 Weather: fog"), with the transmitter/receiver
+//! overlap of the HDL-32E derived from its optics (issue 29).
 //!
 //! Model:
 //! - extinction alpha = -ln(0.05) / V from the meteorological optical range V (5 %
-//!   contrast), backscatter beta = beta_r / V;
+//!   contrast); backscatter beta = beta_r / V (`droplets = "hahner"`, the paper's
+//!   beta_r = 0.046 /sr: lidar ratio alpha / beta = 65 sr) or beta = alpha (beta/alpha)_Mie
+//!   for Shettle & Fenn advection or radiation fog droplets ([`super::fog_droplets`]:
+//!   Bohren-Huffman Mie series for water at 905 nm; lidar ratios of 18-20 sr, so the
+//!   Mie fog echoes 3.3-3.5 x more strongly than the paper's beta_r);
 //! - hard target: P_h = P exp(-2 alpha R0) on every alive return at its range R0;
 //! - soft target (the fog): with the pulse s(t) = sin^2(pi t / (2 tau_H)) on
-//!   [0, 2 tau_H] and the transmitter/receiver overlap xi(r) (0 below R1, 1 above R2,
-//!   linear between), the echo at apparent range R is
-//!   P_s(R) = gain * pi * kappa * beta * I(R; R0), with
+//!   [0, 2 tau_H] and the transmitter/receiver overlap xi(r), the echo at apparent range
+//!   R is P_s(R) = pi * kappa * beta * I(R; R0), with
 //!   I(R; R0) = (c/2) int_0^{2 tau_H} s(t) exp(-2 alpha r) xi(r) / r^2 dt, r = R - c t/2,
 //!   only r <= R0 (no fog behind the target). Written over r (dt = 2 dr / c) this is
 //!   int_{R - c tau_H}^{min(R, R0)} sin^2(pi (R - r) / (c tau_H)) exp(-2 alpha r) xi(r) / r^2 dr.
-//!   pi * kappa replaces the paper's C_A P_0, so that a Lambertian target (beta = rho/pi)
-//!   gives exactly the tool's P = kappa rho / R^2; the released code instead scales its
-//!   tabulated integral by intensity * R0^2 * beta / beta_0 with an empirical beta_0. The
-//!   two differ, hence `gain`.
+//! - One power normalisation: the lidar equation gives a Lambertian hard target
+//!   P = P0 eta A_r (rho / pi) / R^2 and a volume of backscatter beta
+//!   P = P0 eta A_r beta (c/2) int s xi T^2 / r^2 dt (Measures, "Laser Remote Sensing",
+//!   eq. 7.2-7.4 in its notation); the tool's hard targets use P = kappa rho / R^2, so
+//!   P0 eta A_r = pi kappa and the fog echo is pi kappa beta I: the same constant, with
+//!   no free factor (the former `gain` is gone). Hahner's released code instead scales
+//!   its tabulated integral by intensity * R0^2 * beta / beta_0 with an empirical beta_0.
+//!   The recorded hard targets already carry the sensor's own overlap (they are
+//!   measured); xi = 1 at the 100 m reference range of kappa, so kappa holds as is.
 //! - the fog echo is the maximum of P_s over R, reported c tau_H / 2 earlier (where a
 //!   hard target's pulse would put its range); it is *proposed* to the return's firing
 //!   slot ([`NoisyFrame::propose`]) and competes there once, after the chain, with the
 //!   target and other stages' echoes by the sensor's return logic (strongest mode: the
 //!   fog point replaces the target when max P_s > P_h, as in the paper).
 //!
+//! Overlap (`overlap = "biaxial"`, the default): the HDL-32E has its emitter lens and
+//! its receiver lens side by side behind one window (32 laser/detector pairs share them),
+//! a biaxial lidar with parallel axes. For circular apertures and top-hat beams xi(r) is
+//! the area of the intersection of the beam disk (radius a_t + r tan(theta_t / 2)) and
+//! the receiver's field disk (radius a_r + r tan(theta_r / 2)), centres d apart, over the
+//! beam's area (Measures ch. 7; Stelmaszczyk et al., Appl. Opt. 44(7), 2005, the
+//! geometric form factor of a top-hat beam); it is 0 up to
+//! R1 = (d - a_t - a_r) / (tan(theta_t / 2) + tan(theta_r / 2)) and 1 from
+//! R2 = (d + a_t - a_r) / (tan(theta_r / 2) - tan(theta_t / 2)) (Hahner's eqs. 11-12).
+//! HDL-32E figures:
+//! - beam divergence theta_t = 3.3 mrad: the manual (HDL-32E User's Manual, appendix
+//!   "Laser spot size") gives a spot of about 4 in by 2 in at 100 ft, i.e. 3.3 x 1.7
+//!   mrad full angle; the lenses sit side by side horizontally, so the horizontal figure
+//!   is the one that matters (the exit size of the spot is neglected: an upper bound);
+//! - receiver field of view theta_r: not published. It must exceed theta_t for the
+//!   receiver to collect the whole spot at range (the rated 100 m); we take
+//!   1.5 theta_t = 5 mrad and bound it by 1.25-3 theta_t;
+//! - apertures and axis separation: not published. The housing is 85.3 mm across
+//!   (datasheet), so two lenses side by side are at most about 35 mm each; we take 25 mm
+//!   clear apertures (a_t = a_r = 12.5 mm; the beam assumed to fill its lens) and
+//!   d = 30 mm (5 mm between the clear apertures for mounts and the baffle between
+//!   emitter and receiver), bounded by apertures 20-30 mm and a gap of 2-10 mm.
+//!
+//! With these R1 = 1.2 m and R2 = 35.3 m; the echo of fog without a target peaks at an
+//! apparent range of about 7 m (reported 3.5-3.9 m, c tau_H / 2 earlier) with
+//! I = 0.034 /m (at V* = 491 m, below), against I = 0.70 /m at 1.7 m (at V* = 10 km)
+//! for Hahner's 0.9-1.0 m ramp (`overlap = "linear"`, kept as an option).
+//!
+//! Clear air: the peak echo power pi kappa (beta_r / V) I_max falls as 1/V, so echoes
+//! start below the visibility where it equals the threshold p_th (1e-3 in the default
+//! power model, kappa = 100 m^2): V* = 491 m with `droplets = "hahner"`, 1.79 km
+//! (advection) and 1.68 km (radiation) with Mie droplets
+//! ([`Fog::echo_onset_visibility_m`]), so no fog echo is reported at V >= 10 km
+//! (tests/fog_calibration.rs). Over the bounds of the unknown optics V* stays below
+//! 10 km with beta_r up to 0.092 (at most 6.4 km); with Mie droplets the most
+//! unfavourable corner (20 mm apertures 2 mm apart, receiver FOV 3 x the divergence)
+//! reaches 11.3 km. Hahner's ramp gives V* = 10.05 km with beta_r = 0.046: the ring at
+//! 1.7 m of issue 29 (28,377 echoes at 10 km) was the overlap.
+//!
 //! The integral is computed here (Gauss-Legendre quadrature on the smooth pieces between
-//! R1, R2 and R0, maximum over R by a scan and golden-section search), not read from the
-//! paper's tables. It depends only on the options and R0, so it is tabulated once per
-//! stage (on first use) on a 5 mm grid of R0, linearly interpolated; beyond the
-//! untruncated peak (R0 >= argmax, a few metres) the truncation at R0 no longer touches
-//! the maximum and the echo is constant, so the grid ends there.
+//! R1, R2 and R0, the biaxial overlap in pieces of at most 0.75 m; maximum over R by a
+//! scan and golden-section search), not read from the paper's tables. It depends only on
+//! the options and R0, so it is tabulated once per stage (on first use) on a grid of R0
+//! (5 mm linear, 2 cm biaxial), linearly interpolated; beyond the untruncated peak
+//! (R0 >= argmax, a few metres) the truncation at R0 no longer touches the maximum and
+//! the echo is constant, so the grid ends there.
 //!
 //! Deviations, stated: the paper's table generator only scans apparent ranges R <= R0;
 //! we follow the formula (truncation of r at R0, any R), which differs only for targets
 //! closer than the peak (a few metres). Slots without a return (sky, targets out of
 //! range) get the untruncated fog echo too (option `empty_slots`), since the fog in front
 //! of the sensor echoes whatever lies behind it; the paper's code only rewrites points.
-//! The reported intensity of a kept target is not lowered (as in `rain`: power only).
+//! The reported intensity of a kept target is not lowered here (the intensity rule of
+//! issue 29 is another change).
+//!
+//! Draw pattern: one uniform per recorded return (whatever its fate) and per empty slot
+//! when `range_noise_m` > 0, none otherwise, so streams stay aligned across sweeps of V.
 
+pub use super::fog_droplets::Droplets;
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -58,8 +112,12 @@ const DEFAULT_KAPPA_M2: f64 = 100.0;
 /// noise of its fog echo: the HDL-32E's rated range.
 pub const EMPTY_SLOT_RANGE_M: f64 = 100.0;
 
-/// Grid step (m) of the tabulated echo over R0.
+/// Grid step (m) of the tabulated echo over R0 for the linear overlap (its echo bends
+/// sharply within a few cm of R1 and R2).
 const TABLE_STEP_M: f64 = 0.005;
+/// Grid step (m) for the biaxial overlap, whose echo varies smoothly with R0 (its
+/// table spans R1..~7 m; test: interpolation within 1e-3 of the peak).
+const BIAXIAL_TABLE_STEP_M: f64 = 0.02;
 
 /// Extinction coefficient alpha (1/m) at meteorological optical range `v` metres:
 /// -ln(0.05) / V (infinite V: 0).
@@ -71,6 +129,134 @@ pub fn extinction_per_m(visibility_m: f64) -> f64 {
     }
 }
 
+/// Transmitter/receiver overlap xi(r): the fraction of the transmitted beam's cross
+/// section that the receiver sees at range r.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Overlap {
+    /// Hahner et al.'s ramp: 0 below `start_m` (R1), 1 above `full_m` (R2), linear
+    /// between.
+    Linear {
+        /// R1 in metres (> 0).
+        start_m: f64,
+        /// R2 in metres (>= R1).
+        full_m: f64,
+    },
+    /// Geometric overlap of a biaxial lidar with parallel axes and circular apertures.
+    Biaxial(Biaxial),
+}
+
+/// A biaxial transmitter/receiver pair with parallel optical axes (all lengths in
+/// metres, angles as full angles in radians): the beam is a uniform disk of radius
+/// a_t + r tan(theta_t / 2), the receiver's field a disk of radius a_r + r tan(theta_r / 2),
+/// their centres `separation_m` apart (Measures, "Laser Remote Sensing", ch. 7;
+/// Stelmaszczyk et al., Appl. Opt. 44, 2005, top-hat beam).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Biaxial {
+    /// d: distance between the transmitter's and receiver's optical axes.
+    pub separation_m: f64,
+    /// a_t: radius of the transmitted beam at the exit aperture.
+    pub tx_radius_m: f64,
+    /// a_r: radius of the receiver's aperture.
+    pub rx_radius_m: f64,
+    /// theta_t: full divergence angle of the beam.
+    pub divergence_rad: f64,
+    /// theta_r: full field-of-view angle of the receiver (one detector).
+    pub fov_rad: f64,
+}
+
+/// Area of the intersection of two disks of radii `a` and `b` whose centres are `d`
+/// apart (the lens-shaped region: two circular segments).
+pub fn disk_intersection(d: f64, a: f64, b: f64) -> f64 {
+    if d >= a + b {
+        return 0.0;
+    }
+    if d <= (a - b).abs() {
+        let m = a.min(b);
+        return std::f64::consts::PI * m * m;
+    }
+    let ca = ((d * d + a * a - b * b) / (2.0 * d * a)).clamp(-1.0, 1.0);
+    let cb = ((d * d + b * b - a * a) / (2.0 * d * b)).clamp(-1.0, 1.0);
+    let k = ((-d + a + b) * (d + a - b) * (d - a + b) * (d + a + b)).max(0.0);
+    a * a * ca.acos() + b * b * cb.acos() - 0.5 * k.sqrt()
+}
+
+impl Biaxial {
+    /// Beam radius w_t(r).
+    pub fn beam_radius(&self, r: f64) -> f64 {
+        self.tx_radius_m + r * (self.divergence_rad / 2.0).tan()
+    }
+
+    /// Receiver field radius w_r(r).
+    pub fn field_radius(&self, r: f64) -> f64 {
+        self.rx_radius_m + r * (self.fov_rad / 2.0).tan()
+    }
+
+    /// R1: the field first touches the beam (w_t + w_r = d); 0 if they overlap at the
+    /// sensor already.
+    pub fn start_m(&self) -> f64 {
+        let gap = self.separation_m - self.tx_radius_m - self.rx_radius_m;
+        let grow = (self.divergence_rad / 2.0).tan() + (self.fov_rad / 2.0).tan();
+        (gap / grow).max(0.0)
+    }
+
+    /// R2: the field contains the whole beam (w_r - w_t >= d); infinite when the
+    /// receiver's field never grows around the beam.
+    pub fn full_m(&self) -> f64 {
+        let need = self.separation_m + self.tx_radius_m - self.rx_radius_m;
+        if need <= 0.0 {
+            return 0.0;
+        }
+        let grow = (self.fov_rad / 2.0).tan() - (self.divergence_rad / 2.0).tan();
+        if grow <= 0.0 {
+            f64::INFINITY
+        } else {
+            need / grow
+        }
+    }
+
+    /// xi(r): intersection of beam and field over the beam's area.
+    pub fn overlap(&self, r: f64) -> f64 {
+        let wt = self.beam_radius(r);
+        let inter = disk_intersection(self.separation_m, wt, self.field_radius(r));
+        (inter / (std::f64::consts::PI * wt * wt)).min(1.0)
+    }
+}
+
+impl Overlap {
+    /// xi(r).
+    pub fn at(&self, r: f64) -> f64 {
+        match *self {
+            Overlap::Linear { start_m, full_m } => {
+                if r <= start_m {
+                    0.0
+                } else if r >= full_m {
+                    1.0
+                } else {
+                    (r - start_m) / (full_m - start_m)
+                }
+            }
+            Overlap::Biaxial(b) => b.overlap(r),
+        }
+    }
+
+    /// R1: xi = 0 below. The biaxial overlap is integrated from 1 cm at least, so that
+    /// touching apertures (R1 = 0) leave no 1/r^2 singularity at the sensor.
+    pub fn start_m(&self) -> f64 {
+        match *self {
+            Overlap::Linear { start_m, .. } => start_m,
+            Overlap::Biaxial(b) => b.start_m().max(0.01),
+        }
+    }
+
+    /// R2: xi = 1 from here on (may be infinite).
+    pub fn full_m(&self) -> f64 {
+        match *self {
+            Overlap::Linear { full_m, .. } => full_m,
+            Overlap::Biaxial(b) => b.full_m(),
+        }
+    }
+}
+
 /// The optical parameters of the soft-target integral.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SoftTarget {
@@ -78,11 +264,13 @@ pub struct SoftTarget {
     pub alpha: f64,
     /// Half-power pulse width tau_H in seconds.
     pub tau_h_s: f64,
-    /// Overlap starts (xi > 0) at this range in metres (R1 > 0).
-    pub overlap_start_m: f64,
-    /// Overlap is complete (xi = 1) from this range in metres (R2 >= R1).
-    pub overlap_full_m: f64,
+    /// The transmitter/receiver overlap.
+    pub overlap: Overlap,
 }
+
+/// Longest stretch (m) of the biaxial overlap integrated by one 16-point rule: its
+/// xi has a (r - R1)^(3/2) onset and a kink at R2, so the pieces are kept short.
+const BIAXIAL_PIECE_M: f64 = 0.75;
 
 impl SoftTarget {
     /// Pulse length in range, c tau_H (metres): the echo window is [R - c tau_H, R].
@@ -92,14 +280,7 @@ impl SoftTarget {
 
     /// The overlap function xi(r).
     pub fn overlap(&self, r: f64) -> f64 {
-        let (r1, r2) = (self.overlap_start_m, self.overlap_full_m);
-        if r <= r1 {
-            0.0
-        } else if r >= r2 {
-            1.0
-        } else {
-            (r - r1) / (r2 - r1)
-        }
+        self.overlap.at(r)
     }
 
     /// I(R; R0) in 1/m: the soft-target integral at apparent range `r_app` for a hard
@@ -107,7 +288,7 @@ impl SoftTarget {
     /// pieces where the integrand is smooth.
     pub fn integral(&self, r_app: f64, r0: f64) -> f64 {
         let l = self.window_m();
-        let lo = (r_app - l).max(self.overlap_start_m);
+        let lo = (r_app - l).max(self.overlap.start_m());
         let hi = r_app.min(r0);
         if hi <= lo {
             return 0.0;
@@ -118,24 +299,42 @@ impl SoftTarget {
             s * s * (-2.0 * self.alpha * r).exp() * self.overlap(r) / (r * r)
         };
         // Breaks at R2 (kink of xi); R1 and R0 are ends already.
-        let mid = self.overlap_full_m.clamp(lo, hi);
-        gauss_legendre(&f, lo, mid) + gauss_legendre(&f, mid, hi)
+        let mid = self.overlap.full_m().clamp(lo, hi);
+        match self.overlap {
+            Overlap::Linear { .. } => gauss_legendre(&f, lo, mid) + gauss_legendre(&f, mid, hi),
+            Overlap::Biaxial(_) => pieces(&f, lo, mid) + pieces(&f, mid, hi),
+        }
     }
 
     /// The maximum of I(R; R0) over R: (argmax R, max).
     pub fn peak(&self, r0: f64) -> (f64, f64) {
         let l = self.window_m();
-        // The untruncated integrand rises up to R2 and falls after it, so the
-        // convolution with the pulse peaks before R2 + c tau_H; a target at R0 cuts the
-        // window, and then the peak lies before R0 + c tau_H.
+        let lo = self.overlap.start_m();
+        // The untruncated integrand xi exp(-2 alpha r) / r^2 rises at most up to R2 and
+        // falls after it, so the convolution with the pulse peaks before R2 + c tau_H
+        // (R2 capped 150 m past R1 for a field that never contains the beam: there the
+        // 1/r^2 has long won over xi); a target at R0 cuts the window, and then the
+        // peak lies before R0 + c tau_H.
+        let full = self.overlap.full_m().min(lo + 150.0);
         let hi = if r0.is_finite() {
-            r0.min(self.overlap_full_m + l) + l
+            r0.min(full + l) + l
         } else {
-            self.overlap_full_m + l
+            full + l
         };
-        let lo = self.overlap_start_m;
         maximise(&|r| self.integral(r, r0), lo, hi)
     }
+}
+
+/// Gauss-Legendre on [a, b] cut into pieces of at most [`BIAXIAL_PIECE_M`].
+fn pieces(f: &dyn Fn(f64) -> f64, a: f64, b: f64) -> f64 {
+    if b <= a {
+        return 0.0;
+    }
+    let n = ((b - a) / BIAXIAL_PIECE_M).ceil().max(1.0) as usize;
+    let h = (b - a) / n as f64;
+    (0..n)
+        .map(|k| gauss_legendre(f, a + h * k as f64, a + h * (k + 1) as f64))
+        .sum()
 }
 
 /// Gauss-Legendre nodes and weights on [-1, 1] (16 points): exact for polynomials up
@@ -227,7 +426,9 @@ fn maximise(f: &dyn Fn(f64) -> f64, lo: f64, hi: f64) -> (f64, f64) {
 pub struct EchoTable {
     /// R0 of the first grid entry (R1: no echo below).
     start: f64,
-    /// (reported range, max I) at R0 = start + k * TABLE_STEP_M.
+    /// Grid step in metres.
+    step: f64,
+    /// (reported range, max I) at R0 = start + k * step.
     grid: Vec<(f64, f64)>,
     /// From this R0 on, the untruncated echo `far` applies.
     far_from: f64,
@@ -240,11 +441,15 @@ impl EchoTable {
     pub fn new(soft: &SoftTarget) -> EchoTable {
         let shift = soft.window_m() / 2.0;
         let (peak_r, peak_i) = soft.peak(f64::INFINITY);
-        let start = soft.overlap_start_m;
-        let n = ((peak_r - start) / TABLE_STEP_M).ceil().max(0.0) as usize + 1;
+        let start = soft.overlap.start_m();
+        let step = match soft.overlap {
+            Overlap::Linear { .. } => TABLE_STEP_M,
+            Overlap::Biaxial(_) => BIAXIAL_TABLE_STEP_M,
+        };
+        let n = ((peak_r - start) / step).ceil().max(0.0) as usize + 1;
         let grid = (0..=n)
             .map(|k| {
-                let r0 = start + TABLE_STEP_M * k as f64;
+                let r0 = start + step * k as f64;
                 if r0 >= peak_r {
                     (peak_r - shift, peak_i)
                 } else {
@@ -256,7 +461,8 @@ impl EchoTable {
         EchoTable {
             start,
             grid,
-            far_from: start + TABLE_STEP_M * n as f64,
+            step,
+            far_from: start + step * n as f64,
             far: (peak_r - shift, peak_i),
         }
     }
@@ -267,7 +473,7 @@ impl EchoTable {
         if r0 >= self.far_from {
             return self.far;
         }
-        let u = (r0 - self.start) / TABLE_STEP_M;
+        let u = (r0 - self.start) / self.step;
         if u.is_nan() || u < 0.0 {
             return (0.0, 0.0);
         }
@@ -283,21 +489,40 @@ impl EchoTable {
     }
 }
 
+/// HDL-32E optics used by the default biaxial overlap (module comment: sources and
+/// bounds). Full beam divergence (rad): the manual's spot, about 4 in wide at 100 ft.
+pub const HDL32E_DIVERGENCE_MRAD: f64 = 3.3;
+/// Receiver field of view (full angle, mrad): not published; 1.5 x the divergence.
+pub const HDL32E_FOV_MRAD: f64 = 5.0;
+/// Transmitter and receiver clear apertures (diameter, mm): not published; estimated.
+pub const HDL32E_APERTURE_MM: f64 = 25.0;
+/// Distance between the two optical axes (mm): not published; estimated.
+pub const HDL32E_SEPARATION_MM: f64 = 30.0;
+
+/// The default overlap: the biaxial geometry of the HDL-32E.
+pub fn hdl32e_overlap() -> Overlap {
+    Overlap::Biaxial(Biaxial {
+        separation_m: HDL32E_SEPARATION_MM * 1e-3,
+        tx_radius_m: HDL32E_APERTURE_MM * 0.5e-3,
+        rx_radius_m: HDL32E_APERTURE_MM * 0.5e-3,
+        divergence_rad: HDL32E_DIVERGENCE_MRAD * 1e-3,
+        fov_rad: HDL32E_FOV_MRAD * 1e-3,
+    })
+}
+
 /// The fog stage.
 #[derive(Clone, Debug)]
 pub struct Fog {
     /// Meteorological optical range V in metres (infinite: no fog).
     pub visibility_m: f64,
-    /// beta_r: backscatter beta = beta_r / V (1/(m sr)).
+    /// beta_r: backscatter beta = beta_r / V (1/(m sr)) with `droplets` Hahner.
     pub beta_r: f64,
+    /// Source of the backscatter coefficient.
+    pub droplets: Droplets,
     /// Half-power pulse width tau_H in ns.
     pub tau_h_ns: f64,
-    /// R1: the receiver starts to see the beam (m).
-    pub overlap_start_m: f64,
-    /// R2: the receiver sees the whole beam (m).
-    pub overlap_full_m: f64,
-    /// Factor on the fog echo power.
-    pub gain: f64,
+    /// Transmitter/receiver overlap.
+    pub overlap: Overlap,
     /// n: fog echo range scaled by R0 / U(R0 - n, R0 + n) (Hahner's noise variant v1);
     /// 0 for none.
     pub range_noise_m: f64,
@@ -308,24 +533,20 @@ pub struct Fog {
 
 impl Fog {
     /// The stage with these options (valid values assumed, as `build` checks them).
-    #[allow(clippy::too_many_arguments)]
     pub fn new(
         visibility_m: f64,
         beta_r: f64,
         tau_h_ns: f64,
-        overlap_start_m: f64,
-        overlap_full_m: f64,
-        gain: f64,
+        overlap: Overlap,
         range_noise_m: f64,
         empty_slots: bool,
     ) -> Fog {
         Fog {
             visibility_m,
             beta_r,
+            droplets: Droplets::Hahner,
             tau_h_ns,
-            overlap_start_m,
-            overlap_full_m,
-            gain,
+            overlap,
             range_noise_m,
             empty_slots,
             table: OnceLock::new(),
@@ -337,12 +558,26 @@ impl Fog {
         extinction_per_m(self.visibility_m)
     }
 
+    /// The same stage with backscatter from `droplets`.
+    pub fn with_droplets(mut self, droplets: Droplets) -> Fog {
+        self.droplets = droplets;
+        self
+    }
+
+    /// beta * V (1/sr): beta_r, or -ln(0.05) (beta / alpha)_Mie for Mie droplets.
+    pub fn beta_times_v(&self) -> f64 {
+        match self.droplets.backscatter_ratio() {
+            None => self.beta_r,
+            Some(ratio) => -(0.05f64.ln()) * ratio,
+        }
+    }
+
     /// Backscatter beta in 1/(m sr).
     pub fn beta(&self) -> f64 {
         if self.visibility_m.is_infinite() {
             0.0
         } else {
-            self.beta_r / self.visibility_m
+            self.beta_times_v() / self.visibility_m
         }
     }
 
@@ -351,8 +586,7 @@ impl Fog {
         SoftTarget {
             alpha: self.alpha(),
             tau_h_s: self.tau_h_ns * 1e-9,
-            overlap_start_m: self.overlap_start_m,
-            overlap_full_m: self.overlap_full_m,
+            overlap: self.overlap,
         }
     }
 
@@ -362,9 +596,10 @@ impl Fog {
             .get_or_init(|| Arc::new(EchoTable::new(&self.soft_target())))
     }
 
-    /// Power factor turning the integral I into a power for power constant `kappa`.
+    /// Power factor turning the integral I into a power for power constant `kappa`:
+    /// pi kappa beta, the hard target's normalisation (module comment).
     pub fn echo_scale(&self, kappa_m2: f64) -> f64 {
-        self.gain * std::f64::consts::PI * kappa_m2 * self.beta()
+        std::f64::consts::PI * kappa_m2 * self.beta()
     }
 
     /// The fog echo (unnoised) in front of a target at `r0` m, for power constant
@@ -377,8 +612,49 @@ impl Fog {
         }
     }
 
+    /// Peak power of the fog echo with no target in the beam (the strongest it gets).
+    pub fn peak_power(&self, kappa_m2: f64) -> f64 {
+        // The untruncated peak itself (not the table, which is built for many R0).
+        self.echo_scale(kappa_m2) * self.soft_target().peak(f64::INFINITY).1
+    }
+
+    /// The visibility (m) above which the fog echo stays below the threshold `p_th`
+    /// for power constant `kappa`, with these options otherwise. The peak power
+    /// pi kappa beta I_max rises as V falls (beta = beta_r / V) until extinction
+    /// (alpha = 3.0 / V) takes over at a few metres, so the strongest V is found on a log
+    /// scan and the onset by bisection on ln V above it. Infinite if the echo is never
+    /// this weak (up to 1e8 m); 0 if never this strong.
+    pub fn echo_onset_visibility_m(&self, kappa_m2: f64, p_th: f64) -> f64 {
+        let at = |v: f64| {
+            Fog::new(v, self.beta_r, self.tau_h_ns, self.overlap, 0.0, true)
+                .with_droplets(self.droplets)
+                .peak_power(kappa_m2)
+        };
+        // 1 m to 1e8 m, 10 points per decade.
+        let strongest = (0..=80)
+            .map(|k| 10f64.powf(f64::from(k) / 10.0))
+            .map(|v| (v, at(v)))
+            .fold((1.0, f64::MIN), |m, c| if c.1 > m.1 { c } else { m });
+        let (mut lo, mut hi) = (strongest.0, 1e8f64);
+        if strongest.1 < p_th {
+            return 0.0;
+        }
+        if at(hi) >= p_th {
+            return f64::INFINITY;
+        }
+        while hi / lo > 1.0 + 1e-6 {
+            let mid = (lo * hi).sqrt();
+            if at(mid) >= p_th {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        (lo * hi).sqrt()
+    }
+
     fn echoes(&self) -> bool {
-        self.beta() * self.gain > 0.0
+        self.beta() > 0.0
     }
 }
 
@@ -388,29 +664,56 @@ impl NoiseStage for Fog {
     }
 
     fn describe(&self) -> String {
+        let overlap = match self.overlap {
+            Overlap::Linear { start_m, full_m } => format!("linear {start_m}..{full_m} m"),
+            Overlap::Biaxial(b) => format!(
+                "biaxial d = {} mm, apertures {}/{} mm, divergence {} mrad, fov {} mrad: R1 = {:.2} m, R2 = {:.1} m",
+                b.separation_m * 1e3,
+                b.tx_radius_m * 2e3,
+                b.rx_radius_m * 2e3,
+                b.divergence_rad * 1e3,
+                b.fov_rad * 1e3,
+                b.start_m(),
+                b.full_m()
+            ),
+        };
         format!(
-            "visibility {} m: alpha = {:.5} 1/m, beta = {:.3e} 1/(m sr); soft echo tau_H = {} ns, overlap {}..{} m, gain {}",
+            "visibility {} m: alpha = {:.5} 1/m, beta = {:.3e} 1/(m sr) ({} droplets); soft echo tau_H = {} ns, overlap {overlap}",
             self.visibility_m,
             self.alpha(),
             self.beta(),
+            self.droplets.name(),
             self.tau_h_ns,
-            self.overlap_start_m,
-            self.overlap_full_m,
-            self.gain
         )
     }
 
     fn settings(&self) -> Vec<(&'static str, Value)> {
-        vec![
+        let mut v = vec![
             ("visibility_m", float(self.visibility_m)),
-            ("beta_r", float(self.beta_r)),
-            ("tau_h_ns", float(self.tau_h_ns)),
-            ("overlap_start_m", float(self.overlap_start_m)),
-            ("overlap_full_m", float(self.overlap_full_m)),
-            ("gain", float(self.gain)),
-            ("range_noise_m", float(self.range_noise_m)),
-            ("empty_slots", Value::Boolean(self.empty_slots)),
-        ]
+            ("droplets", Value::String(self.droplets.name().into())),
+        ];
+        if self.droplets == Droplets::Hahner {
+            v.push(("beta_r", float(self.beta_r)));
+        }
+        v.push(("tau_h_ns", float(self.tau_h_ns)));
+        match self.overlap {
+            Overlap::Linear { start_m, full_m } => {
+                v.push(("overlap", Value::String("linear".into())));
+                v.push(("overlap_start_m", float(start_m)));
+                v.push(("overlap_full_m", float(full_m)));
+            }
+            Overlap::Biaxial(b) => {
+                v.push(("overlap", Value::String("biaxial".into())));
+                v.push(("axis_separation_mm", float(b.separation_m * 1e3)));
+                v.push(("tx_aperture_mm", float(b.tx_radius_m * 2e3)));
+                v.push(("rx_aperture_mm", float(b.rx_radius_m * 2e3)));
+                v.push(("beam_divergence_mrad", float(b.divergence_rad * 1e3)));
+                v.push(("rx_fov_mrad", float(b.fov_rad * 1e3)));
+            }
+        }
+        v.push(("range_noise_m", float(self.range_noise_m)));
+        v.push(("empty_slots", Value::Boolean(self.empty_slots)));
+        v
     }
 
     fn proposes_echoes(&self) -> bool {
@@ -508,6 +811,16 @@ impl NoiseStage for Fog {
     }
 }
 
+/// Options that belong to one overlap model only.
+const LINEAR_KEYS: [&str; 2] = ["overlap_start_m", "overlap_full_m"];
+const BIAXIAL_KEYS: [&str; 5] = [
+    "axis_separation_mm",
+    "tx_aperture_mm",
+    "rx_aperture_mm",
+    "beam_divergence_mrad",
+    "rx_fov_mrad",
+];
+
 /// Reads the options of a `fog` entry.
 pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
     // `inf` (no fog) is allowed: the identity, for sweeps down from clear weather.
@@ -516,44 +829,112 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
         Some(Value::Float(f)) if *f == f64::INFINITY => f64::INFINITY,
         Some(_) => number(opts, "visibility_m", 0.0, 1e-3, 1e9)?,
     };
-    let beta_r = number(opts, "beta_r", 0.046, 0.0, 10.0)?;
-    let tau_h_ns = number(opts, "tau_h_ns", 20.0, 0.1, 1000.0)?;
-    let overlap_start_m = number(opts, "overlap_start_m", 0.9, 0.01, 100.0)?;
-    let overlap_full_m = number(opts, "overlap_full_m", 1.0, 0.01, 100.0)?;
-    if overlap_full_m < overlap_start_m {
+    let droplets = match opts
+        .choice("droplets", &["hahner", "advection", "radiation"])?
+        .unwrap_or("hahner")
+    {
+        "advection" => Droplets::Advection,
+        "radiation" => Droplets::Radiation,
+        _ => Droplets::Hahner,
+    };
+    if droplets != Droplets::Hahner && opts.has("beta_r") {
         return Err(opts.error(
-            "overlap_full_m",
-            format!("{overlap_full_m} is below overlap_start_m ({overlap_start_m})"),
+            "beta_r",
+            format!(
+                "not an option of droplets = \"{}\" (beta comes from Mie theory; beta_r belongs to droplets = \"hahner\")",
+                droplets.name()
+            ),
         ));
     }
-    let gain = number(opts, "gain", 1.0, 0.0, 1e6)?;
+    let beta_r = number(opts, "beta_r", 0.046, 0.0, 10.0)?;
+    let tau_h_ns = number(opts, "tau_h_ns", 20.0, 0.1, 1000.0)?;
+    let model = opts
+        .choice("overlap", &["biaxial", "linear"])?
+        .unwrap_or("biaxial");
+    let (own, other): (&[&str], &[&str]) = if model == "linear" {
+        (&LINEAR_KEYS, &BIAXIAL_KEYS)
+    } else {
+        (&BIAXIAL_KEYS, &LINEAR_KEYS)
+    };
+    if let Some(k) = other.iter().find(|k| opts.has(k)) {
+        return Err(opts.error(
+            k,
+            format!(
+                "not an option of overlap = \"{model}\" (its options: {})",
+                own.join(", ")
+            ),
+        ));
+    }
+    let overlap = if model == "linear" {
+        let start_m = number(opts, "overlap_start_m", 0.9, 0.01, 100.0)?;
+        let full_m = number(opts, "overlap_full_m", 1.0, 0.01, 100.0)?;
+        if full_m < start_m {
+            return Err(opts.error(
+                "overlap_full_m",
+                format!("{full_m} is below overlap_start_m ({start_m})"),
+            ));
+        }
+        Overlap::Linear { start_m, full_m }
+    } else {
+        let d = number(
+            opts,
+            "axis_separation_mm",
+            HDL32E_SEPARATION_MM,
+            0.0,
+            1000.0,
+        )?;
+        let at = number(opts, "tx_aperture_mm", HDL32E_APERTURE_MM, 0.01, 1000.0)?;
+        let ar = number(opts, "rx_aperture_mm", HDL32E_APERTURE_MM, 0.01, 1000.0)?;
+        let div = number(
+            opts,
+            "beam_divergence_mrad",
+            HDL32E_DIVERGENCE_MRAD,
+            0.01,
+            500.0,
+        )?;
+        let fov = number(opts, "rx_fov_mrad", HDL32E_FOV_MRAD, 0.01, 500.0)?;
+        Overlap::Biaxial(Biaxial {
+            separation_m: d * 1e-3,
+            tx_radius_m: at * 0.5e-3,
+            rx_radius_m: ar * 0.5e-3,
+            divergence_rad: div * 1e-3,
+            fov_rad: fov * 1e-3,
+        })
+    };
     let range_noise_m = number(opts, "range_noise_m", 0.0, 0.0, 100.0)?;
     let empty_slots = super::bool_option(opts, "empty_slots", true)?;
-    Ok(Arc::new(Fog::new(
-        visibility_m,
-        beta_r,
-        tau_h_ns,
-        overlap_start_m,
-        overlap_full_m,
-        gain,
-        range_noise_m,
-        empty_slots,
-    )))
+    Ok(Arc::new(
+        Fog::new(
+            visibility_m,
+            beta_r,
+            tau_h_ns,
+            overlap,
+            range_noise_m,
+            empty_slots,
+        )
+        .with_droplets(droplets),
+    ))
 }
 
 /// The registry entry of this stage.
 pub const KIND: StageKind = StageKind {
     name: NAME,
     factor: "11 weather (fog)",
-    model: "alpha = -ln(0.05)/V, hard target P exp(-2 alpha R); soft-target echo max_R gain pi kappa beta int s(t) exp(-2 alpha r) xi(r)/r^2 (c/2) dt, computed by quadrature, proposed to the firing slot (strongest: replaces the target when stronger)",
-    source: "Hahner et al., ICCV 2021 (Fog Simulation on Real LiDAR Point Clouds); pdiagram-models.md 11 fog; overlap and gain uncalibrated for the HDL-32E",
+    model: "alpha = -ln(0.05)/V, hard target P exp(-2 alpha R); soft-target echo max_R pi kappa beta int s(t) exp(-2 alpha r) xi(r)/r^2 (c/2) dt (the hard target's normalisation), xi the biaxial overlap of the HDL-32E, computed by quadrature, proposed to the firing slot (strongest: replaces the target when stronger)",
+    source: "Hahner et al., ICCV 2021 (Fog Simulation on Real LiDAR Point Clouds); overlap: Measures, Laser Remote Sensing, ch. 7, Stelmaszczyk et al. 2005 (top-hat biaxial); HDL-32E manual (spot 4 x 2 in at 100 ft); apertures, axis separation and receiver FOV estimated (module comment)",
     options: &[
         OptionSpec { name: "visibility_m", unit: "m", default: "required", doc: "meteorological optical range V (inf: no fog)" },
-        OptionSpec { name: "beta_r", unit: "1/sr", default: "0.046", doc: "backscatter beta = beta_r / V (paper range 0.023-0.092)" },
+        OptionSpec { name: "beta_r", unit: "1/sr", default: "0.046", doc: "backscatter beta = beta_r / V (paper range 0.023-0.092; 0: extinction only)" },
+        OptionSpec { name: "droplets", unit: "-", default: "hahner", doc: "backscatter: \"hahner\" (beta = beta_r / V) or Mie for Shettle & Fenn \"advection\" / \"radiation\" fog (beta = alpha (beta/alpha)_Mie, lidar ratio about 18 sr)" },
         OptionSpec { name: "tau_h_ns", unit: "ns", default: "20", doc: "half-power pulse width tau_H" },
-        OptionSpec { name: "overlap_start_m", unit: "m", default: "0.9", doc: "R1: transmitter/receiver overlap starts (xi = 0 below)" },
-        OptionSpec { name: "overlap_full_m", unit: "m", default: "1.0", doc: "R2: overlap complete (xi = 1 above, linear between)" },
-        OptionSpec { name: "gain", unit: "-", default: "1", doc: "factor on the fog echo power (calibration)" },
+        OptionSpec { name: "overlap", unit: "-", default: "biaxial", doc: "\"biaxial\" (geometric overlap, HDL-32E defaults: no fog echo at V >= 10 km) or \"linear\" (Hahner's R1..R2 ramp)" },
+        OptionSpec { name: "axis_separation_mm", unit: "mm", default: "30", doc: "biaxial: distance between transmitter and receiver axes (estimated, 27-40)" },
+        OptionSpec { name: "tx_aperture_mm", unit: "mm", default: "25", doc: "biaxial: transmitted beam diameter at the exit (estimated, 20-30)" },
+        OptionSpec { name: "rx_aperture_mm", unit: "mm", default: "25", doc: "biaxial: receiver aperture diameter (estimated, 20-30)" },
+        OptionSpec { name: "beam_divergence_mrad", unit: "mrad", default: "3.3", doc: "biaxial: full beam divergence (HDL-32E manual: 4 in at 100 ft)" },
+        OptionSpec { name: "rx_fov_mrad", unit: "mrad", default: "5", doc: "biaxial: receiver full field of view (estimated, 1.25-3 x divergence)" },
+        OptionSpec { name: "overlap_start_m", unit: "m", default: "0.9", doc: "linear: R1, overlap starts (xi = 0 below)" },
+        OptionSpec { name: "overlap_full_m", unit: "m", default: "1.0", doc: "linear: R2, overlap complete (xi = 1 above)" },
         OptionSpec { name: "range_noise_m", unit: "m", default: "0", doc: "n: fog echo range x R0 / U(R0 - n, R0 + n) (Hahner v1; 0 = none)" },
         OptionSpec { name: "empty_slots", unit: "-", default: "true", doc: "fog echoes also in firing slots without a return" },
     ],
@@ -568,8 +949,10 @@ mod tests {
         SoftTarget {
             alpha: extinction_per_m(v),
             tau_h_s: 20e-9,
-            overlap_start_m: 0.9,
-            overlap_full_m: r2,
+            overlap: Overlap::Linear {
+                start_m: 0.9,
+                full_m: r2,
+            },
         }
     }
 
@@ -609,7 +992,7 @@ mod tests {
                 let (rg, got) = t.lookup(r0);
                 // Relative 1e-3 once the overlap is complete; just past R1 the echo is
                 // tiny (and reported at a negative range), so only absolutely small.
-                let tol = if r0 > s.overlap_full_m + 0.05 {
+                let tol = if r0 > s.overlap.full_m() + 0.05 {
                     1e-3 * exact
                 } else {
                     1e-3 * i_star
@@ -620,9 +1003,53 @@ mod tests {
                     "{r0}: {rg} vs {re}"
                 );
             }
-            assert!(r_star > s.overlap_full_m);
+            assert!(r_star > s.overlap.full_m());
             assert_eq!(t.lookup(0.5).1, 0.0);
             assert_eq!(t.lookup(80.0), t.far());
+        }
+    }
+
+    #[test]
+    fn biaxial_table_interpolates_within_a_tenth_of_a_percent() {
+        let s = SoftTarget {
+            alpha: extinction_per_m(300.0),
+            tau_h_s: 20e-9,
+            overlap: hdl32e_overlap(),
+        };
+        let t = EchoTable::new(&s);
+        let (r_star, i_star) = s.peak(f64::INFINITY);
+        // The peak lies past R1 (1.2 m) and before R2 + c tau_H.
+        assert!(r_star > 1.2 && r_star < 42.0, "{r_star}");
+        for k in 0..300 {
+            let r0 = 1.21 + 0.0311 * f64::from(k);
+            let (_, exact) = s.peak(r0);
+            let (_, got) = t.lookup(r0);
+            assert!(
+                (got - exact).abs() <= 1e-3 * i_star,
+                "{r0}: {got} vs {exact}"
+            );
+        }
+        // More quadrature pieces change the integral by less than 1e-6 relative.
+        let fine = |r_app: f64| {
+            let l = s.window_m();
+            let lo = (r_app - l).max(s.overlap.start_m());
+            let k = std::f64::consts::PI / l;
+            let f = |r: f64| {
+                let q = (k * (r_app - r)).sin();
+                q * q * (-2.0 * s.alpha * r).exp() * s.overlap(r) / (r * r)
+            };
+            let n = 400;
+            let h = (r_app - lo) / f64::from(n);
+            (0..n)
+                .map(|j| {
+                    let a = lo + h * f64::from(j);
+                    gauss_legendre(&f, a, a + h)
+                })
+                .sum::<f64>()
+        };
+        for r_app in [2.0, 5.0, r_star, 9.0, 20.0] {
+            let (a, b) = (s.integral(r_app, f64::INFINITY), fine(r_app));
+            assert!((a / b - 1.0).abs() < 1e-6, "{r_app}: {a} vs {b}");
         }
     }
 }

@@ -4,7 +4,9 @@
 pub mod crosstalk;
 pub mod emi;
 pub mod fog;
+pub mod fog_droplets;
 pub mod lens_damage;
+pub mod mie;
 pub mod multipath;
 pub mod occlusion;
 pub mod particles;

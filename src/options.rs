@@ -227,3 +227,13 @@ mod tests {
         }
     }
 }
+
+/// How a frame range reads in messages: `--frames A..B`, `--frames A..` when open-ended,
+/// or "the whole capture" when no `--frames` narrowed it.
+pub fn frames_phrase(frames: &std::ops::RangeInclusive<u32>) -> String {
+    match (*frames.start(), *frames.end()) {
+        (0, u32::MAX) => "the whole capture".to_string(),
+        (a, u32::MAX) => format!("--frames {a}.."),
+        (a, b) => format!("--frames {a}..{b}"),
+    }
+}

@@ -127,3 +127,17 @@ fn a_set_with_a_line_break_is_refused() {
     assert!(err.contains("line break"), "{err}");
     assert!(o.stdout.is_empty());
 }
+
+#[test]
+fn no_frame_without_frames_names_the_whole_capture_not_a_range_nobody_gave() {
+    // Issue 30, defect 8: "no frame to process in --frames 0..4294967295" without --frames.
+    let short = "fuzz/findings/capture/backward-clock.pcap";
+    fails_with(
+        &["--quiet", "run", short],
+        &["no frame to process in the whole capture"],
+    );
+    fails_with(
+        &["--quiet", "run", short, "--frames", "3.."],
+        &["in --frames 3..:"],
+    );
+}

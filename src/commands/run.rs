@@ -529,10 +529,9 @@ pub(super) fn no_frame_error(
         ""
     };
     anyhow::anyhow!(
-        "{source}: no frame to process in --frames {}..{}: {partial_note}the capture has {} \
+        "{source}: no frame to process in {}: {partial_note}the capture has {} \
          full frame{} ({}); pick others with --frames or add --keep-partial",
-        frames.start(),
-        frames.end(),
+        crate::options::frames_phrase(frames),
         full,
         if full == 1 { "" } else { "s" },
         if full == 0 {

@@ -295,11 +295,10 @@ pub(super) fn run(
         )?;
         if n == 0 {
             bail!(
-                "{}: no frame to process in --frames {}..{}; pick others with --frames or add \
+                "{}: no frame to process in {}; pick others with --frames or add \
                  --keep-partial",
                 job.source,
-                plan.frames.start(),
-                plan.frames.end()
+                crate::options::frames_phrase(&plan.frames)
             );
         }
         plans.push(Chunks { ranges, seeks });

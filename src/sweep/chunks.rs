@@ -32,10 +32,9 @@ pub fn chunk_ranges(
     )?;
     if n == 0 {
         return Err(Error::Invalid(format!(
-            "{}: no frame to process in the range {}..{} (partial sweeps need --keep-partial)",
+            "{}: no frame to process in {} (partial sweeps need --keep-partial)",
             path.display(),
-            s.frames.start(),
-            s.frames.end()
+            crate::options::frames_phrase(&s.frames)
         )));
     }
     Ok((ranges, seeks, n))

@@ -939,10 +939,9 @@ fn compute_chunk(
     }
     if n_frames == 0 {
         return Err(Error::Invalid(format!(
-            "{}: no frame to process in the range {}..{} (partial sweeps need --keep-partial)",
+            "{}: no frame to process in {} (partial sweeps need --keep-partial)",
             capture.path.display(),
-            s.frames.start(),
-            s.frames.end()
+            crate::options::frames_phrase(&s.frames)
         )));
     }
     if *first {

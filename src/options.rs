@@ -197,6 +197,16 @@ pub fn worker_threads() -> usize {
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
 }
 
+/// How a frame range reads in messages: `--frames A..B`, `--frames A..` when open-ended,
+/// or "the whole capture" when no `--frames` narrowed it.
+pub fn frames_phrase(frames: &std::ops::RangeInclusive<u32>) -> String {
+    match (*frames.start(), *frames.end()) {
+        (0, u32::MAX) => "the whole capture".to_string(),
+        (a, u32::MAX) => format!("--frames {a}.."),
+        (a, b) => format!("--frames {a}..{b}"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -225,15 +235,5 @@ mod tests {
                 assert_eq!(owners.len(), 1, "item {index} of {n} shards: {owners:?}");
             }
         }
-    }
-}
-
-/// How a frame range reads in messages: `--frames A..B`, `--frames A..` when open-ended,
-/// or "the whole capture" when no `--frames` narrowed it.
-pub fn frames_phrase(frames: &std::ops::RangeInclusive<u32>) -> String {
-    match (*frames.start(), *frames.end()) {
-        (0, u32::MAX) => "the whole capture".to_string(),
-        (a, u32::MAX) => format!("--frames {a}.."),
-        (a, b) => format!("--frames {a}..{b}"),
     }
 }

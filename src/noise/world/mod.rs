@@ -5,6 +5,7 @@ pub mod crosstalk;
 pub mod emi;
 pub mod fog;
 pub mod lens_damage;
+pub mod mie;
 pub mod multipath;
 pub mod occlusion;
 pub mod particles;

@@ -8,9 +8,12 @@
 mod common;
 
 use lidar_noise::config::Config;
-use lidar_noise::frame::Frame;
+use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
-use lidar_noise::noise::NoiseChain;
+use lidar_noise::noise::world::mie::{self, Dsd};
+use lidar_noise::noise::world::rain;
+use lidar_noise::noise::{Fate, IdealPower, NoiseChain};
+use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
 const DIGEST: &str = "tests/golden/rain_goodin_digest.txt";
@@ -33,8 +36,14 @@ fn frames_of(path: &Path, frames: std::ops::RangeInclusive<u32>) -> Vec<Frame> {
     out
 }
 
+/// A config file, its rain stage forced to Goodin (configs/rain.toml uses mie since
+/// issue 29; the digest records Goodin's outputs, as before).
 fn load(config: &str) -> Config {
-    Config::load(Some(&root().join(config)), &[], None)
+    let text = std::fs::read_to_string(root().join(config)).unwrap();
+    let text = text
+        .replace("model = \"mie\"", "model = \"goodin\"")
+        .replace("range_noise = \"lisa\"", "range_noise = \"goodin\"");
+    Config::from_toml_str(&text, Path::new(config), &[], None)
         .unwrap_or_else(|e| panic!("{config}: {e}"))
         .0
 }
@@ -109,4 +118,192 @@ fn goodin_rain_outputs_are_unchanged() {
         assert_eq!(line, expected, "goodin rain outputs changed");
     }
     assert!(got.len() >= 6);
+}
+
+/// Marshall-Palmer alpha with Q_ext = 2 over all sizes: pi N0 / Lambda^3 (1/m).
+fn hand_alpha(rate: f64) -> f64 {
+    let lambda = 4.1 * rate.powf(-0.21);
+    PI * 8000.0 / lambda.powi(3) * 1e-6
+}
+
+/// Independent Mie integral: the series at every 0.01 mm from 0.05 to 6 mm (595 sizes,
+/// no table), trapezoid rule; returns (alpha, beta).
+fn direct_mie(rate: f64) -> (f64, f64) {
+    let (n, k) = mie::WATER_905;
+    let lambda = 4.1 * rate.powf(-0.21);
+    let h = 0.01;
+    let (mut a, mut b) = (0.0, 0.0);
+    for i in 0..=595 {
+        let d_mm = 0.05 + h * f64::from(i);
+        let w = if i == 0 || i == 595 { 0.5 } else { 1.0 };
+        let d = d_mm * 1e-3;
+        let e = mie::efficiencies(n, k, PI * d / 905e-9);
+        let nd = 8000.0 * (-lambda * d_mm).exp();
+        a += w * PI * d * d / 4.0 * e.q_ext * nd * h;
+        b += w * e.q_back * (d / 2.0).powi(2) / 4.0 * nd * h;
+    }
+    (a, b)
+}
+
+#[test]
+fn mie_alpha_matches_the_hand_check_and_a_direct_integral() {
+    for rate in [1.0, 7.29, 25.0] {
+        let stage = rain::Rain::mie(
+            rate,
+            Dsd::MarshallPalmer { rate_mm_h: rate },
+            rain::RangeNoise::Lisa,
+        );
+        let alpha = stage.alpha();
+        let hand = hand_alpha(rate);
+        let (direct, _) = direct_mie(rate);
+        assert!(
+            (alpha / hand - 1.0).abs() < 0.05,
+            "{rate} mm/h: {alpha} vs hand {hand}"
+        );
+        assert!(
+            (alpha / direct - 1.0).abs() < 0.05,
+            "{rate} mm/h: {alpha} vs direct {direct}"
+        );
+        // Goodin's is far larger (the issue's ~27x at 7.29 mm/h).
+        assert!(rain::extinction_per_m(rate) > 10.0 * alpha);
+    }
+    // The issue's check value: 1.24e-3 /m at 7 mm/h.
+    assert!((hand_alpha(7.0) - 1.24e-3).abs() < 0.01e-3);
+}
+
+#[test]
+fn mie_backscatter_coefficient_matches_a_direct_integral() {
+    // beta from the 600-node table against the series at every 0.01 mm: Q_back
+    // oscillates with x far faster than either grid, so both are samples of its
+    // average; they must agree within 15 %.
+    let rate = 7.29;
+    let v = rain::mie_optics(&Dsd::MarshallPalmer { rate_mm_h: rate });
+    let (_, beta) = direct_mie(rate);
+    assert!(
+        (v.beta_per_m_sr / beta - 1.0).abs() < 0.15,
+        "{} vs {beta}",
+        v.beta_per_m_sr
+    );
+}
+
+/// A return of `laser` at `range` m, firing `firing`, reflectivity `intensity` %.
+fn ret(laser: u8, range: f32, intensity: u8, firing: u32) -> Return {
+    let time = 100.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6;
+    common::beam_return(
+        laser,
+        range,
+        (firing as f32 * 0.2) % 360.0,
+        intensity,
+        firing,
+        time,
+        ReturnKind::Strongest,
+    )
+}
+
+/// 1800 firings of 32 lasers, ranges 2..60 m, varied reflectivities.
+fn turn() -> Frame {
+    let mut v = Vec::new();
+    for f in 0..1800u32 {
+        for l in 0..32u8 {
+            let k = f * 32 + u32::from(l);
+            let range = 2.0 + (k.wrapping_mul(2_654_435_761) % 5800) as f32 / 100.0;
+            v.push(ret(l, range, (k % 101) as u8, f));
+        }
+    }
+    Frame {
+        index: 0,
+        partial: false,
+        returns: v,
+    }
+}
+
+fn ideal() -> IdealPower {
+    let c = common::config("seed = 1\n");
+    IdealPower::new(&c.power, &c.sensor, &c.detection)
+}
+
+#[test]
+fn kept_power_falls_by_the_two_way_mie_extinction_and_not_at_rate_zero() {
+    let f = turn();
+    let p = ideal();
+    let rate = 7.29;
+    let alpha = hand_alpha(rate); // within 5 % of the stage's (test above)
+    let out = common::run(
+        &common::stage("rain", "model = \"mie\"\nrate_mm_h = 7.29"),
+        &f,
+    );
+    let zero = common::run(&common::stage("rain", "model = \"mie\"\nrate_mm_h = 0"), &f);
+    let mut checked = 0;
+    for (i, r) in f.returns.iter().enumerate() {
+        let p0 = p.power(r.intensity, r.range);
+        // At rate 0: alpha = 0, power exactly the ideal power.
+        assert_eq!(
+            zero.power[i].to_bits(),
+            p0.to_bits(),
+            "rate 0 changed power"
+        );
+        if out.fate[i] == Fate::Kept {
+            let want = p0 * (-2.0 * alpha * f64::from(r.range)).exp();
+            let got = out.power[i];
+            // alpha within 5 % of the hand value: the factor within 5 % of 2 alpha R.
+            let tol = 0.05 * 2.0 * alpha * f64::from(r.range) + 1e-12;
+            assert!(
+                (got / want).ln().abs() <= tol,
+                "{got} vs {want} at {}",
+                r.range
+            );
+            assert!(got < p0);
+            checked += 1;
+        }
+    }
+    assert!(checked > 50_000, "{checked}");
+}
+
+#[test]
+fn mie_range_noise_is_lisa_sigma() {
+    // (R_n - R) / sigma with sigma = 0.09 / sqrt(2 P / p_th) is standard normal.
+    let f = turn();
+    let out = common::run(
+        &common::stage("rain", "model = \"mie\"\nrate_mm_h = 7.29"),
+        &f,
+    );
+    let (mut n, mut s, mut s2) = (0.0, 0.0, 0.0);
+    for (i, r) in f.returns.iter().enumerate() {
+        if out.fate[i] != Fate::Kept {
+            continue;
+        }
+        let sigma = 0.09 / (2.0 * out.power[i] / 0.001).sqrt();
+        let z = (f64::from(out.range[i]) - f64::from(r.range)) / sigma;
+        n += 1.0;
+        s += z;
+        s2 += z * z;
+    }
+    let mean = s / n;
+    let sd = (s2 / n - mean * mean).sqrt();
+    assert!(mean.abs() < 4.0 / n.sqrt(), "{mean}");
+    // f32 rounding of ranges (~2e-6 m at 60 m) is far below sigma (>= 1 mm here).
+    assert!((sd - 1.0).abs() < 0.02, "{sd}");
+}
+
+fn echoes(out: &lidar_noise::noise::NoisyFrame) -> usize {
+    out.fate
+        .iter()
+        .filter(|f| matches!(f, Fate::Replaced | Fate::Added))
+        .count()
+}
+
+#[test]
+fn mie_drop_echoes_exist_and_grow_with_rate() {
+    let f = turn();
+    let at = |rate: f64| {
+        let text = common::stage(
+            "rain",
+            &format!("model = \"mie\"\nrate_mm_h = {rate}\nbackscatter = true"),
+        );
+        echoes(&common::run(&text, &f))
+    };
+    let (light, heavy, none) = (at(2.0), at(25.0), at(0.0));
+    assert_eq!(none, 0);
+    assert!(heavy > light, "{light} -> {heavy}");
+    assert!(heavy > 0);
 }

@@ -19,7 +19,7 @@
 //! curves, which are unknown for the HDL-32E; the particle model needs only the rate and
 //! shares its machinery with the rain backscatter (LISA). Wet ground is not modelled.
 
-use super::particles::Particles;
+use super::particles::{Particles, DEFAULT_KAPPA_M2};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -37,9 +37,6 @@ pub const ICE_INDEX: f64 = 1.3031;
 
 /// Largest flake drawn (mm water equivalent).
 pub const D_MAX_MM: f64 = 10.0;
-
-/// kappa (m^2) of the default power model, for frames built without one.
-const DEFAULT_KAPPA_M2: f64 = 100.0;
 
 /// N0 (1/(m^3 mm)) and Lambda (1/mm) of the Gunn-Marshall size law at `rate` mm/h.
 pub fn size_law(rate_mm_h: f64) -> (f64, f64) {

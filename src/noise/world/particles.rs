@@ -276,6 +276,8 @@ pub struct Prepared {
     r_top: f64,
     lambda_max: f64,
     p0_max: f64,
+    /// Cumulative bin weights of a beam beyond `r_top` (the common case).
+    cum_max: Vec<f64>,
     kappa: f64,
     threshold: f64,
     /// pi tan^2 theta / 12.
@@ -367,12 +369,20 @@ impl Population {
             r_top,
             lambda_max: 0.0,
             p0_max: 1.0,
+            cum_max: Vec::new(),
             kappa: kappa_m2,
             threshold,
             c,
         };
         p.lambda_max = self.expected(&p, f64::INFINITY);
         p.p0_max = (-p.lambda_max).exp();
+        let mut acc = 0.0;
+        p.cum_max = (0..self.bins.len())
+            .map(|b| {
+                acc += self.weight(&p, b, f64::INFINITY);
+                acc
+            })
+            .collect();
         p
     }
 
@@ -431,17 +441,26 @@ impl Population {
         let lo3 = p.lo * p.lo * p.lo;
         for _ in 0..count {
             let (a, b, c): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
-            // The bin: walk the weights (only for drawn particles, which are rare).
-            let mut left = a * total;
-            let mut bin = self.bins.len() - 1;
-            for k in 0..self.bins.len() {
-                let w = self.weight(p, k, range);
-                if left < w {
-                    bin = k;
-                    break;
+            // The bin: by the cumulative weights (a binary search beyond r_top, else a
+            // walk over the bins for this beam's range).
+            let left = a * total;
+            let bin = if range >= p.r_top {
+                p.cum_max
+                    .partition_point(|&c| c <= left)
+                    .min(self.bins.len() - 1)
+            } else {
+                let mut left = left;
+                let mut bin = self.bins.len() - 1;
+                for k in 0..self.bins.len() {
+                    let w = self.weight(p, k, range);
+                    if left < w {
+                        bin = k;
+                        break;
+                    }
+                    left -= w;
                 }
-                left -= w;
-            }
+                bin
+            };
             let sb = &self.bins[bin];
             let width = sb.hi - sb.lo;
             let d = if sb.slope.abs() * width < 1e-9 {

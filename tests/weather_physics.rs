@@ -369,6 +369,10 @@ fn measure_rain() {
             "mie+drops",
             "model = \"mie\"\nrate_mm_h = 7.29\nbackscatter = true\n",
         ),
+        (
+            "goodin+drops",
+            "model = \"goodin\"\nrate_mm_h = 7.29\nbackscatter = true\n",
+        ),
         ("clear", ""),
     ] {
         let text = if body.is_empty() {

@@ -165,12 +165,15 @@ impl NoiseStage for Snow {
     }
 
     fn settings(&self) -> Vec<(&'static str, Value)> {
+        // The preset is printed with its converted rate; the two agree, which build
+        // accepts, so a printed configuration reruns the same.
         let mut v = Vec::new();
-        if let Some(p) = self.preset {
-            v.push(("preset", Value::String(p.into())));
-        }
         v.extend([
             ("rate_mm_h", float(self.rate_mm_h)),
+            (
+                "preset",
+                Value::String(self.preset.unwrap_or("none").into()),
+            ),
             ("divergence_mrad", float(self.divergence_mrad)),
             ("empty_slots", Value::Boolean(self.empty_slots)),
         ]);
@@ -258,14 +261,24 @@ pub fn propose_particle_echoes(
 
 /// Reads the options of a `snow` entry.
 pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
-    let preset = match opts.choice("preset", &["light", "moderate", "heavy"])? {
-        Some(name) => {
-            if opts.has("rate_mm_h") {
-                return Err(opts.error("preset", "give either preset or rate_mm_h, not both"));
+    let preset = match opts.choice("preset", &["none", "light", "moderate", "heavy"])? {
+        Some(name) if name != "none" => {
+            let p = PRESETS.iter().find(|p| p.0 == name);
+            if let (Some(&(_, s, v)), Some(rate)) = (p, opts.f64("rate_mm_h")?) {
+                // Both only as a printed configuration writes them: the same rate.
+                let want = water_equivalent_mm_h(s, v);
+                if (rate - want).abs() > 1e-9 * want {
+                    return Err(opts.error(
+                        "preset",
+                        format!(
+                            "give either preset or rate_mm_h ({name} is {want} mm/h), not both"
+                        ),
+                    ));
+                }
             }
-            PRESETS.iter().find(|p| p.0 == name)
+            p
         }
-        None => {
+        _ => {
             if !opts.has("rate_mm_h") {
                 return Err(opts.missing("rate_mm_h"));
             }
@@ -297,7 +310,7 @@ pub const KIND: StageKind = StageKind {
     source: "Gunn and Marshall 1958; Kilic et al. 2021 (LISA, snow mode); Hahner et al. CVPR 2022 (presets, snowfall-rate conversion); pdiagram-models.md 11 snow",
     options: &[
         OptionSpec { name: "rate_mm_h", unit: "mm/h", default: "required (or preset)", doc: "water-equivalent (melted) precipitation rate R of the Gunn-Marshall law; not Hahner's snowfall rate (see preset)" },
-        OptionSpec { name: "preset", unit: "-", default: "none", doc: "Hahner et al. 2022: \"light\" (snowfall 0.5 mm/h at 2.0 m/s: R = 2.24), \"moderate\" (1.0 at 1.6: R = 8.85), \"heavy\" (2.5 at 1.6: R = 34.97); R = (S/(487 0.1 0.003 v_t))^1.5; instead of rate_mm_h" },
+        OptionSpec { name: "preset", unit: "-", default: "\"none\"", doc: "Hahner et al. 2022: \"light\" (snowfall 0.5 mm/h at 2.0 m/s: R = 2.24), \"moderate\" (1.0 at 1.6: R = 8.85), \"heavy\" (2.5 at 1.6: R = 34.97); R = (S/(487 0.1 0.003 v_t))^1.5; instead of rate_mm_h; \"none\" (default): rate_mm_h" },
         OptionSpec { name: "divergence_mrad", unit: "mrad", default: "3", doc: "full beam divergence of the Monte Carlo cone" },
         OptionSpec { name: "empty_slots", unit: "-", default: "true", doc: "flake echoes also in firing slots without a return" },
     ],

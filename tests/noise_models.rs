@@ -41,7 +41,7 @@ fn run(text: &str, f: &Frame) -> NoisyFrame {
 }
 
 fn rain_cfg(rate: f64, noise: &str, seed: u64) -> String {
-    format!("seed = {seed}\n[[noise]]\ntype = \"rain\"\nrate_mm_h = {rate}\nrange_noise = \"{noise}\"\n")
+    format!("seed = {seed}\n[[noise]]\ntype = \"rain\"\nmodel = \"goodin\"\nrate_mm_h = {rate}\nrange_noise = \"{noise}\"\n")
 }
 
 /// Every laser at every 10 degrees of azimuth, 10 m, intensity 50.
@@ -340,7 +340,7 @@ fn occlusion_does_not_shift_the_rain_draws() {
     let rain_only = run(&rain_cfg(7.0, "goodin", 4), &f);
     let both = run(
         &format!(
-            "seed = 4\n{}\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 7.0\n",
+            "seed = 4\n{}\n[[noise]]\ntype = \"rain\"\nmodel = \"goodin\"\nrate_mm_h = 7.0\n",
             occ_cfg("lasers = [7, 5, 3, 1, 30]")
         ),
         &f,
@@ -359,7 +359,7 @@ fn occlusion_does_not_shift_the_rain_draws() {
 #[test]
 fn thread_count_does_not_change_results() {
     let chain = NoiseChain::new(&config(&format!(
-        "{}\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 7.0\n",
+        "{}\n[[noise]]\ntype = \"rain\"\nmodel = \"goodin\"\nrate_mm_h = 7.0\n",
         occ_cfg("lasers = [1]")
     )));
     let frames: Vec<Frame> = (0..8).map(varied).collect();
@@ -454,7 +454,7 @@ fn first_cause_wins_and_survivors_move_along_the_beam() {
         ],
     );
     let text = format!(
-        "seed = 3\n[power]\nreflectance_floor = 0.0\n{}\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 5\n",
+        "seed = 3\n[power]\nreflectance_floor = 0.0\n{}\n[[noise]]\ntype = \"rain\"\nmodel = \"goodin\"\nrate_mm_h = 5\n",
         occ_cfg("lasers = [7]")
     );
     let out = run(&text, &f);
@@ -486,7 +486,7 @@ fn first_cause_wins_and_survivors_move_along_the_beam() {
 #[test]
 fn summaries_count_and_merge_exactly() {
     let text = format!(
-        "seed = 8\n{}\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 7\n",
+        "seed = 8\n{}\n[[noise]]\ntype = \"rain\"\nmodel = \"goodin\"\nrate_mm_h = 7\n",
         occ_cfg("lasers = [7, 5, 3, 1, 30]")
     );
     let chain = NoiseChain::new(&config(&text));

@@ -263,13 +263,18 @@ fn fog_fills_empty_slots_and_occluded_beams_get_no_echo() {
 #[test]
 fn zero_weather_is_the_identity() {
     let f = turn(2);
-    let base = run("seed = 5\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 7\n", &f);
+    let base = run(
+        "seed = 5\n[[noise]]\ntype = \"rain\"\nmodel = \"goodin\"\nrate_mm_h = 7\n",
+        &f,
+    );
     for extra in [
         "[[noise]]\ntype = \"fog\"\nvisibility_m = inf\n",
         "[[noise]]\ntype = \"snow\"\nrate_mm_h = 0\n",
         "[[noise]]\ntype = \"fog\"\nvisibility_m = 100\nbeta_r = 0\n",
     ] {
-        let text = format!("seed = 5\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 7\n{extra}");
+        let text = format!(
+            "seed = 5\n[[noise]]\ntype = \"rain\"\nmodel = \"goodin\"\nrate_mm_h = 7\n{extra}"
+        );
         let out = run(&text, &f);
         assert!(
             !NoiseChain::new(&config(&text)).proposes_echoes(),
@@ -283,7 +288,7 @@ fn zero_weather_is_the_identity() {
     }
     // backscatter = false written out is the default.
     let off = run(
-        "seed = 5\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 7\nbackscatter = false\n",
+        "seed = 5\n[[noise]]\ntype = \"rain\"\nmodel = \"goodin\"\nrate_mm_h = 7\nbackscatter = false\n",
         &f,
     );
     assert!(same_returns(&off.survivors(), &base.survivors()));
@@ -292,7 +297,7 @@ fn zero_weather_is_the_identity() {
 #[test]
 fn zero_weather_writes_the_same_ply() {
     let tmp = tempfile::tempdir().unwrap();
-    let rain = "seed = 5\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 7\n";
+    let rain = "seed = 5\n[[noise]]\ntype = \"rain\"\nmodel = \"goodin\"\nrate_mm_h = 7\n";
     let weather = format!(
         "{rain}[[noise]]\ntype = \"fog\"\nvisibility_m = inf\n[[noise]]\ntype = \"snow\"\nrate_mm_h = 0.0\n"
     );
@@ -306,8 +311,14 @@ fn zero_weather_writes_the_same_ply() {
 #[test]
 fn rain_backscatter_adds_near_drop_echoes_and_keeps_the_rain_draws() {
     let f = turn(4);
-    let base = run(&stage("rain", "rate_mm_h = 7"), &f);
-    let bs = run(&stage("rain", "rate_mm_h = 7\nbackscatter = true"), &f);
+    let base = run(&stage("rain", "model = \"goodin\"\nrate_mm_h = 7"), &f);
+    let bs = run(
+        &stage(
+            "rain",
+            "model = \"goodin\"\nrate_mm_h = 7\nbackscatter = true",
+        ),
+        &f,
+    );
     let mut spurious = 0;
     for i in 0..bs.len() {
         if bs.fate[i].is_spurious() {
@@ -324,7 +335,13 @@ fn rain_backscatter_adds_near_drop_echoes_and_keeps_the_rain_draws() {
     }
     assert!(spurious > 0);
     // More rain, more drop echoes (same seed).
-    let heavy = run(&stage("rain", "rate_mm_h = 30\nbackscatter = true"), &f);
+    let heavy = run(
+        &stage(
+            "rain",
+            "model = \"goodin\"\nrate_mm_h = 30\nbackscatter = true",
+        ),
+        &f,
+    );
     let heavy_n = heavy.fate.iter().filter(|x| x.is_spurious()).count();
     assert!(heavy_n > spurious, "{heavy_n} vs {spurious}");
 }

@@ -223,6 +223,19 @@ impl MieTable {
         }
     }
 
+    /// Largest Q_back that [`MieTable::at`] gives on [`x1`, `x2`] (the ends and the nodes
+    /// between: the interpolation is linear between nodes).
+    pub fn max_between(&self, x1: f64, x2: f64) -> f64 {
+        let last = self.q_back.len() - 1;
+        let node = |x: f64| ((x.ln() - self.ln_x0) / self.step).clamp(0.0, last as f64);
+        let (a, b) = (node(x1.min(x2)), node(x1.max(x2)));
+        let mut m = self.at(x1).1.max(self.at(x2).1);
+        for i in (a.ceil() as usize)..=(b.floor() as usize).min(last) {
+            m = m.max(self.q_back[i]);
+        }
+        m
+    }
+
     /// (Q_ext, Q_back) at size parameter `x`, linear in ln x, clamped to the table's ends.
     pub fn at(&self, x: f64) -> (f64, f64) {
         let last = self.q_ext.len() - 1;

@@ -19,7 +19,8 @@
 //! The cut depends on kappa and the threshold only, so the draws do not depend on the
 //! other stages.
 
-use crate::noise::Echo;
+use super::mie::{Dsd, MieTable};
+use crate::noise::{Echo, Fate, NoisyFrame};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -173,6 +174,355 @@ impl Particles {
     }
 }
 
+/// Backscatter of one particle as the reflectance rho(D) of a Lambertian disc of the
+/// particle's cross-section: P = kappa rho(D) exp(-2 alpha r) min(1, A_p / A_beam) / r^2.
+#[derive(Clone, Copy, Debug)]
+pub enum Reflectance {
+    /// Constant rho (LISA: the Fresnel reflectance at normal incidence).
+    Fresnel(f64),
+    /// Mie: rho(D) = pi (dsigma/dOmega) / (pi a^2) = Q_back(x) / 4, x = pi D / lambda.
+    Mie {
+        /// Q_ext/Q_back of the particle's material.
+        table: &'static MieTable,
+        /// Wavelength (m).
+        wavelength_m: f64,
+    },
+}
+
+impl Reflectance {
+    /// rho at diameter `d_mm`.
+    #[inline]
+    pub fn at(&self, d_mm: f64) -> f64 {
+        match *self {
+            Reflectance::Fresnel(rho) => rho,
+            Reflectance::Mie {
+                table,
+                wavelength_m,
+            } => {
+                table
+                    .at(super::mie::size_parameter(d_mm * 1e-3, wavelength_m))
+                    .1
+                    / 4.0
+            }
+        }
+    }
+
+    /// Largest rho on [`lo`, `hi`] mm: the ends and every table node between (the table
+    /// is linear between nodes, so this is the exact maximum of what [`Self::at`] gives).
+    fn max_on(&self, lo: f64, hi: f64) -> f64 {
+        match *self {
+            Reflectance::Fresnel(rho) => rho,
+            Reflectance::Mie {
+                table,
+                wavelength_m,
+            } => {
+                let x = |d: f64| super::mie::size_parameter(d * 1e-3, wavelength_m);
+                table.max_between(x(lo), x(hi)) / 4.0
+            }
+        }
+    }
+}
+
+/// Size bins of [`Population`].
+pub const POPULATION_BINS: usize = 64;
+
+/// One size bin: its particles per m^3 and the local exponential slope of N(D).
+#[derive(Clone, Copy, Debug)]
+struct SizeBin {
+    lo: f64,
+    hi: f64,
+    per_m3: f64,
+    slope: f64,
+    rho_max: f64,
+}
+
+/// A particle population sampled only where it can be detected.
+///
+/// Particles form a Poisson process in the beam's cone (cross-section A_beam(r) =
+/// pi (r tan theta / 2)^2) with size density N(D). Per beam whose target lies at R, the
+/// detectable particles are those with r in [lo, R] (lo = max(1.5 m, minimum range); the
+/// target hides what lies behind it) and P(r, D) >= threshold. P falls with r, so for a
+/// size bin [D1, D2] every detectable particle lies nearer than r_b, the range where the
+/// bound kappa rho_max(bin) min(1, (D2 / (r tan theta))^2) / r^2 (no extinction) meets the
+/// threshold. The superset {r in [lo, min(R, r_b)], D in bin} holds a Poisson number of
+/// particles with mean Lambda(R) = sum_b n_b (pi tan^2 theta / 12) (min(R, r_b)^3 -
+/// lo^3)+, n_b the bin's particles per m^3: one Poisson count per beam (inversion of one
+/// uniform), then per particle a bin (weight of its term), D from the bin's N(D) (an
+/// exponential through N at both bin ends: exact for Marshall-Palmer and Gunn-Marshall,
+/// an approximation within a bin for gamma with mu > 0), r with r^3 uniform, and the
+/// exact power test (with extinction and rho(D)) keeps the detectable ones. Thinning a
+/// Poisson process keeps it Poisson, so the echoes have exactly the distribution of
+/// drawing every particle in the cone and keeping the detectable ones (tested against
+/// that brute force), at a cost of one uniform per beam.
+///
+/// Draw pattern: one uniform per lit beam, whatever its range; three per particle drawn.
+#[derive(Clone, Debug)]
+pub struct Population {
+    /// tan of the full beam divergence.
+    pub tan_divergence: f64,
+    /// Particles per m^3 between the size limits.
+    pub per_m3: f64,
+    reflectance: Reflectance,
+    bins: Vec<SizeBin>,
+}
+
+/// A [`Population`] prepared for one frame's kappa, threshold and minimum range.
+#[derive(Clone, Debug)]
+pub struct Prepared {
+    lo: f64,
+    /// Per bin: r_b (m).
+    r_b: Vec<f64>,
+    /// Largest r_b: beams whose target lies beyond it all share `lambda_max`.
+    r_top: f64,
+    lambda_max: f64,
+    p0_max: f64,
+    /// Cumulative bin weights of a beam beyond `r_top` (the common case).
+    cum_max: Vec<f64>,
+    kappa: f64,
+    threshold: f64,
+    /// pi tan^2 theta / 12.
+    c: f64,
+}
+
+impl Population {
+    /// Particles of size density `dsd` between `d_min_mm` and `d_max_mm`, echoing with
+    /// `reflectance`, in a beam of full divergence `divergence_rad`.
+    pub fn new(
+        dsd: &Dsd,
+        d_min_mm: f64,
+        d_max_mm: f64,
+        reflectance: Reflectance,
+        divergence_rad: f64,
+    ) -> Self {
+        let h = (d_max_mm - d_min_mm) / POPULATION_BINS as f64;
+        let mut bins = Vec::with_capacity(POPULATION_BINS);
+        for b in 0..POPULATION_BINS {
+            let lo = d_min_mm + h * b as f64;
+            let hi = lo + h;
+            // Simpson on 16 intervals: N(D) is smooth within a bin.
+            let k = 16;
+            let g = h / f64::from(k);
+            let mut sum = dsd.density(lo) + dsd.density(hi);
+            for i in 1..k {
+                sum += dsd.density(lo + g * f64::from(i)) * if i % 2 == 1 { 4.0 } else { 2.0 };
+            }
+            let per_m3 = (sum * g / 3.0).max(0.0);
+            let (n_lo, n_hi) = (dsd.density(lo), dsd.density(hi));
+            let slope = if n_lo > 0.0 && n_hi > 0.0 {
+                (n_lo / n_hi).ln() / h
+            } else {
+                0.0
+            };
+            bins.push(SizeBin {
+                lo,
+                hi,
+                per_m3,
+                slope,
+                rho_max: reflectance.max_on(lo, hi),
+            });
+        }
+        Population {
+            tan_divergence: divergence_rad.tan(),
+            per_m3: bins.iter().map(|b| b.per_m3).sum(),
+            reflectance,
+            bins,
+        }
+    }
+
+    /// True when no particle is ever drawn.
+    pub fn is_empty(&self) -> bool {
+        self.per_m3 <= 0.0
+    }
+
+    /// Power of the echo of a particle of `d_mm` at `r` m (see [`Reflectance`]).
+    #[inline]
+    pub fn power(&self, r: f64, d_mm: f64, alpha: f64, kappa_m2: f64) -> f64 {
+        let db = r * self.tan_divergence;
+        let share = ((d_mm * 1e-3) / db).powi(2).min(1.0);
+        kappa_m2 * self.reflectance.at(d_mm) * (-2.0 * alpha * r).exp() * share / (r * r)
+    }
+
+    /// The bounds of every bin for `kappa_m2`, `threshold` and `min_range` (m).
+    pub fn prepare(&self, kappa_m2: f64, threshold: f64, min_range: f64) -> Prepared {
+        let t = self.tan_divergence;
+        let lo = MIN_RANGE_M.max(min_range);
+        let r_b: Vec<f64> = self
+            .bins
+            .iter()
+            .map(|b| {
+                let k = kappa_m2 * b.rho_max / threshold;
+                let near = k.sqrt();
+                let d = b.hi * 1e-3;
+                // 1e-9 margin: the bound must not cut a particle on its edge by rounding.
+                (if near * t <= d {
+                    near
+                } else {
+                    (k * d * d / (t * t)).sqrt().sqrt()
+                }) * (1.0 + 1e-9)
+            })
+            .collect();
+        let r_top = r_b.iter().copied().fold(0.0, f64::max);
+        let c = std::f64::consts::PI * t * t / 12.0;
+        let mut p = Prepared {
+            lo,
+            r_b,
+            r_top,
+            lambda_max: 0.0,
+            p0_max: 1.0,
+            cum_max: Vec::new(),
+            kappa: kappa_m2,
+            threshold,
+            c,
+        };
+        p.lambda_max = self.expected(&p, f64::INFINITY);
+        p.p0_max = (-p.lambda_max).exp();
+        let mut acc = 0.0;
+        p.cum_max = (0..self.bins.len())
+            .map(|b| {
+                acc += self.weight(&p, b, f64::INFINITY);
+                acc
+            })
+            .collect();
+        p
+    }
+
+    /// Weight of bin `b` for a beam whose target lies at `range` m.
+    #[inline]
+    fn weight(&self, p: &Prepared, b: usize, range: f64) -> f64 {
+        let u = range.min(p.r_b[b]);
+        let lo3 = p.lo * p.lo * p.lo;
+        self.bins[b].per_m3 * (u * u * u - lo3).max(0.0)
+    }
+
+    /// Expected number of particles in the superset region of a beam to `range` m.
+    pub fn expected(&self, p: &Prepared, range: f64) -> f64 {
+        // Also false for a NaN range.
+        if range.is_nan() || range <= p.lo {
+            return 0.0;
+        }
+        p.c * (0..self.bins.len())
+            .map(|b| self.weight(p, b, range))
+            .sum::<f64>()
+    }
+
+    /// Draws the detectable particles of a beam whose target lies at `range` m (infinite
+    /// for an empty slot) and calls `out` with each echo; `alpha` is the extinction of the
+    /// medium (1/m). Always draws one uniform first.
+    pub fn beam(
+        &self,
+        p: &Prepared,
+        rng: &mut ChaCha8Rng,
+        range: f64,
+        alpha: f64,
+        mut out: impl FnMut(Echo),
+    ) {
+        let u: f64 = rng.random();
+        // Also false for a NaN range.
+        if range.is_nan() || range <= p.lo {
+            return;
+        }
+        let (lambda, p0) = if range >= p.r_top {
+            (p.lambda_max, p.p0_max)
+        } else {
+            let l = self.expected(p, range);
+            (l, (-l).exp())
+        };
+        if u < p0 {
+            return;
+        }
+        // Poisson inversion of the same uniform.
+        let (mut count, mut term, mut cdf) = (1u32, p0 * lambda, p0 + p0 * lambda);
+        while u >= cdf && count < 100_000 {
+            count += 1;
+            term *= lambda / f64::from(count);
+            cdf += term;
+        }
+        let total = lambda / p.c;
+        let lo3 = p.lo * p.lo * p.lo;
+        for _ in 0..count {
+            let (a, b, c): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
+            // The bin: by the cumulative weights (a binary search beyond r_top, else a
+            // walk over the bins for this beam's range).
+            let left = a * total;
+            let bin = if range >= p.r_top {
+                p.cum_max
+                    .partition_point(|&c| c <= left)
+                    .min(self.bins.len() - 1)
+            } else {
+                let mut left = left;
+                let mut bin = self.bins.len() - 1;
+                for k in 0..self.bins.len() {
+                    let w = self.weight(p, k, range);
+                    if left < w {
+                        bin = k;
+                        break;
+                    }
+                    left -= w;
+                }
+                bin
+            };
+            let sb = &self.bins[bin];
+            let width = sb.hi - sb.lo;
+            let d = if sb.slope.abs() * width < 1e-9 {
+                sb.lo + b * width
+            } else {
+                sb.lo - (1.0 - b * (1.0 - (-sb.slope * width).exp())).ln() / sb.slope
+            };
+            let top = range.min(p.r_b[bin]);
+            let r = (lo3 + c * (top * top * top - lo3)).cbrt();
+            let pw = self.power(r, d, alpha, p.kappa);
+            if pw >= p.threshold {
+                out(Echo {
+                    range: r as f32,
+                    power: pw,
+                });
+            }
+        }
+    }
+}
+
+/// Proposes the echoes of `pop` for every beam of `frame` (recorded returns, whatever
+/// their fate except occluded, then vacant slots when `empty_slots`), drawing from `rng`
+/// in that order.
+pub fn propose_population_echoes(
+    frame: &mut NoisyFrame,
+    rng: &mut ChaCha8Rng,
+    pop: &Population,
+    alpha: f64,
+    empty_slots: bool,
+) {
+    if pop.is_empty() {
+        return;
+    }
+    let kappa = frame
+        .power_model
+        .as_ref()
+        .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2);
+    let prep = pop.prepare(kappa, frame.threshold, frame.min_range);
+    let slots = frame.slots();
+    for i in 0..frame.clean_len {
+        // Occlusion removes the beam: no particle is lit (and no draw is made).
+        if frame.fate[i] == Fate::Occluded {
+            continue;
+        }
+        let range = f64::from(frame.range[i]);
+        let slot = slots.slot_of(i);
+        pop.beam(&prep, rng, range, alpha, |e| frame.propose_slot(slot, e));
+    }
+    if empty_slots {
+        for slot in 0..slots.len() as u32 {
+            if slots.is_vacant(slot) {
+                pop.beam(&prep, rng, f64::INFINITY, alpha, |e| {
+                    frame.propose_slot(slot, e)
+                });
+            }
+        }
+    }
+}
+
+/// kappa (m^2) of the default power model, for frames built without one.
+pub const DEFAULT_KAPPA_M2: f64 = 100.0;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -222,5 +572,156 @@ mod tests {
             "{}",
             sum_r / n as f64
         );
+    }
+}
+
+#[cfg(test)]
+mod population_tests {
+    use super::*;
+    use crate::noise::world::mie;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Poisson};
+
+    /// Brute force: every particle of the cone to `range` (Poisson count, r^3 uniform,
+    /// D by inversion of the truncated exponential), kept when r >= 1.5 m and P >= th.
+    /// Returns (count, sum r, sum r^2, sum ln P, sum (ln P)^2).
+    fn brute(pop: &Population, n0: f64, l: f64, range: f64, th: f64, beams: u32) -> [f64; 5] {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let (d0, d1) = (D_MIN_MM, 6.0);
+        let t = pop.tan_divergence;
+        let per = n0 / l * ((-l * d0).exp() - (-l * d1).exp());
+        let mean = per * std::f64::consts::PI / 3.0 * range * (range * t / 2.0).powi(2);
+        let pois = Poisson::new(mean).unwrap();
+        let tail = 1.0 - (-l * (d1 - d0)).exp();
+        let mut s = [0.0; 5];
+        for _ in 0..beams {
+            let n = pois.sample(&mut rng) as u64;
+            for _ in 0..n {
+                let (a, b): (f64, f64) = (rng.random(), rng.random());
+                let r = range * a.cbrt();
+                let d = d0 - (1.0 - b * tail).ln() / l;
+                let p = pop.power(r, d, 0.0, 100.0);
+                if r >= MIN_RANGE_M && p >= th {
+                    add(&mut s, r, p);
+                }
+            }
+        }
+        s
+    }
+
+    fn add(s: &mut [f64; 5], r: f64, p: f64) {
+        let lp = p.ln();
+        s[0] += 1.0;
+        s[1] += r;
+        s[2] += r * r;
+        s[3] += lp;
+        s[4] += lp * lp;
+    }
+
+    fn fast(pop: &Population, range: f64, th: f64, beams: u32) -> [f64; 5] {
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        let prep = pop.prepare(100.0, th, 0.0);
+        let mut s = [0.0; 5];
+        for _ in 0..beams {
+            pop.beam(&prep, &mut rng, range, 0.0, |e| {
+                add(&mut s, f64::from(e.range), e.power)
+            });
+        }
+        s
+    }
+
+    /// Counts, and mean and SD of the range and of ln power (which carries the size) of
+    /// detectable echoes: fast sampler vs brute force, within 4 standard errors.
+    fn compare(pop: &Population, n0: f64, l: f64, th: f64) {
+        let beams = 200_000;
+        let range = 8.0;
+        let b = brute(pop, n0, l, range, th, beams);
+        let f = fast(pop, range, th, beams);
+        assert!(
+            b[0] > 500.0,
+            "too few brute-force echoes for the test: {}",
+            b[0]
+        );
+        let se = (b[0] + f[0]).sqrt();
+        assert!(
+            (b[0] - f[0]).abs() < 4.0 * se,
+            "counts {} vs {}",
+            b[0],
+            f[0]
+        );
+        for (i, what) in [(1, "r"), (3, "ln P")] {
+            let (mb, mf) = (b[i] / b[0], f[i] / f[0]);
+            let sd = (b[i + 1] / b[0] - mb * mb).sqrt();
+            let se_m = sd * (1.0 / b[0] + 1.0 / f[0]).sqrt();
+            assert!(
+                (mb - mf).abs() < 4.0 * se_m,
+                "mean {what} {mb} vs {mf} (se {se_m})"
+            );
+            let sdf = (f[i + 1] / f[0] - mf * mf).sqrt();
+            assert!((sd / sdf - 1.0).abs() < 0.1, "sd {what} {sd} vs {sdf}");
+        }
+    }
+
+    #[test]
+    fn detectable_sampling_matches_brute_force_fresnel() {
+        let rate: f64 = 7.0;
+        let l = 4.1 * rate.powf(-0.21);
+        let pop = Population::new(
+            &Dsd::MarshallPalmer { rate_mm_h: rate },
+            D_MIN_MM,
+            6.0,
+            Reflectance::Fresnel(fresnel(1.328)),
+            3e-3,
+        );
+        compare(&pop, 8000.0, l, 1e-5);
+    }
+
+    #[test]
+    fn detectable_sampling_matches_brute_force_mie() {
+        let rate: f64 = 7.0;
+        let l = 4.1 * rate.powf(-0.21);
+        let pop = Population::new(
+            &Dsd::MarshallPalmer { rate_mm_h: rate },
+            D_MIN_MM,
+            6.0,
+            Reflectance::Mie {
+                table: mie::water_905(),
+                wavelength_m: mie::WAVELENGTH_905_M,
+            },
+            3e-3,
+        );
+        compare(&pop, 8000.0, l, 1e-4);
+    }
+
+    #[test]
+    fn lambertian_full_beam_target_gives_kappa_rho_over_r2() {
+        // A Lambertian disc of reflectance rho filling the beam has dsigma/dOmega =
+        // rho A_beam / pi; the particle rule P = kappa pi (dsigma/dOmega) / (A_beam r^2)
+        // must give the hard-target law kappa rho / r^2 exactly.
+        let (kappa, rho, r, t): (f64, f64, f64, f64) = (100.0, 0.3, 5.0, 3e-3);
+        let a_beam = std::f64::consts::PI * (r * t / 2.0).powi(2);
+        let dsdo = rho * a_beam / std::f64::consts::PI;
+        let p_rule = kappa * std::f64::consts::PI * dsdo / (a_beam * r * r);
+        assert!((p_rule / (kappa * rho / (r * r)) - 1.0).abs() < 1e-12);
+        // And the code's form: a sphere filling the beam (D = r tan theta) with
+        // rho(D) = Q_back/4 is the same as that disc with rho = Q_back / 4.
+        let pop = Population::new(
+            &Dsd::MarshallPalmer { rate_mm_h: 1.0 },
+            D_MIN_MM,
+            6.0,
+            Reflectance::Fresnel(rho),
+            t.atan(),
+        );
+        let d_mm = r * t * 1e3;
+        let p = pop.power(r, d_mm, 0.0, kappa);
+        assert!((p / (kappa * rho / (r * r)) - 1.0).abs() < 1e-9, "{p}");
+        // A drop of cross-section A_p < A_beam: the rule kappa pi (Q_back a^2/4) /
+        // (A_beam r^2) with Q_back = 4 rho.
+        let d_mm = 0.5 * r * t * 1e3;
+        let a = d_mm * 1e-3 / 2.0;
+        let want = kappa * std::f64::consts::PI * mie::diff_backscatter_m2_sr(4.0 * rho, a)
+            / (a_beam * r * r);
+        let p = pop.power(r, d_mm, 0.0, kappa);
+        assert!((p / want - 1.0).abs() < 1e-9, "{p} vs {want}");
     }
 }

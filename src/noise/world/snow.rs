@@ -2,24 +2,44 @@
 //! the beam, by a Marshall-Gunn particle model with LISA's Monte Carlo (LISA in snow mode;
 //! pdiagram-models.md, "11 Weather: snow", its "simpler particle alternative").
 //!
-//! Model, at snowfall rate R (mm/h, water equivalent):
+//! Units: `rate_mm_h` is the water-equivalent (melted) precipitation rate R that the
+//! Gunn-Marshall law takes. Hahner et al. (CVPR 2022, "LiDAR Snowfall Simulation",
+//! their released code `snowfall_rate_to_rainfall_rate`) give snowfall as a snowfall
+//! rate S (mm/h, categories light 0-1, moderate 1-2.5, heavy > 2.5) with a terminal
+//! velocity v_t and convert it to R = (S / (487 rho_s D_s v_t))^(3/2) with flake density
+//! rho_s = 0.1 g/cm^3 and diameter D_s = 0.003 m. `preset` names their settings: light
+//! (S 0.5 mm/h, v_t 2.0 m/s) R = 2.24 mm/h; moderate (1.0, 1.6) R = 8.85 mm/h; heavy
+//! (2.5, 1.6) R = 34.97 mm/h. Before issue 29 a "moderate 1 mm/h" was fed as R = 1.
+//!
+//! Model, at water-equivalent rate R (mm/h):
 //! - flake sizes (Gunn and Marshall 1958, as in LISA's snow mode): N(D) = N0 exp(-Lambda D),
 //!   N0 = 7.6e3 R^-0.87 per m^3 per mm, Lambda = 2.55 R^-0.48 per mm, D in mm, drawn
 //!   between 0.05 and 10 mm; ice, refractive index 1.3031 (Fresnel rho_F = 0.0173);
 //! - extinction alpha = int (pi/4) D^2 Q_ext N(D) dD with Q_ext = 2 (flakes are thousands
 //!   of wavelengths across: the geometric-optics limit of Mie theory) = pi N0 / Lambda^3
 //!   x 1e-6 (1/m); hard target P exp(-2 alpha R);
-//! - flake echoes per beam by the Monte Carlo of [`super::particles`] (cone of full
-//!   divergence 3 mrad, flakes nearer than 1.5 m ignored), each proposed to the beam's
-//!   firing slot, where the sensor's return logic chooses once (strongest mode: a flake
-//!   echo stronger than the target replaces it).
+//! - flake echoes per beam (cone of full divergence 3 mrad, flakes nearer than 1.5 m
+//!   ignored), sampled only where detectable ([`super::particles::Population`]), each
+//!   proposed to the beam's firing slot, where the sensor's return logic chooses once
+//!   (strongest mode: a flake echo stronger than the target replaces it);
+//! - flake backscatter by geometric optics: LISA's rule, the Fresnel reflectance of ice
+//!   at normal incidence over the flake's cross-section (Lambertian disc), P_j =
+//!   kappa rho_F exp(-2 alpha r) min(1, A_p/A_beam) / r^2. Flakes are not spheres; the
+//!   Mie backscatter of a sphere at these sizes is dominated by the glory, an axial
+//!   focusing that needs a perfect sphere (van de Hulst 1957, Ch. 17.4; Bohren & Huffman
+//!   1983, Sec. 13.7), and irregular ice shows no glory; an ice sphere of the melted
+//!   diameter would give Q_back/4 ~ 1 instead of rho_F = 0.017 (the rain stage does use
+//!   Mie for drops, which are spheres). Unchanged from before issue 29 but for the
+//!   sampling (only detectable flakes drawn), so the flake echoes keep their distribution
+//!   and change their draws.
 //!
 //! Why not Hahner et al. (CVPR 2022): its flake sampling in per-channel planes, waveform
 //! sums and HDL-64E intensity corrections need the sensor's waveform and noise-floor
 //! curves, which are unknown for the HDL-32E; the particle model needs only the rate and
 //! shares its machinery with the rain backscatter (LISA). Wet ground is not modelled.
 
-use super::particles::Particles;
+use super::mie::Dsd;
+use super::particles::{Particles, Population, Reflectance, DEFAULT_KAPPA_M2};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -38,8 +58,18 @@ pub const ICE_INDEX: f64 = 1.3031;
 /// Largest flake drawn (mm water equivalent).
 pub const D_MAX_MM: f64 = 10.0;
 
-/// kappa (m^2) of the default power model, for frames built without one.
-const DEFAULT_KAPPA_M2: f64 = 100.0;
+/// Hahner et al.'s snowfall presets: (name, snowfall rate S mm/h, terminal velocity m/s).
+pub const PRESETS: [(&str, f64, f64); 3] = [
+    ("light", 0.5, 2.0),
+    ("moderate", 1.0, 1.6),
+    ("heavy", 2.5, 1.6),
+];
+
+/// Water-equivalent rate (mm/h) of snowfall rate `s_mm_h` at terminal velocity `v_m_s`
+/// (Hahner et al. 2022: R = (S / (487 rho_s D_s v_t))^(3/2), rho_s = 0.1, D_s = 0.003).
+pub fn water_equivalent_mm_h(s_mm_h: f64, v_m_s: f64) -> f64 {
+    (s_mm_h / (487.0 * 0.1 * 0.003 * v_m_s)).powf(1.5)
+}
 
 /// N0 (1/(m^3 mm)) and Lambda (1/mm) of the Gunn-Marshall size law at `rate` mm/h.
 pub fn size_law(rate_mm_h: f64) -> (f64, f64) {
@@ -64,8 +94,11 @@ pub struct Snow {
     pub divergence_mrad: f64,
     /// Flake echoes also in slots without a return.
     pub empty_slots: bool,
+    /// Hahner's preset the rate came from, if any.
+    pub preset: Option<&'static str>,
     alpha: f64,
     particles: Particles,
+    population: Arc<Population>,
 }
 
 impl Snow {
@@ -76,12 +109,26 @@ impl Snow {
         } else {
             (0.0, f64::INFINITY)
         };
+        let dsd = Dsd::Gamma {
+            n0,
+            mu: 0.0,
+            lambda_per_mm: lambda,
+        };
+        let population = Population::new(
+            &dsd,
+            super::particles::D_MIN_MM,
+            D_MAX_MM,
+            Reflectance::Fresnel(super::particles::fresnel(ICE_INDEX)),
+            divergence_mrad * 1e-3,
+        );
         Snow {
             rate_mm_h,
             divergence_mrad,
             empty_slots,
+            preset: None,
             alpha: extinction_per_m(rate_mm_h),
             particles: Particles::new(n0, lambda, D_MAX_MM, ICE_INDEX, divergence_mrad * 1e-3),
+            population: Arc::new(population),
         }
     }
 
@@ -90,9 +137,14 @@ impl Snow {
         self.alpha
     }
 
-    /// The flake population.
+    /// The flake population (size law; LISA's Fresnel echo rule).
     pub fn particles(&self) -> &Particles {
         &self.particles
+    }
+
+    /// The flake population as sampled (detectable flakes only).
+    pub fn population(&self) -> &Population {
+        &self.population
     }
 }
 
@@ -102,18 +154,30 @@ impl NoiseStage for Snow {
     }
 
     fn describe(&self) -> String {
+        let preset = match self.preset {
+            Some(p) => format!(" (Hahner's {p} preset)"),
+            None => String::new(),
+        };
         format!(
-            "snowfall {} mm/h: alpha = {:.5} 1/m, {:.0} flakes/m^3 above 0.05 mm, echoes in a {} mrad beam",
-            self.rate_mm_h, self.alpha, self.particles.per_m3, self.divergence_mrad
+            "snowfall {} mm/h water equivalent{preset}: alpha = {:.5} 1/m, {:.0} flakes/m^3 above 0.05 mm, echoes in a {} mrad beam",
+            self.rate_mm_h, self.alpha, self.population.per_m3, self.divergence_mrad
         )
     }
 
     fn settings(&self) -> Vec<(&'static str, Value)> {
-        vec![
+        // The preset is printed with its converted rate; the two agree, which build
+        // accepts, so a printed configuration reruns the same.
+        let mut v = Vec::new();
+        v.extend([
             ("rate_mm_h", float(self.rate_mm_h)),
+            (
+                "preset",
+                Value::String(self.preset.unwrap_or("none").into()),
+            ),
             ("divergence_mrad", float(self.divergence_mrad)),
             ("empty_slots", Value::Boolean(self.empty_slots)),
-        ]
+        ]);
+        v
     }
 
     fn proposes_echoes(&self) -> bool {
@@ -130,7 +194,13 @@ impl NoiseStage for Snow {
                 *power *= (-two_alpha * f64::from(range)).exp();
             }
         }
-        propose_particle_echoes(frame, rng, &self.particles, self.alpha, self.empty_slots);
+        super::particles::propose_population_echoes(
+            frame,
+            rng,
+            &self.population,
+            self.alpha,
+            self.empty_slots,
+        );
     }
 }
 
@@ -191,31 +261,56 @@ pub fn propose_particle_echoes(
 
 /// Reads the options of a `snow` entry.
 pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
-    if !opts.has("rate_mm_h") {
-        return Err(opts.missing("rate_mm_h"));
-    }
-    let rate = number(opts, "rate_mm_h", 0.0, 0.0, 100.0)?;
-    if rate > 10.0 {
+    let preset = match opts.choice("preset", &["none", "light", "moderate", "heavy"])? {
+        Some(name) if name != "none" => {
+            let p = PRESETS.iter().find(|p| p.0 == name);
+            if let (Some(&(_, s, v)), Some(rate)) = (p, opts.f64("rate_mm_h")?) {
+                // Both only as a printed configuration writes them: the same rate.
+                let want = water_equivalent_mm_h(s, v);
+                if (rate - want).abs() > 1e-9 * want {
+                    return Err(opts.error(
+                        "preset",
+                        format!(
+                            "give either preset or rate_mm_h ({name} is {want} mm/h), not both"
+                        ),
+                    ));
+                }
+            }
+            p
+        }
+        _ => {
+            if !opts.has("rate_mm_h") {
+                return Err(opts.missing("rate_mm_h"));
+            }
+            None
+        }
+    };
+    let rate = match preset {
+        Some(&(_, s, v)) => water_equivalent_mm_h(s, v),
+        None => number(opts, "rate_mm_h", 0.0, 0.0, 100.0)?,
+    };
+    if preset.is_none() && rate > 40.0 {
         opts.warn(
             "rate_mm_h",
-            format!(
-                "{rate} mm/h of water-equivalent snowfall is far beyond heavy snow (> 2.5 mm/h)"
-            ),
+            format!("{rate} mm/h water equivalent is beyond Hahner's heavy preset (35 mm/h)"),
         );
     }
     let divergence_mrad = number(opts, "divergence_mrad", 3.0, 0.01, 100.0)?;
     let empty_slots = super::bool_option(opts, "empty_slots", true)?;
-    Ok(Arc::new(Snow::new(rate, divergence_mrad, empty_slots)))
+    let mut snow = Snow::new(rate, divergence_mrad, empty_slots);
+    snow.preset = preset.map(|p| p.0);
+    Ok(Arc::new(snow))
 }
 
 /// The registry entry of this stage.
 pub const KIND: StageKind = StageKind {
     name: NAME,
     factor: "11 weather (snow)",
-    model: "Gunn-Marshall flakes N0 = 7.6e3 R^-0.87, Lambda = 2.55 R^-0.48 /mm; alpha = pi N0/Lambda^3 (Q_ext = 2), P exp(-2 alpha R); flake echoes by LISA's Monte Carlo in a 3 mrad cone, proposed to the firing slot",
-    source: "Kilic et al. 2021 (LISA, snow mode); Gunn and Marshall 1958; pdiagram-models.md 11 snow",
+    model: "Gunn-Marshall flakes N0 = 7.6e3 R^-0.87, Lambda = 2.55 R^-0.48 /mm (R water equivalent); alpha = pi N0/Lambda^3 (Q_ext = 2), P exp(-2 alpha R); flake echoes with Fresnel reflectance x area (geometric optics, LISA), detectable flakes only, in a 3 mrad cone, proposed to the firing slot",
+    source: "Gunn and Marshall 1958; Kilic et al. 2021 (LISA, snow mode); Hahner et al. CVPR 2022 (presets, snowfall-rate conversion); pdiagram-models.md 11 snow",
     options: &[
-        OptionSpec { name: "rate_mm_h", unit: "mm/h", default: "required", doc: "snowfall rate, water equivalent (light < 1, moderate 1-2.5, heavy > 2.5)" },
+        OptionSpec { name: "rate_mm_h", unit: "mm/h", default: "required (or preset)", doc: "water-equivalent (melted) precipitation rate R of the Gunn-Marshall law; not Hahner's snowfall rate (see preset)" },
+        OptionSpec { name: "preset", unit: "-", default: "\"none\"", doc: "Hahner et al. 2022: \"light\" (snowfall 0.5 mm/h at 2.0 m/s: R = 2.24), \"moderate\" (1.0 at 1.6: R = 8.85), \"heavy\" (2.5 at 1.6: R = 34.97); R = (S/(487 0.1 0.003 v_t))^1.5; instead of rate_mm_h; \"none\" (default): rate_mm_h" },
         OptionSpec { name: "divergence_mrad", unit: "mrad", default: "3", doc: "full beam divergence of the Monte Carlo cone" },
         OptionSpec { name: "empty_slots", unit: "-", default: "true", doc: "flake echoes also in firing slots without a return" },
     ],

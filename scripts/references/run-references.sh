@@ -16,6 +16,7 @@
 # directory outside it and imported from there. LISA's Mie library is rebuilt there from
 # its mie.c with its own Makefile (falls back to the shipped mie.so if that fails).
 set -euo pipefail
+export PYTHONDONTWRITEBYTECODE=1  # no __pycache__ in the tree
 cd "$(dirname "$0")/../.."
 invocation="scripts/references/run-references.sh $*"
 fog_src=$1 lisa_src=$2 py=$3 sample=${4:-0}

@@ -93,6 +93,7 @@ def main():
         label = res[:, 4]
         r_new = np.linalg.norm(res[:, :3], axis=1)
         kept = label == 2
+        # returns LISA's link budget loses without any rain (our computation, same formula)
         clear_lost = int((pc[:, 3] / r_clean ** 2 < pmin).sum())
         row = {
             "rate_mm_h": rate, "alpha_per_m": float(alpha), "beta_per_m": float(beta),
@@ -119,8 +120,11 @@ def main():
         r_new = np.linalg.norm(res[:, :3], axis=1)
         kept = r_new > 0
         alpha = 0.01 * rate ** 0.6
+        pmin_msu = 0.9 * lisa.rmax ** -2 / math.pi  # msu_rain's own threshold
         row = {"rate_mm_h": rate, "alpha_per_m": alpha,
                "lost_pct": round(100.0 * float((~kept).sum()) / n, 3),
+               "lost_in_clear_air_pct": round(
+                   100.0 * float((pc[:, 3] / r_clean ** 2 <= pmin_msu).sum()) / n, 3),
                "range_sd_20_30_m": band_sd(r_clean, r_new, kept),
                "max_range_10pct_lisa_budget_m": max_range(0.1, alpha, 1.0,
                                                           0.9 * lisa.rmax ** -2 / math.pi),

@@ -136,7 +136,7 @@ class Measured:
             self.summary = json.load(f)
         self.n_in = self.summary["totals"]["noise"]["returns_in"]
         self.frames = self.summary["totals"]["noise"]["frames"]
-        self.rows = []  # (key, fate, cause, range, range_clean, power, intensity)
+        self.rows = []  # (key, fate, cause, range, range_clean, power, intensity, ring)
         for name in sorted(os.listdir(folder)):
             if not name.endswith(".ply"):
                 continue
@@ -144,7 +144,8 @@ class Measured:
             for i in range(len(c["x"])):
                 k = (name, c["laser"][i], round(c["time"][i] * 1e7))
                 self.rows.append((k, c["fate"][i], c["cause"][i], c["range"][i],
-                                  c["range_clean"][i], c["power"][i], c["intensity"][i]))
+                                  c["range_clean"][i], c["power"][i], c["intensity"][i],
+                                  c["ring"][i]))
         self.clean = clean
 
     def share(self, fates):
@@ -154,6 +155,14 @@ class Measured:
     def echo_ranges(self):
         """Ranges of the spurious echoes (replaced or added)."""
         return sorted(r[3] for r in self.rows if r[1] in (4, 5))
+
+    def echo_profile(self):
+        """(median intensity byte, % in the lower 16 rings) of the spurious echoes."""
+        e = [r for r in self.rows if r[1] in (4, 5)]
+        if not e:
+            return None
+        return (statistics.median(r[6] for r in e),
+                100.0 * sum(1 for r in e if r[7] < 16) / len(e))
 
     def kept(self, lo=0.0, hi=1e9):
         """Kept returns whose clean range is in [lo, hi)."""
@@ -426,6 +435,12 @@ def build(rep, r, base, refs):
                 f"median echo range {fmt(med, 2, ' m')}",
                 compare(rep_pct, ref["fog_share_pct"] if ref else None, rel=0.5, abs_=1.0,
                         unit=" pp"))
+        prof, hi_ = m.echo_profile(), (ref or {}).get("fog_intensity")
+        if prof and ref and hi_:
+            rep.row(f"V = {vs}: fog echoes' median intensity byte; share in the lower 16 rings",
+                    "Hahner `simulate_fog` (its echo intensity scales the recorded byte)",
+                    f"{hi_['p50']:.0f}; {ref['fog_rings_lower_half_pct']:.0f} %",
+                    f"{prof[0]:.0f}; {prof[1]:.0f} %", "-")
         rep.row(f"V = {vs}: extinction read from power (1/m)", "ln(20) / V (Koschmieder, "
                 "5 % contrast)", f"{math.log(20) / v:.4g}", fmt(m.alpha_eff(), 4),
                 compare(m.alpha_eff(), math.log(20) / v, rel=0.05, abs_=0.0))

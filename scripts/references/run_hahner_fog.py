@@ -69,6 +69,11 @@ def main():
                 "beta_used": float(p.beta),
                 "fog_points": k, "fog_share_pct": round(100.0 * k / n, 3),
                 "fog_range_m": quantiles(r),
+                # the echoes' intensity (same scale as the input byte: Hahner scales the
+                # fog response by the original intensity) and their rings (5th feature)
+                "fog_intensity": quantiles(fog[:, 3]) if fog is not None else None,
+                "fog_rings_lower_half_pct": (round(100.0 * float((fog[:, 4] < 16).sum())
+                                                   / len(fog), 2) if fog is not None else None),
                 "fog_range_hist_m": {f"{a}-{b}": int(((r >= a) & (r < b)).sum())
                                      for a, b in [(0, 2), (2, 5), (5, 10), (10, 20),
                                                   (20, 50), (50, 1000)]},

@@ -1,25 +1,26 @@
 #!/usr/bin/env python3
-"""Prints a configuration with the rain stage switched to physical (Mie) rain.
+"""Prints a configuration with the rain stage's model set explicitly.
 
-Usage: mie_config.py CONFIG > OUT.toml
-In every `[[noise]]` block whose type is "rain": any `model = ...` line and the
-`range_noise = ...` line (Goodin's Eq. 9 choice) are removed and `model = "mie"` is added,
-so the rain's other options (rate, backscatter) stay and its range noise is the mie
-model's default. Everything else is copied as it is (comments included).
+Usage: mie_config.py CONFIG [mie|goodin] > OUT.toml   (default mie)
+In every `[[noise]]` block whose type is "rain": any `model = ...` line is removed and
+`model = "<MODEL>"` is added; for mie the `range_noise = ...` line (Goodin's Eq. 9 choice)
+is removed too, so the range noise is the mie model's default. The rain's other options
+(rate, backscatter) and everything else are copied as they are (comments included).
 """
 import re
 import sys
 
 
-def main(path):
+def main(path, model="mie"):
     lines = open(path).read().split("\n")
     out, block, is_rain = [], [], False
 
     def flush():
         if is_rain:
-            kept = [x for x in block if not re.match(r"\s*(model|range_noise)\s*=", x)]
+            drop = r"\s*(model|range_noise)\s*=" if model == "mie" else r"\s*model\s*="
+            kept = [x for x in block if not re.match(drop, x)]
             at = next(i for i, x in enumerate(kept) if re.match(r'\s*type\s*=\s*"rain"', x))
-            kept.insert(at + 1, 'model = "mie"    # written by scripts/make-study-mie.sh')
+            kept.insert(at + 1, f'model = "{model}"    # written by scripts/make-study-mie.sh')
             out.extend(kept)
         else:
             out.extend(block)
@@ -36,4 +37,4 @@ def main(path):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    main(*sys.argv[1:3])

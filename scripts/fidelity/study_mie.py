@@ -70,6 +70,8 @@ def main():
       "parking fixtures, five randomized street scenes (synth seeds 7001-7005), the shared "
       "real capture; noise seeds 1..3.")
     p()
+    if os.environ.get("LIDAR_NOISE_BIN"):
+        rev = f"binary {os.environ['LIDAR_NOISE_BIN']}, scripts at {rev}"
     p(f"- Build `{rev}`, generated "
       f"{datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M')} UTC; "
       "wall time per rain model: "

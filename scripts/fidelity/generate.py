@@ -20,6 +20,7 @@ import datetime
 import json
 import math
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -298,13 +299,20 @@ class Report:
             kind = "no verdict"
         t = self.tally[-1][1]
         t[kind] = t.get(kind, 0) + 1
+        if kind == "deviate/fail":
+            name = re.sub(r" \(build[^)]*\)", "", q).split(";")[0].split(": bytes")[0]
+            t.setdefault("_which", []).append(re.sub(r" \([^)]*\)$", "", name))
 
     def summary(self):
         """One line per section: how many rows agree, deviate, are not available."""
         out = ["", "## Standing in one line per stage", ""]
         for title, t in self.tally:
+            which = t.pop("_which", [])
             parts = ", ".join(f"{n} {k}" for k, n in sorted(t.items()))
-            out.append(f"- {title}: {parts or 'no rows'}.")
+            line = f"- {title}: {parts or 'no rows'}."
+            if which:
+                line += " Deviating: " + "; ".join(which) + "."
+            out.append(line)
         return out
 
     def note(self, text):

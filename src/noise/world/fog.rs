@@ -499,15 +499,20 @@ pub const HDL32E_APERTURE_MM: f64 = 25.0;
 /// Distance between the two optical axes (mm): not published; estimated.
 pub const HDL32E_SEPARATION_MM: f64 = 30.0;
 
-/// The default overlap: the biaxial geometry of the HDL-32E.
-pub fn hdl32e_overlap() -> Overlap {
-    Overlap::Biaxial(Biaxial {
+/// The biaxial optics of the HDL-32E (the constants above).
+pub fn hdl32e_optics() -> Biaxial {
+    Biaxial {
         separation_m: HDL32E_SEPARATION_MM * 1e-3,
         tx_radius_m: HDL32E_APERTURE_MM * 0.5e-3,
         rx_radius_m: HDL32E_APERTURE_MM * 0.5e-3,
         divergence_rad: HDL32E_DIVERGENCE_MRAD * 1e-3,
         fov_rad: HDL32E_FOV_MRAD * 1e-3,
-    })
+    }
+}
+
+/// The default overlap: the biaxial geometry of the HDL-32E.
+pub fn hdl32e_overlap() -> Overlap {
+    Overlap::Biaxial(hdl32e_optics())
 }
 
 /// The fog stage.

@@ -255,11 +255,18 @@ struct SizeBin {
 /// drawing every particle in the cone and keeping the detectable ones (tested against
 /// that brute force), at a cost of one uniform per beam.
 ///
-/// Draw pattern: one uniform per lit beam, whatever its range; three per particle drawn.
+/// Draw pattern: one uniform per lit beam, whatever its range; three per particle drawn,
+/// and with [`Population::optics`] one more per particle bright enough to be detected.
 #[derive(Clone, Debug)]
 pub struct Population {
     /// tan of the full beam divergence.
     pub tan_divergence: f64,
+    /// The sensor's transmitter/receiver optics, when set: the beam starts at the exit
+    /// aperture's width (not at a point, as in LISA's cone), and a particle's echo is
+    /// seen only where the particle lies in the receiver's field of view, which at range
+    /// r covers the share xi(r) of the beam (the overlap of the fog stage). `None` keeps
+    /// LISA's cone and a receiver that sees every particle.
+    pub optics: Option<super::fog::Biaxial>,
     /// Particles per m^3 between the size limits.
     pub per_m3: f64,
     reflectance: Reflectance,
@@ -323,10 +330,21 @@ impl Population {
         }
         Population {
             tan_divergence: divergence_rad.tan(),
+            optics: None,
             per_m3: bins.iter().map(|b| b.per_m3).sum(),
             reflectance,
             bins,
         }
+    }
+
+    /// The population seen through `optics` (see [`Population::optics`]); the beam's
+    /// divergence stays the population's own.
+    pub fn with_optics(mut self, optics: super::fog::Biaxial) -> Self {
+        self.optics = Some(super::fog::Biaxial {
+            divergence_rad: 2.0 * (self.tan_divergence / 2.0).atan().max(0.0),
+            ..optics
+        });
+        self
     }
 
     /// True when no particle is ever drawn.
@@ -334,10 +352,16 @@ impl Population {
         self.per_m3 <= 0.0
     }
 
-    /// Power of the echo of a particle of `d_mm` at `r` m (see [`Reflectance`]).
+    /// Power of the echo of a particle of `d_mm` at `r` m (see [`Reflectance`]), before
+    /// the receiver's field of view is taken into account.
     #[inline]
     pub fn power(&self, r: f64, d_mm: f64, alpha: f64, kappa_m2: f64) -> f64 {
-        let db = r * self.tan_divergence;
+        // Beam diameter: from the exit aperture with the sensor's optics (never narrower
+        // than the cone, so the bounds of `prepare` still hold), else LISA's cone.
+        let db = match &self.optics {
+            Some(o) => 2.0 * o.beam_radius(r),
+            None => r * self.tan_divergence,
+        };
         let share = ((d_mm * 1e-3) / db).powi(2).min(1.0);
         kappa_m2 * self.reflectance.at(d_mm) * (-2.0 * alpha * r).exp() * share / (r * r)
     }
@@ -471,12 +495,21 @@ impl Population {
             let top = range.min(p.r_b[bin]);
             let r = (lo3 + c * (top * top * top - lo3)).cbrt();
             let pw = self.power(r, d, alpha, p.kappa);
-            if pw >= p.threshold {
-                out(Echo {
-                    range: r as f32,
-                    power: pw,
-                });
+            if pw < p.threshold {
+                continue;
             }
+            // In the receiver's field with probability xi(r) (one more draw, made only for
+            // a particle bright enough to be detected).
+            if let Some(o) = &self.optics {
+                let v: f64 = rng.random();
+                if v >= o.overlap(r) {
+                    continue;
+                }
+            }
+            out(Echo {
+                range: r as f32,
+                power: pw,
+            });
         }
     }
 }
@@ -602,6 +635,13 @@ mod population_tests {
                 let d = d0 - (1.0 - b * tail).ln() / l;
                 let p = pop.power(r, d, 0.0, 100.0);
                 if r >= MIN_RANGE_M && p >= th {
+                    // Through the optics: in the receiver's field with probability xi(r).
+                    if let Some(o) = &pop.optics {
+                        let v: f64 = rng.random();
+                        if v >= o.overlap(r) {
+                            continue;
+                        }
+                    }
                     add(&mut s, r, p);
                 }
             }
@@ -691,6 +731,36 @@ mod population_tests {
             3e-3,
         );
         compare(&pop, 8000.0, l, 1e-4);
+    }
+
+    #[test]
+    fn detectable_sampling_matches_brute_force_through_the_hdl32e_optics() {
+        // A heavier rain, so that enough drops pass the exit aperture's wider beam and the
+        // receiver's field for the comparison.
+        let rate: f64 = 50.0;
+        let l = 4.1 * rate.powf(-0.21);
+        let pop = Population::new(
+            &Dsd::MarshallPalmer { rate_mm_h: rate },
+            D_MIN_MM,
+            6.0,
+            Reflectance::Mie {
+                table: mie::water_905(),
+                wavelength_m: mie::WAVELENGTH_905_M,
+            },
+            3e-3,
+        )
+        .with_optics(super::super::fog::hdl32e_optics());
+        compare(&pop, 8000.0, l, 1e-5);
+        // The optics only remove or weaken echoes: fewer than through LISA's cone.
+        let cone = Population {
+            optics: None,
+            ..pop.clone()
+        };
+        let (a, b) = (
+            fast(&pop, 8.0, 1e-4, 20_000),
+            fast(&cone, 8.0, 1e-4, 20_000),
+        );
+        assert!(a[0] < 0.5 * b[0], "{} vs {}", a[0], b[0]);
     }
 
     #[test]

@@ -249,7 +249,10 @@ impl Rain {
                 wavelength_m: mie::WAVELENGTH_905_M,
             },
             divergence_mrad * 1e-3,
-        );
+        )
+        // The HDL-32E's exit aperture and receiver field (the fog stage's overlap): the
+        // near drops LISA's point cone lights brightly are mostly outside the field.
+        .with_optics(super::fog::hdl32e_optics());
         self.mie_drops = Some(Arc::new(MieDrops {
             divergence_mrad,
             empty_slots,

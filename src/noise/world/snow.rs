@@ -120,7 +120,9 @@ impl Snow {
             D_MAX_MM,
             Reflectance::Fresnel(super::particles::fresnel(ICE_INDEX)),
             divergence_mrad * 1e-3,
-        );
+        )
+        // The HDL-32E's exit aperture and receiver field, as for rain drops.
+        .with_optics(super::fog::hdl32e_optics());
         Snow {
             rate_mm_h,
             divergence_mrad,

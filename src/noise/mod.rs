@@ -20,6 +20,38 @@
 //! stage (say, the occlusion) leaves the rain draws unchanged, so "rain alone" and
 //! "rain + occlusion" use common random numbers. Because every frame has its own stream,
 //! frames can be processed in any order on any number of threads with identical results.
+//!
+//! # Intensity
+//! One rule sets the intensity byte the sensor reports, applied once after the chain
+//! (stages, spurious echoes resolved, detection filters) by
+//! [`NoisyFrame::apply_intensity_rule`]:
+//! - a return's own echo (fate [`Fate::Kept`]) reports
+//!   I' = clamp(round(I g P / P_i), 0, 255), with I the recorded byte, P_i its ideal
+//!   power (see [`power`]), P its power after every stage and g the product of the
+//!   receivers' `gain_error` (a factor on the byte alone, not on the power). Every
+//!   attenuating stage (fog, rain, snow, lens damage, occlusion with a transmission,
+//!   emitter, laser-diode and receiver gains, a mixed pixel's own share) only multiplies
+//!   `power`, so the byte sees the product of all losses, rounded once.
+//! - In reflectivity mode the firmware turns the raw level into reflectivity with a
+//!   range compensation calibrated in clear air (the recorded byte already carries it):
+//!   the compensation stays, and what the atmosphere and the optics take from the echo
+//!   shows as a lower reflectivity (Filgueira et al., Measurement 95, 2017: HDL-32E
+//!   intensity falls with the rain rate). In raw mode the level is proportional to the
+//!   received power of an unsaturated linear receiver, so a loss factor f on the power
+//!   is a factor f on the level: the same factor in both modes. The compensation is
+//!   that of the recorded range (a range noise of centimetres changes it by well under
+//!   one byte).
+//! - Spurious echoes (fates [`Fate::Replaced`], [`Fate::Added`]: fog, drops, flakes,
+//!   crosstalk, spoofing, multipath mixtures, EMI, scattered beams) keep the intensity
+//!   their stage or [`IdealPower::intensity_of`] gave them from their own power.
+//! - Saturation: the ideal power is clamped at 1 (a bound of the power model, reached
+//!   within about 10 m of a white target), and stages multiply the clamped value, so
+//!   P / P_i is still exactly the product of the loss factors and the byte is scaled by
+//!   it. This treats the byte as the linear reflectivity the firmware reports
+//!   (including retro-reflectors above 100) rather than modelling a receiver that hides
+//!   a loss until the echo falls below saturation, which the capture cannot tell us.
+//! - At zero strength every stage leaves P = P_i bit for bit and g = 1, so every byte
+//!   is the recorded one and no intensity column is made (same output bytes).
 
 pub mod detection;
 pub mod power;
@@ -310,6 +342,9 @@ pub struct Moved {
     pub time_stretch: Vec<TimeStretch>,
     /// Reported intensity byte.
     pub intensity: Option<Vec<u8>>,
+    /// Product of the receivers' gain errors on the intensity byte (`None` = 1), applied
+    /// by the intensity rule ([`NoisyFrame::apply_intensity_rule`]).
+    pub intensity_gain: Option<f64>,
 }
 
 /// The affine map t -> t0 + (t - t0) scale + offset of the reported firing times of the
@@ -442,6 +477,48 @@ impl NoisyFrame {
     #[inline]
     pub fn detectable(&self, range: f32, power: f64) -> bool {
         power >= self.threshold && f64::from(range) >= self.min_range
+    }
+
+    /// The intensity rule (module documentation, "Intensity"): every kept return reports
+    /// its recorded byte times g P / P_i, rounded once and clamped to the byte, where
+    /// `ideal` holds each return's ideal power P_i (the powers the frame started with)
+    /// and g is [`Moved::intensity_gain`]; spurious and dropped returns are left alone.
+    /// The intensity column is made only when some byte changes.
+    ///
+    /// One pass over the returns: the fates, the powers, `ideal` and the bytes (from the
+    /// layout when built, which is 1 byte per return against 48 for `clean`).
+    pub fn apply_intensity_rule(&mut self, ideal: &[f64]) {
+        let g = self.moved.intensity_gain.unwrap_or(1.0);
+        let n = ideal.len().min(self.clean_len);
+        let layout = self.layout.clone().filter(|l| l.len() == self.clean.len());
+        let NoisyFrame {
+            clean,
+            power,
+            fate,
+            moved,
+            ..
+        } = self;
+        for i in 0..n {
+            if fate[i] != Fate::Kept {
+                continue;
+            }
+            let p0 = ideal[i];
+            // A zero ideal power (reflectance floor 0 and byte 0) has byte 0 whatever f.
+            let f = if p0 > 0.0 { g * (power[i] / p0) } else { g };
+            let v0 = layout
+                .as_ref()
+                .map_or(clean[i].intensity, |l| l.intensity[i]);
+            let v = sensor::scale_byte(v0, f);
+            match &mut moved.intensity {
+                Some(col) => col[i] = v,
+                None if v != v0 => {
+                    let mut col: Vec<u8> = clean.iter().map(|r| r.intensity).collect();
+                    col[i] = v;
+                    moved.intensity = Some(col);
+                }
+                None => {}
+            }
+        }
     }
 
     /// Number of returns (clean and noisy alike).
@@ -790,6 +867,12 @@ impl NoiseChain {
         noisy.threshold = self.detection.min_power;
         noisy.min_range = self.detection.min_range_m;
         noisy.power_model = Some(Arc::clone(&self.power));
+        // The ideal powers, for the intensity rule after the chain (no stage, no change).
+        let ideal = if self.stages.is_empty() {
+            Vec::new()
+        } else {
+            noisy.power.clone()
+        };
         for (i, (stage, &tag)) in self.stages.iter().zip(&self.tags).enumerate() {
             // Chains are far shorter than 255 stages (checked when the config is read).
             noisy.stage = i.min(usize::from(NO_CAUSE) - 1) as u8;
@@ -799,6 +882,7 @@ impl NoiseChain {
         // Every stage's echoes compete once, per firing slot, with the return-mode rule.
         spurious::resolve(&mut noisy);
         apply_detection(&mut noisy, &self.detection);
+        noisy.apply_intensity_rule(&ideal);
         noisy
     }
 

@@ -10,12 +10,14 @@
 //! background level, so that "a floor of k times the threshold" drops exactly the
 //! returns with P' < (1 + k) p_th when `sigma_noise = 0`. Range noise:
 //! R' = R + N(0, s_R^2), s_R = range_noise_m / sqrt(2 * SNR), SNR = P'/p_th (LISA).
-//! Intensity: I' = clamp(round(gain_error * I), 0, 255). Saturation and walk are not
-//! modelled. Source: LISA (velatkilic/LISA, dR = 0.09 m); gains and floor: engineering
+//! Intensity: the power factors show in the byte through the chain's intensity rule
+//! (`noise`, "Intensity"), and `gain_error` multiplies the byte alone there
+//! (I' = clamp(round(gain_error * I * P / P_i), 0, 255), rounded once). Saturation and
+//! walk are not modelled. Source: LISA (velatkilic/LISA, dR = 0.09 m); gains and floor: engineering
 //! assumption. Frame stream: two normal draws per return when the corresponding sigma
 //! is non-zero.
 
-use super::{fill_normals, float, normal, number, scale_byte, sigma, CHUNK};
+use super::{fill_normals, float, normal, number, sigma, CHUNK};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -173,15 +175,10 @@ impl NoiseStage for Receiver {
             }
         }
         if self.gain_error != 1.0 {
-            let g = self.gain_error;
-            let lay = frame.layout();
-            let v = frame
-                .moved
-                .intensity
-                .get_or_insert_with(|| lay.intensity.clone());
-            for x in v.iter_mut() {
-                *x = scale_byte(*x, g);
-            }
+            // A factor on the byte alone, applied with the power losses by the chain's
+            // intensity rule (rounded once; see `noise`, "Intensity").
+            let g = frame.moved.intensity_gain.unwrap_or(1.0) * self.gain_error;
+            frame.moved.intensity_gain = Some(g);
         }
     }
 }

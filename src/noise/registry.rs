@@ -167,7 +167,7 @@ mod listing_tests {
                     k.name
                 );
             }
-            if !matches!(k.name, "occlusion" | "laser_diode" | "rain") {
+            if !matches!(k.name, "occlusion" | "laser_diode" | "rain" | "crosstalk") {
                 let set: Vec<&str> = config.noise[0]
                     .settings
                     .iter()

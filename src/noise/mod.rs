@@ -410,6 +410,24 @@ impl NoisyFrame {
         NoisyFrame::of_parts(index, clean, range, power, None)
     }
 
+    /// Same as [`NoisyFrame::new`], also returning the recorded intensity bytes, read in
+    /// the same pass (for the intensity rule).
+    fn new_keeping_bytes(index: u32, clean: Vec<Return>, ideal: &IdealPower) -> (Self, Vec<u8>) {
+        let n = clean.len();
+        let mut range = Vec::with_capacity(n);
+        let mut power = Vec::with_capacity(n);
+        let mut bytes = Vec::with_capacity(n);
+        for r in &clean {
+            range.push(r.range);
+            power.push(ideal.power(r.intensity, r.range));
+            bytes.push(r.intensity);
+        }
+        (
+            NoisyFrame::of_parts(index, clean, range, power, None),
+            bytes,
+        )
+    }
+
     /// Same as [`NoisyFrame::new`] with its [`Layout`] built in the same pass over the
     /// returns (for chains whose stages read it: a 50k-return frame's returns are
     /// 2.4 MB, and the three passes of `new` and `Layout::of` each streamed them).
@@ -490,9 +508,23 @@ impl NoisyFrame {
     /// return against 48 in `clean`); a first pass to find whether anything changes, then
     /// a copy of the bytes, read `clean` twice and cost twice as much.
     pub fn apply_intensity_rule(&mut self, ideal: &[f64]) {
-        let g = self.moved.intensity_gain.unwrap_or(1.0);
         let n = ideal.len().min(self.clean_len);
-        let layout = self.layout.clone().filter(|l| l.len() == self.clean.len());
+        // The recorded bytes (a copy from the layout, or one strided read of `clean`).
+        let recorded = match self.layout.as_ref().filter(|l| l.len() >= n) {
+            Some(l) => l.intensity[..n].to_vec(),
+            None => self.clean[..n].iter().map(|r| r.intensity).collect(),
+        };
+        self.intensity_rule_on(ideal, recorded);
+    }
+
+    /// [`NoisyFrame::apply_intensity_rule`] with the recorded bytes of the first
+    /// `ideal.len()` returns given (and reused as the intensity column): the chain reads
+    /// them in the pass that computes the ideal powers, where the returns are in cache,
+    /// rather than once more from the 48-byte returns at the end.
+    fn intensity_rule_on(&mut self, ideal: &[f64], mut col: Vec<u8>) {
+        let g = self.moved.intensity_gain.unwrap_or(1.0);
+        let n = ideal.len().min(self.clean_len).min(col.len());
+        col.truncate(n);
         let NoisyFrame {
             clean,
             power,
@@ -500,12 +532,7 @@ impl NoisyFrame {
             moved,
             ..
         } = self;
-        // The recorded bytes first (a copy from the layout, or one strided read of
-        // `clean`), then the rule in place, free of branches so it vectorises.
-        let mut col: Vec<u8> = match &layout {
-            Some(l) => l.intensity.clone(),
-            None => clean.iter().map(|r| r.intensity).collect(),
-        };
+        // The rule in place on the recorded bytes, free of branches so it vectorises.
         let existing = moved.intensity.as_deref();
         // The rule's byte of return i whose recorded byte is `v`, or `cur` unless kept.
         let byte = |v: u8, p: f64, p0: f64, fate: Fate, cur: u8| {
@@ -541,9 +568,7 @@ impl NoisyFrame {
             return;
         }
         // Returns past the ideal powers (added by stages) keep their bytes.
-        if let Some(c) = existing {
-            col[n..].copy_from_slice(&c[n..]);
-        }
+        col.extend((n..clean.len()).map(|i| existing.map_or(clean[i].intensity, |c| c[i])));
         moved.intensity = Some(col);
     }
 
@@ -896,10 +921,15 @@ impl NoiseChain {
 
     /// Runs the chain on returns of the frame with capture index `index`.
     pub fn process_returns(&self, index: u32, returns: Vec<Return>) -> NoisyFrame {
-        let mut noisy = if self.layout {
-            NoisyFrame::with_layout(index, returns, &self.power)
+        // The recorded bytes for the intensity rule: read with the ideal powers when
+        // no layout (which holds them) is built.
+        let (mut noisy, recorded) = if self.layout {
+            (NoisyFrame::with_layout(index, returns, &self.power), None)
+        } else if self.stages.is_empty() {
+            (NoisyFrame::new(index, returns, &self.power), None)
         } else {
-            NoisyFrame::new(index, returns, &self.power)
+            let (f, b) = NoisyFrame::new_keeping_bytes(index, returns, &self.power);
+            (f, Some(b))
         };
         noisy.threshold = self.detection.min_power;
         noisy.min_range = self.detection.min_range_m;
@@ -919,7 +949,12 @@ impl NoiseChain {
         // Every stage's echoes compete once, per firing slot, with the return-mode rule.
         spurious::resolve(&mut noisy);
         apply_detection(&mut noisy, &self.detection);
-        noisy.apply_intensity_rule(&ideal);
+        if !self.stages.is_empty() {
+            match recorded {
+                Some(bytes) => noisy.intensity_rule_on(&ideal, bytes),
+                None => noisy.apply_intensity_rule(&ideal),
+            }
+        }
         noisy
     }
 

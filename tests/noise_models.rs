@@ -278,8 +278,9 @@ fn partial_transmission_scales_power_only() {
     for i in 0..out.len() {
         assert_eq!(out.fate[i], Fate::Kept);
         assert_eq!(out.range[i], clear.range[i]);
+        // One-way transmission T crossed out and back: P' = T^2 P (issue 29).
         let want = if out.clean[i].laser == 3 {
-            clear.power[i] * 0.25
+            clear.power[i] * (0.25 * 0.25)
         } else {
             clear.power[i]
         };

@@ -20,6 +20,38 @@
 //! stage (say, the occlusion) leaves the rain draws unchanged, so "rain alone" and
 //! "rain + occlusion" use common random numbers. Because every frame has its own stream,
 //! frames can be processed in any order on any number of threads with identical results.
+//!
+//! # Intensity
+//! One rule sets the intensity byte the sensor reports, applied once after the chain
+//! (stages, spurious echoes resolved, detection filters) by
+//! [`NoisyFrame::apply_intensity_rule`]:
+//! - a return's own echo (fate [`Fate::Kept`]) reports
+//!   I' = clamp(round(I g P / P_i), 0, 255), with I the recorded byte, P_i its ideal
+//!   power (see [`power`]), P its power after every stage and g the product of the
+//!   receivers' `gain_error` (a factor on the byte alone, not on the power). Every
+//!   attenuating stage (fog, rain, snow, lens damage, occlusion with a transmission,
+//!   emitter, laser-diode and receiver gains, a mixed pixel's own share) only multiplies
+//!   `power`, so the byte sees the product of all losses, rounded once.
+//! - In reflectivity mode the firmware turns the raw level into reflectivity with a
+//!   range compensation calibrated in clear air (the recorded byte already carries it):
+//!   the compensation stays, and what the atmosphere and the optics take from the echo
+//!   shows as a lower reflectivity (Filgueira et al., Measurement 95, 2017: HDL-32E
+//!   intensity falls with the rain rate). In raw mode the level is proportional to the
+//!   received power of an unsaturated linear receiver, so a loss factor f on the power
+//!   is a factor f on the level: the same factor in both modes. The compensation is
+//!   that of the recorded range (a range noise of centimetres changes it by well under
+//!   one byte).
+//! - Spurious echoes (fates [`Fate::Replaced`], [`Fate::Added`]: fog, drops, flakes,
+//!   crosstalk, spoofing, multipath mixtures, EMI, scattered beams) keep the intensity
+//!   their stage or [`IdealPower::intensity_of`] gave them from their own power.
+//! - Saturation: the ideal power is clamped at 1 (a bound of the power model, reached
+//!   within about 10 m of a white target), and stages multiply the clamped value, so
+//!   P / P_i is still exactly the product of the loss factors and the byte is scaled by
+//!   it. This treats the byte as the linear reflectivity the firmware reports
+//!   (including retro-reflectors above 100) rather than modelling a receiver that hides
+//!   a loss until the echo falls below saturation, which the capture cannot tell us.
+//! - At zero strength every stage leaves P = P_i bit for bit and g = 1, so every byte
+//!   is the recorded one and no intensity column is made (same output bytes).
 
 pub mod detection;
 pub mod power;
@@ -310,6 +342,9 @@ pub struct Moved {
     pub time_stretch: Vec<TimeStretch>,
     /// Reported intensity byte.
     pub intensity: Option<Vec<u8>>,
+    /// Product of the receivers' gain errors on the intensity byte (`None` = 1), applied
+    /// by the intensity rule ([`NoisyFrame::apply_intensity_rule`]).
+    pub intensity_gain: Option<f64>,
 }
 
 /// The affine map t -> t0 + (t - t0) scale + offset of the reported firing times of the
@@ -373,6 +408,24 @@ impl NoisyFrame {
             .map(|r| ideal.power(r.intensity, r.range))
             .collect();
         NoisyFrame::of_parts(index, clean, range, power, None)
+    }
+
+    /// Same as [`NoisyFrame::new`], also returning the recorded intensity bytes, read in
+    /// the same pass (for the intensity rule).
+    fn new_keeping_bytes(index: u32, clean: Vec<Return>, ideal: &IdealPower) -> (Self, Vec<u8>) {
+        let n = clean.len();
+        let mut range = Vec::with_capacity(n);
+        let mut power = Vec::with_capacity(n);
+        let mut bytes = Vec::with_capacity(n);
+        for r in &clean {
+            range.push(r.range);
+            power.push(ideal.power(r.intensity, r.range));
+            bytes.push(r.intensity);
+        }
+        (
+            NoisyFrame::of_parts(index, clean, range, power, None),
+            bytes,
+        )
     }
 
     /// Same as [`NoisyFrame::new`] with its [`Layout`] built in the same pass over the
@@ -442,6 +495,81 @@ impl NoisyFrame {
     #[inline]
     pub fn detectable(&self, range: f32, power: f64) -> bool {
         power >= self.threshold && f64::from(range) >= self.min_range
+    }
+
+    /// The intensity rule (module documentation, "Intensity"): every kept return reports
+    /// its recorded byte times g P / P_i, rounded once and clamped to the byte, where
+    /// `ideal` holds each return's ideal power P_i (the powers the frame started with)
+    /// and g is [`Moved::intensity_gain`]; spurious and dropped returns keep their byte.
+    /// The intensity column is kept only when some byte changes.
+    ///
+    /// One pass over the returns that writes the whole column (50 kB for a 50k-return
+    /// frame) and reads the recorded bytes once (from the layout when built: 1 byte per
+    /// return against 48 in `clean`); a first pass to find whether anything changes, then
+    /// a copy of the bytes, read `clean` twice and cost twice as much.
+    pub fn apply_intensity_rule(&mut self, ideal: &[f64]) {
+        let n = ideal.len().min(self.clean_len);
+        // The recorded bytes (a copy from the layout, or one strided read of `clean`).
+        let recorded = match self.layout.as_ref().filter(|l| l.len() >= n) {
+            Some(l) => l.intensity[..n].to_vec(),
+            None => self.clean[..n].iter().map(|r| r.intensity).collect(),
+        };
+        self.intensity_rule_on(ideal, recorded);
+    }
+
+    /// [`NoisyFrame::apply_intensity_rule`] with the recorded bytes of the first
+    /// `ideal.len()` returns given (and reused as the intensity column): the chain reads
+    /// them in the pass that computes the ideal powers, where the returns are in cache,
+    /// rather than once more from the 48-byte returns at the end.
+    fn intensity_rule_on(&mut self, ideal: &[f64], mut col: Vec<u8>) {
+        let g = self.moved.intensity_gain.unwrap_or(1.0);
+        let n = ideal.len().min(self.clean_len).min(col.len());
+        col.truncate(n);
+        let NoisyFrame {
+            clean,
+            power,
+            fate,
+            moved,
+            ..
+        } = self;
+        // The rule in place on the recorded bytes, free of branches so it vectorises.
+        let existing = moved.intensity.as_deref();
+        // The rule's byte of return i whose recorded byte is `v`, or `cur` unless kept.
+        let byte = |v: u8, p: f64, p0: f64, fate: Fate, cur: u8| {
+            // A zero ideal power (reflectance floor 0 and byte 0) has byte 0 anyway.
+            let f = if p0 > 0.0 { g * (p / p0) } else { g };
+            let new = round_byte(f64::from(v) * f);
+            if fate == Fate::Kept {
+                new
+            } else {
+                cur
+            }
+        };
+        let mut any = false;
+        let parts = power[..n].iter().zip(&ideal[..n]).zip(&fate[..n]);
+        match existing {
+            // One loop per case, so neither tests an `Option` per return.
+            None => {
+                for (v, ((&p, &p0), &fate)) in col[..n].iter_mut().zip(parts) {
+                    let out = byte(*v, p, p0, fate, *v);
+                    any |= out != *v;
+                    *v = out;
+                }
+            }
+            Some(c) => {
+                for ((v, &cur), ((&p, &p0), &fate)) in col[..n].iter_mut().zip(c).zip(parts) {
+                    let out = byte(*v, p, p0, fate, cur);
+                    any |= out != cur;
+                    *v = out;
+                }
+            }
+        }
+        if !any {
+            return;
+        }
+        // Returns past the ideal powers (added by stages) keep their bytes.
+        col.extend((n..clean.len()).map(|i| existing.map_or(clean[i].intensity, |c| c[i])));
+        moved.intensity = Some(col);
     }
 
     /// Number of returns (clean and noisy alike).
@@ -617,6 +745,17 @@ impl<'a> View<'a> {
     }
 }
 
+/// `x` rounded half up and clamped to a byte, the value of
+/// [`sensor::scale_byte`]`(1, x)` (`round(x).clamp(0, 255)`) without its branch: the cast
+/// saturates (a negative x gives 0, NaN gives 0 and then x - t is NaN, so no step up) and
+/// `x - t` is exact for t <= 255 <= x or 0 <= x - t < 1.
+#[inline(always)]
+fn round_byte(x: f64) -> u8 {
+    let t = (x as u32).min(255);
+    let up = u32::from(x - f64::from(t) >= 0.5);
+    (t + up).min(255) as u8
+}
+
 /// `a.rem_euclid(360.0)` without the `fmod` call for the angles sensor stages produce
 /// (within one turn of [0, 360)): the same value, since `a - 360` is exact there and
 /// `a + 360` is the rounded sum `rem_euclid` also returns.
@@ -782,14 +921,25 @@ impl NoiseChain {
 
     /// Runs the chain on returns of the frame with capture index `index`.
     pub fn process_returns(&self, index: u32, returns: Vec<Return>) -> NoisyFrame {
-        let mut noisy = if self.layout {
-            NoisyFrame::with_layout(index, returns, &self.power)
+        // The recorded bytes for the intensity rule: read with the ideal powers when
+        // no layout (which holds them) is built.
+        let (mut noisy, recorded) = if self.layout {
+            (NoisyFrame::with_layout(index, returns, &self.power), None)
+        } else if self.stages.is_empty() {
+            (NoisyFrame::new(index, returns, &self.power), None)
         } else {
-            NoisyFrame::new(index, returns, &self.power)
+            let (f, b) = NoisyFrame::new_keeping_bytes(index, returns, &self.power);
+            (f, Some(b))
         };
         noisy.threshold = self.detection.min_power;
         noisy.min_range = self.detection.min_range_m;
         noisy.power_model = Some(Arc::clone(&self.power));
+        // The ideal powers, for the intensity rule after the chain (no stage, no change).
+        let ideal = if self.stages.is_empty() {
+            Vec::new()
+        } else {
+            noisy.power.clone()
+        };
         for (i, (stage, &tag)) in self.stages.iter().zip(&self.tags).enumerate() {
             // Chains are far shorter than 255 stages (checked when the config is read).
             noisy.stage = i.min(usize::from(NO_CAUSE) - 1) as u8;
@@ -799,6 +949,12 @@ impl NoiseChain {
         // Every stage's echoes compete once, per firing slot, with the return-mode rule.
         spurious::resolve(&mut noisy);
         apply_detection(&mut noisy, &self.detection);
+        if !self.stages.is_empty() {
+            match recorded {
+                Some(bytes) => noisy.intensity_rule_on(&ideal, bytes),
+                None => noisy.apply_intensity_rule(&ideal),
+            }
+        }
         noisy
     }
 
@@ -832,6 +988,32 @@ mod tests {
             }
         }
         assert_eq!(small_sin_cos(0.5), 0.5f64.sin_cos());
+    }
+
+    #[test]
+    fn round_byte_is_scale_byte() {
+        let mut xs = vec![
+            f64::NAN,
+            -1.0,
+            -0.4,
+            -0.0,
+            0.0,
+            0.5,
+            254.5,
+            255.49,
+            255.5,
+            1e12,
+        ];
+        xs.push(f64::INFINITY);
+        xs.push(f64::NEG_INFINITY);
+        xs.extend((0..60_000).map(|k| f64::from(k) * 0.004_999_7));
+        xs.extend((0..=600).map(|k| f64::from(k) * 0.5));
+        xs.push(0.499_999_999_999_999_94);
+        for x in xs {
+            let want = x.round().clamp(0.0, 255.0) as u8;
+            assert_eq!(round_byte(x), want, "{x}");
+            assert_eq!(round_byte(x), sensor::scale_byte(1, x), "{x}");
+        }
     }
 
     #[test]

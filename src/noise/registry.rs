@@ -167,7 +167,10 @@ mod listing_tests {
                     k.name
                 );
             }
-            if !matches!(k.name, "occlusion" | "laser_diode" | "rain" | "fog") {
+            if !matches!(
+                k.name,
+                "occlusion" | "laser_diode" | "rain" | "fog" | "crosstalk"
+            ) {
                 let set: Vec<&str> = config.noise[0]
                     .settings
                     .iter()

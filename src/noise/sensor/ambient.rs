@@ -10,6 +10,9 @@
 //! doc suggests 0.0005 m/K to try; Glennie and Lichti 2011 report warm-up drift of an
 //! HDL-64E without a coefficient we could verify). False sun returns are part 2 (they add
 //! returns). Deterministic (no draws).
+//!
+//! Defaults: a scenario's conditions, not the unit's: no sun and the calibration
+//! temperature, so no change (`sensor`, "What the defaults stand for").
 
 use super::{float, number};
 use crate::config::reader::Section;

@@ -7,7 +7,11 @@
 //! at 50 ppm; per frame keeps the timestamps of one rotation consistent and is what the
 //! PLY's frame-relative `time` shows). Range is not re-quantised to 2 mm (no stage of
 //! this tool does). Source: physics; magnitudes are engineering assumptions so that clock
-//! plus receiver noise stay within the datasheet's 2 cm. One normal draw per return
+//! plus receiver noise stay within the datasheet's 2 cm. The defaults are the spread
+//! between units, to add to a recording (`sensor`, "What the defaults stand for"):
+//! jitter 20 ps (3 mm; 70 ps, 1.05 cm, before issue 29, is about a whole sensor's
+//! timing noise and counted it twice on a recording), drift 50 ppm (a common crystal
+//! tolerance). One normal draw per return
 //! when `jitter_ps > 0`, from the stage's frame stream.
 
 use super::{fill_normals, float, number, sigma, CHUNK, C_M_PER_S};
@@ -97,7 +101,7 @@ impl NoiseStage for Clock {
 pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
     Ok(Arc::new(Clock {
         bias_ns: number(opts, "bias_ns", 0.0, -100.0, 100.0)?,
-        jitter_ps: sigma(opts, "jitter_ps", 70.0, 10_000.0)?,
+        jitter_ps: sigma(opts, "jitter_ps", 20.0, 10_000.0)?,
         drift_ppm: number(opts, "drift_ppm", 50.0, -10_000.0, 10_000.0)?,
         time_offset_us: number(opts, "time_offset_us", 0.0, -1e6, 1e6)?,
     }))
@@ -111,7 +115,7 @@ pub const KIND: StageKind = StageKind {
     source: "physics (c dt/2); magnitudes engineering assumptions within the 2 cm datasheet accuracy (pdiagram-models.md 09)",
     options: &[
         OptionSpec { name: "bias_ns", unit: "ns", default: "0", doc: "time-of-flight bias (1 ns = 0.1499 m)" },
-        OptionSpec { name: "jitter_ps", unit: "ps", default: "70", doc: "Gaussian ToF jitter SD (70 ps = 1.05 cm)" },
+        OptionSpec { name: "jitter_ps", unit: "ps", default: "20", doc: "Gaussian ToF jitter SD added (20 ps = 3 mm; 70 ps = 1.05 cm is about a whole sensor's)" },
         OptionSpec { name: "drift_ppm", unit: "ppm", default: "50", doc: "oscillator frequency error: range scale and timestamp stretch" },
         OptionSpec { name: "time_offset_us", unit: "us", default: "0", doc: "timestamp offset" },
     ],

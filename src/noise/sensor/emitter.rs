@@ -7,15 +7,18 @@
 //! (`Return::time`/3600: the capture's own clock, no wall clock). The doc's
 //! (1 - d_age h/h_life) becomes `power_factor` (age at the start of the capture) and its
 //! temperature terms are left to `ambient` (factor 13), which owns the temperature.
-//! Intensity follows power: I' = clamp(round(f I)). Deterministic (no draws). Source:
+//! The byte follows the power through the chain's intensity rule (`noise`, "Intensity"):
+//! this stage changes power only. Deterministic (no draws). Source:
 //! engineering assumption (no ageing data for HDL-32E emitters was found); the default
 //! 0.9 is half of the doc's 20 % end-of-life loss.
+//! The default is the ageing of a unit relative to the recorded one (spread between
+//! units, `sensor`, "What the defaults stand for").
 
-use super::{float, number, scale_byte, CHUNK};
+use super::{float, number, CHUNK};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
-use crate::noise::{Fate, NoiseStage, NoisyFrame, StageKind};
+use crate::noise::{NoiseStage, NoisyFrame, StageKind};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 use toml::Value;
@@ -55,7 +58,7 @@ impl NoiseStage for Emitter {
         if self.power_factor == 1.0 && self.drift_per_hour == 0.0 {
             return;
         }
-        // Times and intensities from the frame's compact columns (not the 48-byte returns).
+        // Times from the frame's compact columns (not the 48-byte returns).
         let lay = frame.layout();
         let factor = |t: f64| {
             // A product with the rounded 1/3600, not the quotient: h is within about an
@@ -64,36 +67,28 @@ impl NoiseStage for Emitter {
             let h = t * (1.0 / 3600.0);
             (self.power_factor * (1.0 - self.drift_per_hour * h)).max(0.0)
         };
-        // The intensity bytes of every factor the frame's times give, tabled once per
-        // frame (see `ByteTable`): f is monotone in t (a product with a positive constant,
-        // a product with a constant, a subtraction from 1, a product with
-        // power_factor >= 0 and max(0), each monotone), so the factor of every time in
-        // the frame's range lies between the factors of its two ends.
+        // f is monotone in t (a product with a positive constant, a product with a
+        // constant, a subtraction from 1, a product with power_factor >= 0 and max(0),
+        // each monotone), so the factor of every time in the frame's range lies between
+        // the factors of its two ends.
         let [t0, t1] = lay.time_range;
         let (f0, f1) = (factor(t0), factor(t1));
-        let table = ByteTable::between(f0, f1);
-        let NoisyFrame {
-            power, fate, moved, ..
-        } = frame;
-        let inten = moved.intensity.get_or_insert_with(|| lay.intensity.clone());
+        let NoisyFrame { power, fate, .. } = frame;
         if !lay.time_nan && f0.to_bits() == f1.to_bits() && f0 != 0.0 && f0.is_finite() {
             // One factor for the frame: every time lies between the two ends and f is
             // monotone, so every factor equals theirs (a non-zero value: zero could come
-            // as +0 or -0). So no time is read and nothing divided: as when the drift is
-            // 0, or every return of the frame has the same time. Its table has every
-            // byte (both ends are one factor).
+            // as +0 or -0). So no time is read: as when the drift is 0, or every return
+            // of the frame has the same time.
             for (p, fate) in power.iter_mut().zip(fate.iter()) {
                 *p = if fate.is_alive() { *p * f0 } else { *p };
             }
-            table.look_up_alive(inten, fate);
             return;
         }
         let mut f = [0.0f64; CHUNK];
-        for (((times, power), inten), fate) in lay
+        for ((times, power), fate) in lay
             .time
             .chunks(CHUNK)
             .zip(power.chunks_mut(CHUNK))
-            .zip(inten.chunks_mut(CHUNK))
             .zip(fate.chunks(CHUNK))
         {
             // The factors of a chunk first, free of branches (the divisions vectorise).
@@ -105,81 +100,6 @@ impl NoiseStage for Emitter {
             for ((p, fate), &f) in power.iter_mut().zip(fate).zip(f.iter()) {
                 *p = if fate.is_alive() { *p * f } else { *p };
             }
-            // Where every factor of the chunk is in the table's range and the table has
-            // every byte (as when the frame's times are close), each byte is a look-up
-            // alone; otherwise `scale` decides per return. The same bytes either way.
-            let inside = f
-                .iter()
-                .fold(true, |all, &f| all & (f >= table.lo) & (f <= table.hi));
-            if inside && table.complete {
-                table.look_up_alive(inten, fate);
-                continue;
-            }
-            for ((v, fate), &f) in inten.iter_mut().zip(fate).zip(f.iter()) {
-                if fate.is_alive() {
-                    *v = table.scale(*v, f);
-                }
-            }
-        }
-    }
-}
-
-/// `scale_byte(v, f)` for every byte v and every factor f in a range `[lo, hi]`, where
-/// that is one value: `scale_byte(v, f)` is monotone in f (the product v f is, and so
-/// is rounding it), so where the two ends give the same byte every f between them does;
-/// the other bytes (a half-integer lies between v lo and v hi) are computed per return.
-struct ByteTable {
-    lo: f64,
-    hi: f64,
-    /// The byte, or `AMBIGUOUS`.
-    bytes: [u16; 256],
-    /// No byte is `AMBIGUOUS`.
-    complete: bool,
-}
-
-const AMBIGUOUS: u16 = 256;
-
-impl ByteTable {
-    /// Each live return's byte replaced by its table entry, branch free (dead returns
-    /// keep theirs). For a complete table and factors inside its range.
-    fn look_up_alive(&self, inten: &mut [u8], fate: &[Fate]) {
-        debug_assert!(self.complete);
-        for (v, fate) in inten.iter_mut().zip(fate) {
-            let e = self.bytes[usize::from(*v)] as u8;
-            *v = if fate.is_alive() { e } else { *v };
-        }
-    }
-
-    /// The table of the factors between `a` and `b` (in either order); empty (every
-    /// byte computed) unless both are finite.
-    fn between(a: f64, b: f64) -> ByteTable {
-        let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
-        let mut t = ByteTable {
-            lo,
-            hi,
-            bytes: [AMBIGUOUS; 256],
-            complete: false,
-        };
-        if lo.is_finite() && hi.is_finite() && lo >= 0.0 {
-            for (v, e) in t.bytes.iter_mut().enumerate() {
-                let (x, y) = (scale_byte(v as u8, lo), scale_byte(v as u8, hi));
-                if x == y {
-                    *e = u16::from(x);
-                }
-            }
-        }
-        t.complete = t.bytes.iter().all(|&e| e != AMBIGUOUS);
-        t
-    }
-
-    /// `scale_byte(v, f)`, from the table when f is in its range.
-    #[inline]
-    fn scale(&self, v: u8, f: f64) -> u8 {
-        let e = self.bytes[usize::from(v)];
-        if e != AMBIGUOUS && f >= self.lo && f <= self.hi {
-            e as u8
-        } else {
-            scale_byte(v, f)
         }
     }
 }
@@ -196,7 +116,7 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
 pub const KIND: StageKind = StageKind {
     name: NAME,
     factor: "03 emitter (degradation, drift)",
-    model: "P' = P power_factor (1 - drift_per_hour h), h = firing time / 3600 s; I' = f I",
+    model: "P' = P power_factor (1 - drift_per_hour h), h = firing time / 3600 s (the byte follows by the intensity rule)",
     source: "engineering assumption (pdiagram-models.md 03: 20 % loss at end of life; a 20 % loss shortens the detectable range by 11 %)",
     options: &[
         OptionSpec { name: "power_factor", unit: "-", default: "0.9", doc: "emitted power relative to new, in [0, 1]" },
@@ -209,9 +129,10 @@ pub const KIND: StageKind = StageKind {
 mod tests {
     use super::*;
     use crate::frame::{Return, ReturnKind};
+    use crate::noise::Fate;
     use crate::noise::IdealPower;
 
-    /// Powers and bytes of `e` applied to returns of the given times (every third one
+    /// Powers of `e` applied to returns of the given times (every third one
     /// dead), with those of the model's formula per return.
     fn against_formula(e: &Emitter, times: &[f64]) {
         let clean: Vec<Return> = times
@@ -245,17 +166,17 @@ mod tests {
         }
         let before = frame.power.clone();
         e.apply(&mut frame, &mut crate::noise::stage_rng(1, 0, 0));
-        let inten = frame.moved.intensity.as_ref().expect("intensity");
+        // Power only: the byte is the intensity rule's.
+        assert!(frame.moved.intensity.is_none());
         for (i, r) in clean.iter().enumerate() {
             let f =
                 (e.power_factor * (1.0 - e.drift_per_hour * (r.time * (1.0 / 3600.0)))).max(0.0);
-            let (p, v) = if frame.fate[i].is_alive() {
-                (before[i] * f, scale_byte(r.intensity, f))
+            let p = if frame.fate[i].is_alive() {
+                before[i] * f
             } else {
-                (before[i], r.intensity)
+                before[i]
             };
             assert_eq!(frame.power[i].to_bits(), p.to_bits(), "{i} {}", r.time);
-            assert_eq!(inten[i], v, "{i} {}", r.time);
         }
     }
 
@@ -283,31 +204,5 @@ mod tests {
                 against_formula(e, times);
             }
         }
-    }
-
-    #[test]
-    fn a_complete_table_gives_scale_byte_s_byte_for_every_factor_in_its_range() {
-        // Close ends (as the times of one frame give) make complete tables; the
-        // look-up must then be `scale_byte` for every factor between them.
-        let mut complete = 0;
-        for k in 0..400 {
-            let lo = 0.5 + f64::from(k) * 0.001_37;
-            let hi = lo * (1.0 + 1e-7);
-            let t = ByteTable::between(hi, lo);
-            if !t.complete {
-                continue;
-            }
-            complete += 1;
-            for v in 0..=255u8 {
-                for s in 0..=8 {
-                    let f = lo + (hi - lo) * f64::from(s) / 8.0;
-                    assert_eq!(t.bytes[usize::from(v)] as u8, scale_byte(v, f), "{v} {f}");
-                    assert_eq!(t.scale(v, f), scale_byte(v, f));
-                }
-            }
-        }
-        assert!(complete > 100, "{complete}");
-        // A table over a wide range has ambiguous bytes.
-        assert!(!ByteTable::between(0.5, 0.9).complete);
     }
 }

@@ -2,16 +2,21 @@
 //! power, range offset and pointing error, fixed for the unit.
 //!
 //! Model (pdiagram-models.md, 01): per laser l, P' = g_l P with g_l = exp(N(0, s_g^2)),
-//! R' = R + b_l with b_l ~ N(0, s_b^2), I' = clamp(round(g_l I), 0, 255); plus (this
+//! R' = R + b_l with b_l ~ N(0, s_b^2) (the byte follows g_l by the chain's intensity
+//! rule, `noise`, "Intensity"); plus (this
 //! issue) elevation and azimuth offsets ~ N(0, s^2) in degrees: the point is reported
 //! along the turned direction at its range (the scene is not re-ray-cast: the range the
 //! turned beam would have measured is unknown). All draws are made once per seed from
 //! the stage's unit stream, four per laser in a fixed order, so a value given per laser
 //! replaces its draw without moving the others. Source: Levinson and Thrun, ISER 2010
 //! (per-beam intensity response and range offsets); defaults are engineering
-//! assumptions under the HDL-32E's 2 cm accuracy.
+//! assumptions under the HDL-32E's 2 cm accuracy. The defaults are the spread between
+//! units (to add to a recording, see `sensor`, "What the defaults stand for"): the
+//! per-laser range bias SD is 5 mm (10 mm before issue 29, which with the clock and
+//! receiver defaults added 2.2 cm at 25 m, beyond the datasheet's 2 cm for the whole
+//! sensor).
 
-use super::{float, normal, per_laser, scale_byte, sigma};
+use super::{float, normal, per_laser, sigma};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -38,9 +43,6 @@ pub struct LaserDiode {
     pub given: [Option<Vec<f64>>; 4],
     /// Values in use per laser: power factor, range bias m, elevation deg, azimuth deg.
     pub values: [[f64; 32]; 4],
-    /// Intensity bytes scaled by each laser's power factor (`scale_byte`), tabled with
-    /// the unit draws.
-    bytes: Option<Arc<[[u8; 256]; 32]>>,
 }
 
 impl NoiseStage for LaserDiode {
@@ -84,7 +86,6 @@ impl NoiseStage for LaserDiode {
                 }
             }
         }
-        s.bytes = Some(Arc::from(byte_tables(&s.values[0])));
         Some(Arc::new(s))
     }
     fn apply(&self, frame: &mut NoisyFrame, _rng: &mut ChaCha8Rng) {
@@ -141,47 +142,26 @@ impl NoiseStage for LaserDiode {
             *v = Some(column);
         }
         if gains {
-            // The intensity bytes of each laser's gain, tabled once per seed (computed
-            // here when the stage runs without its unit draws).
-            let computed;
-            let bytes: &[[u8; 256]; 32] = match &self.bytes {
-                Some(b) => b,
-                None => {
-                    computed = byte_tables(gain);
-                    &computed
-                }
-            };
-            let inten = moved.intensity.get_or_insert_with(|| lay.intensity.clone());
-            let power_and_bytes = |p: &mut f64, v: &mut u8, l: usize| {
-                *p *= gain[l];
-                *v = bytes[l][usize::from(*v)];
-            };
+            // Power only: the byte follows by the chain's intensity rule.
             if biases {
-                // Power, intensity and range in one pass over fates and laser ids (the
-                // fields are independent, so the order of their updates is free).
-                for ((((p, v), r), &l), f) in power
+                // Power and range in one pass over fates and laser ids.
+                for (((p, r), &l), f) in power
                     .iter_mut()
-                    .zip(inten.iter_mut())
                     .zip(range.iter_mut())
                     .zip(lasers)
                     .zip(fate.iter())
                 {
                     if f.is_alive() {
                         let l = usize::from(l & 31);
-                        power_and_bytes(p, v, l);
+                        *p *= gain[l];
                         *r = (f64::from(*r) + bias[l]) as f32;
                     }
                 }
                 return;
             }
-            for (((p, v), &l), f) in power
-                .iter_mut()
-                .zip(inten.iter_mut())
-                .zip(lasers)
-                .zip(fate.iter())
-            {
+            for ((p, &l), f) in power.iter_mut().zip(lasers).zip(fate.iter()) {
                 if f.is_alive() {
-                    power_and_bytes(p, v, usize::from(l & 31));
+                    *p *= gain[usize::from(l & 31)];
                 }
             }
         }
@@ -232,17 +212,6 @@ fn per_laser_columns(lasers: &[u8], firings: &[[u32; 2]], tables: &[&[f32; 32]])
     out
 }
 
-/// `scale_byte(v, g_l)` for every byte v and laser l.
-fn byte_tables(gain: &[f64; 32]) -> Box<[[u8; 256]; 32]> {
-    let mut t = Box::new([[0u8; 256]; 32]);
-    for (row, &g) in t.iter_mut().zip(gain) {
-        for (v, b) in row.iter_mut().enumerate() {
-            *b = scale_byte(v as u8, g);
-        }
-    }
-    t
-}
-
 const GIVEN_KEYS: [&str; 4] = [
     "power_factors",
     "range_bias_m",
@@ -260,12 +229,11 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
     ];
     Ok(Arc::new(LaserDiode {
         sigma_power: sigma(opts, "sigma_power", 0.10, 2.0)?,
-        sigma_range_m: sigma(opts, "sigma_range_m", 0.01, 1.0)?,
+        sigma_range_m: sigma(opts, "sigma_range_m", 0.005, 1.0)?,
         sigma_elevation_deg: sigma(opts, "sigma_elevation_deg", 0.01, 5.0)?,
         sigma_azimuth_deg: sigma(opts, "sigma_azimuth_deg", 0.01, 5.0)?,
         given,
         values: [[1.0; 32], [0.0; 32], [0.0; 32], [0.0; 32]],
-        bytes: None,
     }))
 }
 
@@ -273,11 +241,11 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
 pub const KIND: StageKind = StageKind {
     name: NAME,
     factor: "01 laser diode (piece to piece)",
-    model: "per laser, once per seed: P' = g_l P, g_l = exp(N(0, s_g^2)); R' = R + N(0, s_b^2); elevation and azimuth offsets N(0, s^2); I' = g_l I",
+    model: "per laser, once per seed: P' = g_l P, g_l = exp(N(0, s_g^2)); R' = R + N(0, s_b^2); elevation and azimuth offsets N(0, s^2); the byte follows g_l by the intensity rule",
     source: "Levinson and Thrun, ISER 2010 (per-beam response and range offsets); defaults engineering assumption within the 2 cm spec",
     options: &[
         OptionSpec { name: "sigma_power", unit: "-", default: "0.10", doc: "SD of the per-laser log power factor" },
-        OptionSpec { name: "sigma_range_m", unit: "m", default: "0.01", doc: "SD of the per-laser range bias b_l" },
+        OptionSpec { name: "sigma_range_m", unit: "m", default: "0.005", doc: "SD of the per-laser range bias b_l (spread between units)" },
         OptionSpec { name: "sigma_elevation_deg", unit: "deg", default: "0.01", doc: "SD of the per-laser elevation offset" },
         OptionSpec { name: "sigma_azimuth_deg", unit: "deg", default: "0.01", doc: "SD of the per-laser azimuth offset" },
         OptionSpec { name: "power_factors", unit: "-", default: "drawn", doc: "32 given power factors (replace the draws)" },

@@ -13,6 +13,10 @@
 //! Lichti, Remote Sensing 3(3), 2011 (encoder misalignment found only marginally
 //! significant); magnitudes are engineering assumptions below the 0.01 deg reporting step
 //! and the 0.166 deg firing step.
+//!
+//! Defaults: the spread between units (encoder, bearing and spin-control tolerances of
+//! another unit), to add to a recording; they move angles, not ranges (`sensor`, "What
+//! the defaults stand for").
 
 use super::{fill_normals, float, normal, number, sigma, sin_plus, SineTrack};
 use crate::config::reader::Section;

@@ -2,6 +2,25 @@
 //! stage, models and defaults from `pdiagram-models.md`. Shared here: the rigid
 //! [`Pose`] and option readers that reject NaN, infinities and out-of-range values with
 //! the key and its line.
+//!
+//! # What the defaults stand for
+//! The tool replays recorded captures, which already hold their own unit's noise (the
+//! HDL-32E datasheet: range accuracy < 2 cm, one sigma at 25 m, for the whole sensor).
+//! A default added on top must therefore be the spread between units (what another
+//! unit of the same model, or the same unit aged or remounted, adds), not the whole
+//! sensor's noise, or a recording gets its noise twice. Per stage:
+//! - `laser_diode`, `receiver` gains and range noise, `clock` jitter and drift,
+//!   `mechanics`, `emitter`: spread between units (or ageing of the unit), to add to a
+//!   recording. Their range terms at their defaults (per-laser bias 5 mm, jitter 20 ps
+//!   = 3 mm, drift 50 ppm = 1.25 mm at 25 m, receiver 0.03 m / sqrt(2 SNR) = 5.3 mm for
+//!   a 10 % target at 25 m) add 7.9 mm RMS at 25 m, so a unit within the datasheet
+//!   stays within it when its own noise is under 1.8 cm (tests/conventions.rs).
+//!   For a noise-free synthetic scene, the whole sensor's noise is about
+//!   `receiver.range_noise_m = 0.09` (LISA's dR) with `clock.jitter_ps = 70`.
+//! - `mounting`: the spread between installations of a calibrated rig.
+//! - `motion`, `ambient`: the operating conditions of a scenario (speed, vibration, sun,
+//!   temperature), not the unit; their defaults are no motion, no sun, the calibration
+//!   temperature (range bias 0), and a mild vibration.
 
 pub mod ambient;
 pub mod clock;

@@ -12,6 +12,9 @@
 //! in the sensor frame before any mounting error (`mounting` acts last in either chain
 //! order). Range, azimuth and time fields stay as reported. Source: Zhang and Singh,
 //! LOAM, RSS 2014; vibration values engineering assumption.
+//!
+//! Defaults: a scenario's conditions, not the unit's: no ego-motion, a mild vibration
+//! (`sensor`, "What the defaults stand for").
 
 use super::{float, number, sin_plus, FiringPose, Pose, Poses, SineTrack};
 use crate::config::reader::Section;

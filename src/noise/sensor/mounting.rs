@@ -7,6 +7,9 @@
 //! Points move; range, azimuth and intensity stay as the sensor reports them.
 //! Source: 3D_Corruptions_AD spatial alignment noise (Dong et al., CVPR 2023) for the
 //! kind of error; defaults (0.2 deg, 0.02 m, a calibrated rig) are engineering assumptions.
+//!
+//! Defaults: the spread between installations of a calibrated rig, to add to a
+//! recording (`sensor`, "What the defaults stand for").
 
 use super::{float, normal, number, sigma, Pose, Poses};
 use crate::config::reader::Section;

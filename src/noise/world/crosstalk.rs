@@ -29,9 +29,37 @@
 //! - An echo whose range falls under the minimum range (or below zero) is not detectable
 //!   and loses its slot: the return stays.
 //!
+//! Echo power P_x, from a model of the interfering sensor (issue 29; before it P_x = 1
+//! for every echo, which always won its slot in strongest mode). The interferer is
+//! another HDL-32E unless told otherwise: `interferer_power` = r, its pulse power over
+//! ours (1 for the same model). Powers are in this tool's unit, a fraction of our
+//! emitted power on the kappa scale (`noise::power`: a Lambertian target of reflectance
+//! rho at R returns kappa rho / R^2, kappa = eta A_rx / pi in physical terms, so any
+//! physical ratio to our own echo carries over with the same kappa):
+//! - Model A, reflected: the false echo is the interferer's pulse diffusely reflected by
+//!   the surface our beam sees (it lands near the return's range, as the benchmarks
+//!   place it). A Lambertian spot lit by a pulse of power P_t sends eta A_rx rho P_t /
+//!   (pi R^2) into our aperture whoever fired it; the interferer's spot (its divergence
+//!   times its distance d_i) puts all its power inside our footprint when d_i <= R and a
+//!   share (R / d_i)^2 of it otherwise, so P_x = r min(1, (R / d_i)^2) P <= r P, with P
+//!   the return's current power (same surface, same path back to us). We take the upper
+//!   bound P_x = r P (interferer at most as far from the surface as we are). Consequence:
+//!   an equal interferer's reflection ties with the true echo and never replaces it in
+//!   strongest mode (ties go to the recorded return); in last and dual mode the farther
+//!   echoes are reported. Source: the Lambertian lidar equation (e.g. Jelalian, Laser
+//!   Radar Systems, 1992, ch. 1), as `noise::power`.
+//! - Model B, direct: the interferer's pulse reaches our aperture straight from its
+//!   emitter, at distance d (`interferer_distance_m`), spread over its spot. The HDL-32E
+//!   manual (appendix D, "Laser Spot Size") gives a rectangular spot of about 4 x 2
+//!   inches at 100 feet: full divergences theta_w = 0.1016 / 30.48 = 3.33 mrad and
+//!   theta_h = 1.67 mrad. The aperture receives P_t A_rx / (theta_w theta_h d^2) against
+//!   eta A_rx rho P_t / (pi R^2) from our own echo, so in our unit
+//!   P_x = min(1, r kappa pi / (theta_w theta_h d^2)): with kappa = 100 m^2 that is 1
+//!   (saturation) for any d under 7.5 km, the value the stage used before, now derived.
+//! - `power` sets P_x directly (both models) and overrides the two.
+//!
 //! Defaults: p_x = 0.01 (the benchmarks' 0.4-2 %), s_x = 3 m (both benchmarks), the
-//! whole turn, P_x = 1 (receiver saturation: a direct pulse of another sensor is far
-//! stronger than a diffuse echo; engineering assumption).
+//! whole turn, r = 1 (another HDL-32E), d = 20 m (a car in the next lane, model B).
 
 use crate::config::reader::Section;
 use crate::error::Result;
@@ -46,6 +74,9 @@ use toml::Value;
 
 /// The `type` name of this stage.
 pub const NAME: &str = "crosstalk";
+
+/// kappa of the default power model (m^2), for descriptions and frames without one.
+const DEFAULT_KAPPA_M2: f64 = 100.0;
 
 /// An azimuth sector: `width` degrees clockwise from `from` (the sensor's azimuth
 /// direction), possibly through 0; a width of 360 is the whole turn.
@@ -205,11 +236,30 @@ pub struct Crosstalk {
     pub max_range_m: f64,
     /// Azimuth sectors of the interferers.
     pub sectors: Vec<Sector>,
-    /// Received power of the false echo (fraction of emitted power).
-    pub power: f64,
+    /// Received power of the false echo (fraction of emitted power) when set; `None`:
+    /// from the interferer model (module documentation).
+    pub power: Option<f64>,
+    /// Interferer's pulse power over ours (r).
+    pub interferer_power: f64,
+    /// Model B: distance d of the interferer's emitter, metres.
+    pub interferer_distance_m: f64,
 }
 
+/// Full divergences (width, height) of the HDL-32E's spot, radians: about 4 x 2 inches
+/// at 100 feet (HDL-32E user's manual, appendix D, "Laser Spot Size").
+pub const SPOT_DIVERGENCE_RAD: [f64; 2] = [0.1016 / 30.48, 0.0508 / 30.48];
+
 impl Crosstalk {
+    /// Model B's direct-path power in our unit for a power model with `kappa_m2`:
+    /// min(1, r kappa pi / (theta_w theta_h d^2)), or `power` when set.
+    pub fn direct_power(&self, kappa_m2: f64) -> f64 {
+        self.power.unwrap_or_else(|| {
+            let [tw, th] = SPOT_DIVERGENCE_RAD;
+            let d = self.interferer_distance_m;
+            (self.interferer_power * kappa_m2 * std::f64::consts::PI / (tw * th * d * d)).min(1.0)
+        })
+    }
+
     /// True if a return at `azimuth` degrees lies in one of the sectors.
     #[inline]
     fn covers(&self, azimuth: f64) -> bool {
@@ -246,13 +296,9 @@ impl Crosstalk {
             let i = eligible[k] as usize;
             let z: f64 = rng.sample(StandardNormal);
             let range = (f64::from(frame.range[i]) + self.sigma_m * z) as f32;
-            frame.propose(
-                i,
-                Echo {
-                    range,
-                    power: self.power,
-                },
-            );
+            // Reflected by the surface the return comes from: r times its power.
+            let power = self.power.unwrap_or(self.interferer_power * frame.power[i]);
+            frame.propose(i, Echo { range, power });
         }
     }
 
@@ -281,16 +327,15 @@ impl Crosstalk {
         let mut chosen = rand::seq::index::sample(rng, n, count).into_vec();
         chosen.sort_unstable();
         let lo = frame.min_range.max(0.0);
+        let kappa = frame
+            .power_model
+            .as_ref()
+            .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2);
+        let power = self.direct_power(kappa);
         for k in chosen {
             let slot = slots.slot(firings[k / 32] as usize, (k % 32) as u8);
             let range = (lo + (self.max_range_m - lo) * rng.random::<f64>()) as f32;
-            frame.propose_slot(
-                slot,
-                Echo {
-                    range,
-                    power: self.power,
-                },
-            );
+            frame.propose_slot(slot, Echo { range, power });
         }
     }
 }
@@ -312,20 +357,31 @@ impl NoiseStage for Crosstalk {
                 }
             })
             .collect();
+        let power = match (self.power, self.model) {
+            (Some(p), _) => format!("power {p}"),
+            (None, Model::Benchmark) => format!(
+                "power {} x the return's (interferer's reflection)",
+                self.interferer_power
+            ),
+            (None, Model::Physical) => format!(
+                "power {} (direct pulse of an interferer {} x ours at {} m)",
+                self.direct_power(DEFAULT_KAPPA_M2),
+                self.interferer_power,
+                self.interferer_distance_m
+            ),
+        };
         match self.model {
             Model::Benchmark => format!(
-                "{} % of returns in {} get a false echo at R + N(0, {} m), power {}",
+                "{} % of returns in {} get a false echo at R + N(0, {} m), {power}",
                 self.fraction * 100.0,
                 sectors.join(", "),
                 self.sigma_m,
-                self.power
             ),
             Model::Physical => format!(
-                "{} % of firing slots in {} get a false echo at U(min range, {} m), power {}",
+                "{} % of firing slots in {} get a false echo at U(min range, {} m), {power}",
                 self.fraction * 100.0,
                 sectors.join(", "),
                 self.max_range_m,
-                self.power
             ),
         }
     }
@@ -335,7 +391,7 @@ impl NoiseStage for Crosstalk {
             Model::Benchmark => "benchmark",
             Model::Physical => "physical",
         };
-        vec![
+        let mut v = vec![
             ("model", Value::String(model.into())),
             ("fraction", float(self.fraction)),
             ("sigma_m", float(self.sigma_m)),
@@ -344,12 +400,17 @@ impl NoiseStage for Crosstalk {
                 "sectors_deg",
                 Value::Array(self.sectors.iter().map(|s| s.to_value()).collect()),
             ),
-            ("power", float(self.power)),
-        ]
+            ("interferer_power", float(self.interferer_power)),
+            ("interferer_distance_m", float(self.interferer_distance_m)),
+        ];
+        if let Some(p) = self.power {
+            v.push(("power", float(p)));
+        }
+        v
     }
 
     fn proposes_echoes(&self) -> bool {
-        self.fraction > 0.0 && self.power > 0.0
+        self.fraction > 0.0 && self.power.unwrap_or(self.interferer_power) > 0.0
     }
 
     fn apply(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
@@ -374,7 +435,12 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
     // The wire holds ranges up to 131.07 m (65535 x 2 mm).
     let max_range_m = number(opts, "max_range_m", 100.0, 1.0, 131.0)?;
     let sectors = read_sectors(opts, "sectors_deg")?.unwrap_or_else(|| vec![Sector::FULL]);
-    let power = number(opts, "power", 1.0, 0.0, 1.0)?;
+    let power = match opts.value("power") {
+        None => None,
+        Some(_) => Some(number(opts, "power", 1.0, 0.0, 1.0)?),
+    };
+    let interferer_power = number(opts, "interferer_power", 1.0, 0.0, 1e3)?;
+    let interferer_distance_m = number(opts, "interferer_distance_m", 20.0, 0.1, 1e6)?;
     if model == Model::Benchmark && fraction > 0.02 {
         opts.warn(
             "fraction",
@@ -391,6 +457,8 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
         max_range_m,
         sectors,
         power,
+        interferer_power,
+        interferer_distance_m,
     }))
 }
 
@@ -398,15 +466,17 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
 pub const KIND: StageKind = StageKind {
     name: NAME,
     factor: "15 other LiDARs (crosstalk)",
-    model: "A (benchmark): Binomial(n, p_x) of the n returns in the sectors get a false echo at R + N(0, s_x^2) along the beam; B (physical): Binomial(n, q_x) of the n firing slots in the sectors get one at U(min range, R_max); power P_x, competing by the slot rule",
-    source: "3D_Corruptions_AD lidar_crosstalk_noise (0.4-2 %, SD 3 m); Robo3D gen_crosstalk.py (0.6-1 %, SD 3 m); model B and P_x engineering assumptions (pdiagram-models.md 15)",
+    model: "A (benchmark): Binomial(n, p_x) of the n returns in the sectors get a false echo at R + N(0, s_x^2) along the beam; B (physical): Binomial(n, q_x) of the n firing slots in the sectors get one at U(min range, R_max); power P_x: A the interferer's reflection off the return's surface, r P; B its direct pulse, min(1, r kappa pi / (theta_w theta_h d^2)); competing by the slot rule",
+    source: "3D_Corruptions_AD lidar_crosstalk_noise (0.4-2 %, SD 3 m); Robo3D gen_crosstalk.py (0.6-1 %, SD 3 m); P_x: Lambertian lidar equation with the HDL-32E spot (user's manual appendix D, 4 x 2 in at 100 ft); model B engineering assumption (pdiagram-models.md 15)",
     options: &[
         OptionSpec { name: "model", unit: "-", default: "\"benchmark\"", doc: "\"benchmark\" (model A, about the true range) or \"physical\" (model B, uniform ranges in any slot)" },
         OptionSpec { name: "fraction", unit: "-", default: "0.01", doc: "A: fraction p_x of the returns in the sectors; B: probability q_x per firing slot" },
         OptionSpec { name: "sigma_m", unit: "m", default: "3", doc: "A: SD s_x of the false echo's range about the return's range" },
         OptionSpec { name: "max_range_m", unit: "m", default: "100", doc: "B: largest false range R_max (at most 131 m, the wire's limit)" },
         OptionSpec { name: "sectors_deg", unit: "deg", default: "[[0, 360]]", doc: "interferer sectors [[from, to], ...], clockwise, may wrap" },
-        OptionSpec { name: "power", unit: "-", default: "1", doc: "received power of a false echo (fraction of emitted power, 1 = saturation)" },
+        OptionSpec { name: "interferer_power", unit: "-", default: "1", doc: "interferer's pulse power over ours, r (1: another HDL-32E)" },
+        OptionSpec { name: "interferer_distance_m", unit: "m", default: "20", doc: "B: distance d of the interferer's emitter (direct pulse)" },
+        OptionSpec { name: "power", unit: "-", default: "model", doc: "fixed received power of every false echo (fraction of emitted power, 1 = saturation); overrides the interferer model" },
     ],
     build,
 };

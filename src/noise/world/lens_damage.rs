@@ -7,8 +7,10 @@
 //!
 //! Model (pdiagram-models.md, 10; engineering assumption, no quantitative lens-damage
 //! study was found):
-//! - transmission: P' = T^2 P on the chosen lasers (out and back through the same
-//!   optics); the intensity byte follows, I' = T^2 I.
+//! - transmission: `transmission` is the one-way transmission T of the optics, crossed
+//!   out and back: P' = T^2 P on the chosen lasers (the convention `occlusion` shares).
+//!   The intensity byte follows through the chain's intensity rule (`noise`,
+//!   "Intensity"), I' = T^2 I for a return with no other loss.
 //! - scatter: with probability p_s (`scatter_probability`) per return of a chosen laser
 //!   the beam is deflected by (d_a, d_w) ~ N(0, s_d^2) each (`scatter_sigma_deg`) in
 //!   azimuth and elevation. The return then comes from the surface in the deflected
@@ -259,22 +261,12 @@ impl NoiseStage for LensDamage {
             }
         }
         if t2 != 1.0 {
-            let clean = &frame.clean;
-            let inten = frame
-                .moved
-                .intensity
-                .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect());
-            // The intensity bytes after the loss, looked up (one factor for every laser).
-            let mut table = [0u8; 256];
-            for (v, t) in table.iter_mut().enumerate() {
-                *t = scale_byte(v as u8, t2);
-            }
+            // Power only: the byte follows by the chain's intensity rule.
             // With every laser damaged, skip reading the (large) returns for their laser.
             let all = self.mask == u32::MAX;
-            for i in 0..n {
-                if frame.fate[i].is_alive() && (all || self.damaged(clean[i].laser)) {
-                    frame.power[i] *= t2;
-                    inten[i] = table[usize::from(inten[i])];
+            for ((p, fate), r) in frame.power.iter_mut().zip(&frame.fate).zip(&frame.clean) {
+                if fate.is_alive() && (all || self.damaged(r.laser)) {
+                    *p *= t2;
                 }
             }
         }

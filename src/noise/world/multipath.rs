@@ -17,7 +17,8 @@
 //!   P1 + P2 (the power-weighted centroid is the doc's engineering approximation). The
 //!   return is moved there directly and marked `Replaced` (cause: this stage): it is a
 //!   false point, although no other echo competes for it.
-//! - otherwise two echoes: the return keeps its range with power P1, and an echo at R2
+//! - otherwise two echoes: the return keeps its range with power P1 (its byte follows
+//!   by the chain's intensity rule, `noise`, "Intensity"), and an echo at R2
 //!   with power P2 is [proposed](NoisyFrame::propose_slot) to its firing slot, so the
 //!   return-mode rule chooses: strongest mode reports the stronger, last mode the
 //!   farther, dual mode both (the farther as the last return, the other as the strongest:
@@ -207,7 +208,7 @@ impl NoiseStage for Multipath {
         let merge_m = merge_distance_m(self.pulse_ns);
         let half_theta = self.divergence_mrad * 1e-3 / 2.0;
         // Decide every change from the state before this stage, then apply.
-        let mut actions: Vec<(u32, usize, f64, Mix)> = Vec::new();
+        let mut actions: Vec<(u32, usize, Mix)> = Vec::new();
         let mut words = [0u64; 32];
         for f in 0..n_fir {
             rng.fill(&mut words[..]);
@@ -270,7 +271,7 @@ impl NoiseStage for Multipath {
                     g,
                     merge_m,
                 );
-                actions.push((s as u32, i, g, m));
+                actions.push((s as u32, i, m));
             }
         }
         if actions.is_empty() {
@@ -282,7 +283,7 @@ impl NoiseStage for Multipath {
             .moved
             .intensity
             .get_or_insert_with(|| clean.iter().map(|r| r.intensity).collect());
-        for (s, i, g, m) in actions {
+        for (s, i, m) in actions {
             let (r0, p0) = (frame.range[i], frame.power[i]);
             // The entries of the slot that hold this echo (two in a dual slot whose
             // entries report the same echo).
@@ -309,9 +310,9 @@ impl NoiseStage for Multipath {
                 }
                 Mix::Two { own_power, echo } => {
                     for t in targets {
+                        // The return keeps its own echo, weaker: its byte follows its
+                        // power by the chain's intensity rule.
                         frame.power[t] = own_power;
-                        let inten = frame.moved.intensity.as_mut().expect("allocated");
-                        inten[t] = scale_byte(inten[t], 1.0 - g);
                     }
                     frame.propose_slot(s, echo);
                 }

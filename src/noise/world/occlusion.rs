@@ -5,8 +5,15 @@
 //! as -5.33 match although stored as f32); optional `azimuth_deg = [from, to]`, the
 //! sector clockwise from `from` (inclusive) to `to` (exclusive), which may wrap through
 //! 0 (`[300, 60]`); optional `transmission` in [0, 1): 0 (default) blocks the beam —
-//! the return is marked `Occluded`, its power and range untouched — while 0 < t < 1
-//! multiplies the power by t and keeps the return for the later stages and filters.
+//! the return is marked `Occluded`, its power and range untouched — while 0 < T < 1
+//! attenuates it and keeps the return for the later stages and filters.
+//!
+//! Transmission convention (shared with `lens_damage`): T is the one-way transmission
+//! of the obstruction (dirt, a film, a thin cover), which the pulse crosses on its way
+//! out and its echo on the way back, so P' = T^2 P (two-way loss; a film that passes
+//! 70 % of the light passes 49 % of the echo). Before issue 29 this stage multiplied by
+//! T once; `configs/paper.toml` uses T = 0 (blocked), which this does not touch. The
+//! intensity byte follows through the chain's intensity rule (`noise`, "Intensity").
 
 use crate::config::reader::Section;
 use crate::error::Result;
@@ -39,7 +46,7 @@ pub struct Occlusion {
     pub selection: Selection,
     /// Optional azimuth sector [from, to) in degrees, clockwise, may wrap.
     pub azimuth_deg: Option<[f64; 2]>,
-    /// Power transmission of the obstruction; 0 blocks.
+    /// One-way transmission T of the obstruction (power x T^2, out and back); 0 blocks.
     pub transmission: f64,
     /// Bit i set: laser id (or ring) i selected.
     mask: u32,
@@ -107,7 +114,11 @@ impl NoiseStage for Occlusion {
         let effect = if self.transmission == 0.0 {
             "blocked".to_string()
         } else {
-            format!("power x {}", self.transmission)
+            format!(
+                "one-way transmission {}: power x {}",
+                self.transmission,
+                self.transmission * self.transmission
+            )
         };
         format!("{what}{sector}: {effect}")
     }
@@ -143,7 +154,8 @@ impl NoiseStage for Occlusion {
                 *fate = Fate::Occluded;
                 *cause = stage;
             } else {
-                *power *= self.transmission;
+                // Out and back through the obstruction.
+                *power *= self.transmission * self.transmission;
             }
         }
     }
@@ -227,14 +239,14 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
 pub const KIND: crate::noise::StageKind = crate::noise::StageKind {
     name: NAME,
     factor: "12 obstruction (lens occlusion)",
-    model: "beams of the selected lasers (optionally in an azimuth sector) are blocked, or their power multiplied by the transmission",
+    model: "beams of the selected lasers (optionally in an azimuth sector) are blocked, or their power multiplied by T^2 (one-way transmission T, out and back)",
     source: "the reference study (five occluded lasers); noise-models.md",
     options: &[
         crate::noise::registry::OptionSpec { name: "lasers", unit: "laser id", default: "one of lasers/rings/elevation_deg required", doc: "occluded lasers (0-31, firing order)" },
         crate::noise::registry::OptionSpec { name: "rings", unit: "ring", default: "-", doc: "occluded rings (0 = lowest)" },
         crate::noise::registry::OptionSpec { name: "elevation_deg", unit: "deg", default: "-", doc: "occluded elevation interval [lo, hi]" },
         crate::noise::registry::OptionSpec { name: "azimuth_deg", unit: "deg", default: "all", doc: "sector [from, to), clockwise, may wrap" },
-        crate::noise::registry::OptionSpec { name: "transmission", unit: "-", default: "0", doc: "0 blocks the beam, 0 < t < 1 scales power" },
+        crate::noise::registry::OptionSpec { name: "transmission", unit: "-", default: "0", doc: "one-way transmission T: 0 blocks the beam, 0 < T < 1 scales power by T^2 (out and back)" },
     ],
     build,
 };

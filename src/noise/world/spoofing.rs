@@ -14,7 +14,9 @@
 //! what the sensor reports: in strongest mode the echo replaces the return when P_s is
 //! higher, in last mode only when the box is farther, in dual mode it can be added as the
 //! second return. `max_points` (N_s) limits the attacker's budget: that many of the hit
-//! slots, drawn uniformly without replacement per frame (0 = every hit slot).
+//! slots, drawn uniformly without replacement per frame (0 = every hit slot, which is
+//! about 250 points for the default box on the shared capture: more than any published
+//! attack shows).
 //!
 //! Relay/delay: an attacker re-emitting the victim's pulse with delay tau makes an echo at
 //! R' = d_a + c tau / 2. We take the attacker at the target itself (d_a = R of each return
@@ -30,9 +32,14 @@
 //! Not modelled: blinding/saturation (use `occlusion` on the sector), attack windows over
 //! frames and lasers (the box and the sector select the beams). Defaults: a car-sized box
 //! (4.5 x 1.8 x 1.5 m on the road 1.8 m below a roof-mounted sensor) 15 m ahead, power 1
-//! (receiver saturation), no relay: engineering assumptions. Cao et al. (CCS 2019) report
-//! about 100 spoofed points in 8-10 degrees (not verified against the paper): set
-//! `max_points = 100` for that budget.
+//! (receiver saturation), no relay: engineering assumptions. Budget: `max_points = 100`
+//! per frame, the attack capability Cao et al. demonstrated ("Adversarial Sensor Attack
+//! on LiDAR-based Perception in Autonomous Driving", CCS 2019: about 100 spoofed points
+//! within about 10 degrees of azimuth, building on Shin et al., "Illusion and Dazzle",
+//! CHES 2017); Sun et al. ("Towards Robust LiDAR-based Perception in Autonomous
+//! Driving", USENIX Security 2020) assume a stronger attacker with up to 200 points
+//! (`max_points = 200`). These figures are taken from the papers' summaries (abstracts
+//! and the issue), not re-read from their tables.
 
 use super::crosstalk::{read_sector, Sector};
 use crate::config::reader::Section;
@@ -46,6 +53,10 @@ use toml::Value;
 
 /// The `type` name of this stage.
 pub const NAME: &str = "spoofing";
+
+/// Default budget of injected points per frame: the ~100 points in ~10 degrees Cao et
+/// al. (CCS 2019) spoofed.
+pub const DEFAULT_MAX_POINTS: u32 = 100;
 
 /// Azimuth margin (degrees) around the box's span when choosing firings to test: covers
 /// calibration azimuth offsets and the spread of a firing's lasers.
@@ -304,7 +315,7 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
     let base_z_m = number(opts, "base_z_m", -1.8, -100.0, 100.0)?;
     let power = number(opts, "power", 1.0, 0.0, 1.0)?;
     let max_points = match opts.i64("max_points")? {
-        None => 0,
+        None => DEFAULT_MAX_POINTS,
         Some(n) if (0..=1_000_000).contains(&n) => n as u32,
         Some(n) => {
             return Err(opts.error(
@@ -353,7 +364,7 @@ pub const KIND: StageKind = StageKind {
         OptionSpec { name: "height_m", unit: "m", default: "1.5", doc: "box height" },
         OptionSpec { name: "base_z_m", unit: "m", default: "-1.8", doc: "z of the box's bottom in the sensor frame" },
         OptionSpec { name: "power", unit: "-", default: "1", doc: "attacker's received power P_s (fraction of emitted power, 1 = saturation); 0 = no injection" },
-        OptionSpec { name: "max_points", unit: "points", default: "0", doc: "budget N_s of injected points per frame, drawn among the hit slots; 0 = all" },
+        OptionSpec { name: "max_points", unit: "points", default: "100", doc: "budget N_s of injected points per frame, drawn among the hit slots (100: Cao et al. CCS 2019; 200: Sun et al. USENIX Security 2020); 0 = all" },
         OptionSpec { name: "relay_azimuth_deg", unit: "deg", default: "[0, 360]", doc: "sector [from, to) of the relay attack, clockwise, may wrap" },
         OptionSpec { name: "relay_delay_ns", unit: "ns", default: "0", doc: "relay delay tau: returns in the sector move by c tau / 2; 0 = no relay" },
     ],

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Regenerates the README's weather figures and table (issue 12, p-diagram 11):
 # - docs/figures/weather_fog_visibility_m_detected_share.png: fog at MOR 50-1000 m;
-# - docs/figures/weather_rain_rate_mm_h_detected_share.png: Goodin rain at 0.5-30 mm/h;
-# - docs/figures/fog_sensitivity.md: how the fog results move with the uncalibrated
-#   overlap R2 and gain: share of labelled objects detected (sweep, mean over seeds) /
+# - docs/figures/weather_rain_rate_mm_h_detected_share.png: rain (the default model, mie) at 0.5-30 mm/h;
+# - docs/figures/fog_sensitivity.md: how the fog results move with the overlap model
+#   (the HDL-32E's biaxial geometry, or Hahner's 0.9-1.0 m ramp) and the droplets
+#   (Hahner's beta_r, Mie advection or radiation fog): share of labelled objects detected (sweep, mean over seeds) /
 #   fog points (returns replaced or added by fog echoes, from `run`'s summary.json) per
 #   recorded return.
 # All on the crossroad fixture with configs/clear.toml as the base (the stage added by
@@ -23,19 +24,19 @@ cp "$out/fog/plots/crossroad/detected_share.png" docs/figures/weather_fog_visibi
   --vary rain.rate_mm_h=0.5,1,2,4,7,10,15,20,30 --seeds 1..3 -o "$out/rain"
 cp "$out/rain/plots/crossroad/detected_share.png" docs/figures/weather_rain_rate_mm_h_detected_share.png
 
-# Sensitivity table: per (R2, gain) setting one sweep over V for the share of objects
-# detected, and one run per cell for the returns replaced or added by fog echoes.
-visibilities="50 150 300 600 1000"
-settings="1.0:1 5.0:1 1.0:0.1 1.0:0.01"
+# Sensitivity table: per (overlap, droplets) setting one sweep over V for the share of
+# objects detected, and one run per cell for the returns replaced or added by fog echoes.
+visibilities="50 150 300 600 1000 10000"
+settings="biaxial:hahner biaxial:advection biaxial:radiation linear:hahner"
 table=docs/figures/fog_sensitivity.md
 {
-  echo "| overlap_full_m (R2) | gain | $(for v in $visibilities; do printf 'V = %s m | ' "$v"; done)"
+  echo "| overlap | droplets | $(for v in $visibilities; do printf 'V = %s m | ' "$v"; done)"
   echo "|---|---|$(for _ in $visibilities; do printf -- '---|'; done)"
   for s in $settings; do
     r2=${s%%:*}
     gain=${s##*:}
     cfg="$out/fog-$r2-$gain.toml"
-    { cat configs/clear.toml; printf '\n[[noise]]\ntype = "fog"\nvisibility_m = 1000.0\noverlap_full_m = %s\ngain = %s\n' "$r2" "$gain"; } > "$cfg"
+    { cat configs/clear.toml; printf '\n[[noise]]\ntype = "fog"\nvisibility_m = 1000.0\noverlap = "%s"\ndroplets = "%s"\n' "$r2" "$gain"; } > "$cfg"
     "$bin" --quiet sweep "$capture" --config "$cfg" \
       --vary "fog.visibility_m=${visibilities// /,}" --seeds 1..3 -o "$out/sens-$r2-$gain"
     row="| $r2 | $gain |"

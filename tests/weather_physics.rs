@@ -260,9 +260,12 @@ fn kept_power_falls_by_the_two_way_mie_extinction_and_not_at_rate_zero() {
 }
 
 #[test]
-fn mie_range_noise_is_lisa_sigma() {
-    // (R_n - R) / sigma with sigma = 0.09 / sqrt(2 P / p_th) is standard normal.
+fn mie_range_noise_adds_lisa_s_extra_variance() {
+    // (R_n - R) / sigma with sigma^2 = 0.09^2 (p_th / 2) (1/P - 1/P0) is standard normal:
+    // P the attenuated power, P0 the power before the rain (the recording's own noise is
+    // already in its ranges).
     let f = turn();
+    let clear = common::run("seed = 1\n", &f);
     let out = common::run(
         &common::stage("rain", "model = \"mie\"\nrate_mm_h = 7.29"),
         &f,
@@ -272,17 +275,25 @@ fn mie_range_noise_is_lisa_sigma() {
         if out.fate[i] != Fate::Kept {
             continue;
         }
-        let sigma = 0.09 / (2.0 * out.power[i] / 0.001).sqrt();
+        let var = 0.001 / 2.0 * (1.0 / out.power[i] - 1.0 / clear.power[i]);
+        let sigma = 0.09 * var.max(0.0).sqrt();
+        // f32 rounding of ranges (~4e-6 m at 60 m) must stay far below sigma.
+        if sigma < 1e-4 {
+            continue;
+        }
         let z = (f64::from(out.range[i]) - f64::from(r.range)) / sigma;
         n += 1.0;
         s += z;
         s2 += z * z;
     }
+    assert!(n > 10_000.0, "{n}");
     let mean = s / n;
     let sd = (s2 / n - mean * mean).sqrt();
     assert!(mean.abs() < 4.0 / n.sqrt(), "{mean}");
-    // f32 rounding of ranges (~2e-6 m at 60 m) is far below sigma (>= 1 mm here).
     assert!((sd - 1.0).abs() < 0.02, "{sd}");
+    // At 0 mm/h the stage is the identity.
+    let zero = common::run(&common::stage("rain", "model = \"mie\"\nrate_mm_h = 0"), &f);
+    assert_eq!(zero.range, clear.range);
 }
 
 fn echoes(out: &lidar_noise::noise::NoisyFrame) -> usize {

@@ -12,7 +12,10 @@
 //!   hard targets P exp(-2 alpha R) (Beer-Lambert, two ways);
 //! - range noise that grows as the echo weakens, LISA's model (Kilic et al. 2021, their
 //!   range-noise equation and code): sigma_R = dR / sqrt(2 SNR), SNR = P / p_th with P
-//!   the attenuated power, p_th the detection threshold and dR = 0.09 m
+//!   the power, p_th the detection threshold and dR = 0.09 m. A recorded return already
+//!   carries the sensor's noise at its clear-air power P0, so the stage adds only the
+//!   difference of variances, sigma^2 = dR^2 (p_th / 2) (1/P - 1/P0) with P the attenuated
+//!   power (0 at 0 mm/h; LISA, which simulates the sensor, adds the whole sigma)
 //!   (`range_noise = "lisa"`, the default with mie; "goodin" and "mavs" also accepted);
 //! - drop echoes (`backscatter = true`) with the Mie backscatter cross-section
 //!   dsigma/dOmega = Q_back a^2 / 4 in place of LISA's Fresnel reflectance x area:
@@ -96,7 +99,7 @@ pub enum RangeNoise {
     Goodin,
     /// Uniform +-1.5 cm as in MAVS.
     Mavs,
-    /// LISA: Gaussian, sigma = dR / sqrt(2 P / p_th).
+    /// LISA: Gaussian, the variance of dR / sqrt(2 P / p_th) beyond the clear-air echo's.
     Lisa,
 }
 
@@ -126,6 +129,15 @@ pub fn mie_optics(dsd: &Dsd) -> VolumeOptics {
 /// sigma (m) of LISA's range noise at power `p` and threshold `p_th`.
 pub fn lisa_sigma_m(p: f64, p_th: f64) -> f64 {
     LISA_RANGE_RESOLUTION_M / (2.0 * p / p_th).sqrt()
+}
+
+/// sigma (m) of the range noise the rain adds to a recorded return whose power falls from
+/// `before` to `after`: the recording already holds the sensor's own noise at `before`,
+/// so only the extra variance, sigma(after)^2 - sigma(before)^2, is added (0 without
+/// rain, so 0 mm/h is the identity).
+pub fn lisa_added_sigma_m(after: f64, before: f64, p_th: f64) -> f64 {
+    let var = |p: f64| if p > 0.0 { p_th / (2.0 * p) } else { 0.0 };
+    LISA_RANGE_RESOLUTION_M * (var(after) - var(before)).max(0.0).sqrt()
 }
 
 /// The rain stage.
@@ -279,7 +291,9 @@ impl NoiseStage for Rain {
                 self.sigma_per_m
             ),
             RangeNoise::Mavs => "uniform range noise +-1.5 cm (MAVS)".into(),
-            RangeNoise::Lisa => "range noise sigma = 0.09 m / sqrt(2 P / p_th) (LISA)".into(),
+            RangeNoise::Lisa => {
+                "added range noise sigma^2 = (0.09 m)^2 p_th / 2 (1/P - 1/P_clear) (LISA's law, the extra over the recording's own)".into()
+            }
         };
         let drops = match (&self.backscatter, &self.mie_drops) {
             (Some(b), _) => format!(
@@ -423,12 +437,13 @@ impl Rain {
                 continue;
             }
             let r_i = f64::from(*range);
+            let before = *power;
             *power *= (-two_alpha * r_i).exp();
             let delta = match self.range_noise {
                 RangeNoise::Goodin => self.sigma_per_m * r_i * draw,
                 RangeNoise::Mavs => draw,
                 // A return at or under zero power is dropped by the filters anyway.
-                RangeNoise::Lisa if *power > 0.0 => lisa_sigma_m(*power, p_th) * draw,
+                RangeNoise::Lisa if *power > 0.0 => lisa_added_sigma_m(*power, before, p_th) * draw,
                 RangeNoise::Lisa => 0.0,
             };
             *range = (r_i + delta) as f32;
@@ -562,7 +577,7 @@ pub const KIND: crate::noise::StageKind = crate::noise::StageKind {
     options: &[
         crate::noise::registry::OptionSpec { name: "model", unit: "-", default: "\"mie\"", doc: "\"mie\" (physical: Mie optics of a drop size distribution) or \"goodin\" (Goodin et al. 2019, the reference study's; alpha ~27x the Mie value)" },
         crate::noise::registry::OptionSpec { name: "rate_mm_h", unit: "mm/h", default: "required", doc: "rain rate" },
-        crate::noise::registry::OptionSpec { name: "range_noise", unit: "-", default: "\"lisa\" (mie), \"goodin\" (goodin)", doc: "\"lisa\" (sigma = 0.09 m / sqrt(2 P/p_th); mie only), \"goodin\" (Eq. 9 Gaussian) or \"mavs\" (uniform +-1.5 cm)" },
+        crate::noise::registry::OptionSpec { name: "range_noise", unit: "-", default: "\"lisa\" (mie), \"goodin\" (goodin)", doc: "\"lisa\" (LISA's sigma = 0.09 m / sqrt(2 P/p_th), the extra variance over the clear-air echo's; mie only), \"goodin\" (Eq. 9 Gaussian) or \"mavs\" (uniform +-1.5 cm)" },
         crate::noise::registry::OptionSpec { name: "dsd", unit: "-", default: "\"marshall-palmer\"", doc: "mie: drop size distribution, \"marshall-palmer\" (from rate_mm_h) or \"gamma\" (N0 D^mu exp(-Lambda D), Ulbrich 1983)" },
         crate::noise::registry::OptionSpec { name: "gamma_n0", unit: "1/(m^3 mm^(1+mu))", default: "required with gamma", doc: "gamma DSD: N0" },
         crate::noise::registry::OptionSpec { name: "gamma_mu", unit: "-", default: "required with gamma", doc: "gamma DSD: shape mu (> -1)" },

@@ -17,24 +17,29 @@
 //!   difference of variances, sigma^2 = dR^2 (p_th / 2) (1/P - 1/P0) with P the attenuated
 //!   power (0 at 0 mm/h; LISA, which simulates the sensor, adds the whole sigma)
 //!   (`range_noise = "lisa"`, the default with mie; "goodin" and "mavs" also accepted);
-//! - drop echoes (`backscatter = true`) with the Mie backscatter cross-section
-//!   dsigma/dOmega = Q_back a^2 / 4 in place of LISA's Fresnel reflectance x area:
-//!   P_j = kappa pi (dsigma/dOmega)(D) / (A_beam(r) r^2) exp(-2 alpha r), A_beam =
-//!   pi (r tan theta / 2)^2, capped at the full-beam case (a drop larger than the beam
-//!   intercepts only the beam: pi a^2 in place of A_beam). Derivation: this tool's
-//!   hard-target law P = kappa rho / r^2 is a Lambertian target filling the beam, whose
-//!   differential backscatter cross-section is rho A_beam / pi; received power scales as
-//!   irradiance (1/A_beam) x dsigma/dOmega / r^2, so a particle gives kappa pi
-//!   (dsigma/dOmega) / (A_beam r^2), which is kappa rho / r^2 for the Lambertian disc
-//!   (tested). Equivalently rho_F of LISA's rule becomes Q_back(D) / 4. Sampled only
-//!   where detectable ([`super::particles::Population`]). Drop echoes are attenuated by
-//!   the same Mie alpha (one extinction per medium).
+//! - drop echoes (`backscatter = true`): P_j = kappa pi (dsigma/dOmega)(D) /
+//!   (A_beam(r) r^2) exp(-2 alpha r), capped at the full-beam case (a drop larger than the
+//!   beam intercepts only the beam). Derivation: this tool's hard-target law
+//!   P = kappa rho / r^2 is a Lambertian target filling the beam, whose differential
+//!   backscatter cross-section is rho A_beam / pi; received power scales as irradiance
+//!   (1/A_beam) x dsigma/dOmega / r^2, so a particle gives kappa pi (dsigma/dOmega) /
+//!   (A_beam r^2), which is kappa rho / r^2 for the Lambertian disc (tested). The beam and
+//!   receiver are the HDL-32E's (the fog stage's biaxial optics): A_beam grows from the
+//!   exit aperture, drops fill the lit volume, and a drop is seen only inside the
+//!   receiver's field (probability xi(r)). dsigma/dOmega: the receiver, 30 mm beside the
+//!   beam, sees the drops at pi - d/r, 2.5 mrad or more from exact backscatter for every
+//!   drop within the ~12 m where one can be detected, several widths (~1/x) away from the
+//!   glory that makes the exact-180 degree Mie Q_back large (Q_back/4 ~ 1.2: a drop echoing
+//!   like a white disc, which put a drop echo in 77 % of the sky beams at 7.29 mm/h); there
+//!   a large sphere's backscatter is its front-surface reflection rho_F a^2 / 4 (van de
+//!   Hulst 1957, geometric optics), rho_F of water = 0.0199: LISA's rule. Averaging the Mie
+//!   intensity functions over the receiver's aperture would refine it for the smallest
+//!   drops (not done). Sampled only where detectable ([`super::particles::Population`]).
+//!   Drop echoes are attenuated by the same Mie alpha (one extinction per medium).
 //!
-//! Caveat, stated not corrected: Q_back is the exact 180-degree value. For drops
-//! (x ~ 10^2-10^4) it is dominated by the glory, a lobe ~1/x rad wide, while a biaxial
-//! receiver of centimetre aperture at a few metres averages over milliradians; so these
-//! echoes are likely too strong (lidar ratio ~4.7 sr; at 7.29 mm/h a 1 mm drop is
-//! detectable to ~11 m). Averaging |S1|^2 + |S2|^2 over the receiver's cone is the fix.
+//! The Mie series still gives the extinction (Q_ext) and the volume backscatter that
+//! [`super::mie::volume_optics`] reports (lidar ratio ~4.7 sr at 7.29 mm/h, exact
+//! 180 degrees: what a coaxial lidar would see).
 //!
 //! The rate warning above 7 mm/h belongs to Goodin's fit and is not given for mie.
 //!
@@ -256,10 +261,14 @@ impl Rain {
             &self.dsd,
             MIE_D_MIN_MM,
             DROP_MAX_MM,
-            Reflectance::Mie {
-                table: mie::water_905(),
-                wavelength_m: mie::WAVELENGTH_905_M,
-            },
+            // Seen by the HDL-32E's biaxial receiver, a drop scatters towards it at pi - d/r
+            // (d = 30 mm between the axes: 2.5 mrad or more for every drop within the
+            // 12 m where drops can be detected), several widths (~1/x, 0.3 mrad for a 1 mm
+            // drop) away from the glory that makes the exact-180 degree Mie Q_back large;
+            // there a large sphere's backscatter is its front-surface reflection,
+            // dsigma/dOmega = rho_F a^2 / 4 (van de Hulst 1957, geometric optics). The
+            // exact-180 degree value put a drop echo in 77 % of the sky beams at 7.29 mm/h.
+            Reflectance::Fresnel(super::particles::fresnel(WATER_INDEX)),
             divergence_mrad * 1e-3,
         )
         // The HDL-32E's exit aperture and receiver field (the fog stage's overlap): the
@@ -572,7 +581,7 @@ fn build_mie(opts: &Section<'_>, rate: f64) -> Result<Arc<dyn NoiseStage>> {
 pub const KIND: crate::noise::StageKind = crate::noise::StageKind {
     name: NAME,
     factor: "11 weather (rain)",
-    model: "mie: Mie extinction of Marshall-Palmer (or gamma) drops, water at 905 nm, exp(-2 alpha R), LISA range noise dR/sqrt(2 SNR), drop echoes with Mie backscatter; goodin: alpha = 0.01 R^0.6, Gaussian range noise (Goodin Eq. 9) or MAVS uniform noise, drop echoes with Fresnel reflectance (LISA)",
+    model: "mie: Mie extinction of Marshall-Palmer (or gamma) drops, water at 905 nm, exp(-2 alpha R), LISA range noise (the variance beyond the recording's), drop echoes through the HDL-32E's biaxial optics (front-surface reflection seen off the glory); goodin: alpha = 0.01 R^0.6, Gaussian range noise (Goodin Eq. 9) or MAVS uniform noise, drop echoes with Fresnel reflectance (LISA)",
     source: "Bohren & Huffman 1983; Hale & Querry 1973; Marshall & Palmer 1948; Ulbrich 1983; Kilic et al. 2021 (LISA); Goodin et al., Electronics 2019; noise-models.md",
     options: &[
         crate::noise::registry::OptionSpec { name: "model", unit: "-", default: "\"mie\"", doc: "\"mie\" (physical: Mie optics of a drop size distribution) or \"goodin\" (Goodin et al. 2019, the reference study's; alpha ~27x the Mie value)" },
@@ -582,7 +591,7 @@ pub const KIND: crate::noise::StageKind = crate::noise::StageKind {
         crate::noise::registry::OptionSpec { name: "gamma_n0", unit: "1/(m^3 mm^(1+mu))", default: "required with gamma", doc: "gamma DSD: N0" },
         crate::noise::registry::OptionSpec { name: "gamma_mu", unit: "-", default: "required with gamma", doc: "gamma DSD: shape mu (> -1)" },
         crate::noise::registry::OptionSpec { name: "gamma_lambda_per_mm", unit: "1/mm", default: "required with gamma", doc: "gamma DSD: slope Lambda" },
-        crate::noise::registry::OptionSpec { name: "backscatter", unit: "-", default: "false", doc: "drop echoes at short range, proposed to the firing slot (mie: Mie backscatter, detectable drops only; goodin: LISA Monte Carlo, Fresnel)" },
+        crate::noise::registry::OptionSpec { name: "backscatter", unit: "-", default: "false", doc: "drop echoes at short range, proposed to the firing slot (mie: through the HDL-32E optics, detectable drops only; goodin: LISA Monte Carlo cone)" },
         crate::noise::registry::OptionSpec { name: "divergence_mrad", unit: "mrad", default: "3", doc: "with backscatter: full beam divergence of the Monte Carlo cone" },
         crate::noise::registry::OptionSpec { name: "empty_slots", unit: "-", default: "true", doc: "with backscatter: drop echoes also in firing slots without a return" },
     ],

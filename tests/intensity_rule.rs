@@ -226,18 +226,6 @@ fn spurious_echoes_keep_the_intensity_of_their_own_power() {
     check_rule(&f, &out, 100.0, 1.0, "spoofing + emitter");
 }
 
-fn same_returns(a: &[Return], b: &[Return]) -> bool {
-    a.len() == b.len()
-        && a.iter().zip(b).all(|(x, y)| {
-            x.x.to_bits() == y.x.to_bits()
-                && x.y.to_bits() == y.y.to_bits()
-                && x.z.to_bits() == y.z.to_bits()
-                && x.range.to_bits() == y.range.to_bits()
-                && x.time.to_bits() == y.time.to_bits()
-                && x.intensity == y.intensity
-        })
-}
-
 #[test]
 fn at_zero_strength_every_byte_is_unchanged() {
     let f = turn();
@@ -250,7 +238,7 @@ fn at_zero_strength_every_byte_is_unchanged() {
         [[noise]]\ntype = \"receiver\"\nsigma_gain = 0\nsigma_noise = 0\nrange_noise_m = 0\n";
     let out = run(zero, &f);
     assert_eq!(out.fate, base.fate);
-    assert!(same_returns(&out.survivors(), &base.survivors()));
+    assert!(common::same_returns(&out.survivors(), &base.survivors()));
     assert!(
         out.moved.intensity.is_none(),
         "no intensity column at zero strength"

@@ -84,20 +84,6 @@ fn all_zero() -> String {
     s
 }
 
-fn same_returns(a: &[Return], b: &[Return]) -> bool {
-    a.len() == b.len()
-        && a.iter().zip(b).all(|(x, y)| {
-            x.x.to_bits() == y.x.to_bits()
-                && x.y.to_bits() == y.y.to_bits()
-                && x.z.to_bits() == y.z.to_bits()
-                && x.range.to_bits() == y.range.to_bits()
-                && x.azimuth.to_bits() == y.azimuth.to_bits()
-                && x.elevation.to_bits() == y.elevation.to_bits()
-                && x.time.to_bits() == y.time.to_bits()
-                && x.intensity == y.intensity
-        })
-}
-
 #[test]
 fn a_1_ns_clock_bias_shifts_every_range_by_c_ns_over_2() {
     let f = turn(0);
@@ -195,8 +181,8 @@ fn mounting_translation_and_per_seed_draws() {
         chain.process(&turn(0)).survivors(),
         chain.process(&turn(9)).survivors(),
     );
-    assert!(same_returns(&a, &b));
-    assert!(!same_returns(&a, &turn(0).returns));
+    assert!(common::same_returns(&a, &b));
+    assert!(!common::same_returns(&a, &turn(0).returns));
 }
 
 #[test]
@@ -449,10 +435,13 @@ fn every_stage_at_zero_magnitude_is_the_identity() {
     for (k, body) in ZERO {
         let out = run(&stage(k, body), &f);
         assert_eq!(out.fate, base.fate, "{k}");
-        assert!(same_returns(&out.survivors(), &base.survivors()), "{k}");
+        assert!(
+            common::same_returns(&out.survivors(), &base.survivors()),
+            "{k}"
+        );
     }
     let out = run(&all_zero(), &f);
-    assert!(same_returns(&out.survivors(), &base.survivors()));
+    assert!(common::same_returns(&out.survivors(), &base.survivors()));
 }
 
 #[test]
@@ -489,10 +478,13 @@ fn sensor_chain_is_deterministic_and_thread_independent() {
         .install(|| chain.process_all(frames.clone()));
     for (a, b) in one.iter().zip(&two) {
         assert_eq!(a.fate, b.fate);
-        assert!(same_returns(&a.survivors(), &b.survivors()));
+        assert!(common::same_returns(&a.survivors(), &b.survivors()));
     }
     let again = NoiseChain::new(&config(&text)).process(&frames[0]);
-    assert!(same_returns(&again.survivors(), &one[0].survivors()));
+    assert!(common::same_returns(
+        &again.survivors(),
+        &one[0].survivors()
+    ));
 }
 
 #[test]

@@ -43,19 +43,6 @@ fn turn(index: u32) -> Frame {
     }
 }
 
-fn same_returns(a: &[Return], b: &[Return]) -> bool {
-    a.len() == b.len()
-        && a.iter().zip(b).all(|(x, y)| {
-            x.x.to_bits() == y.x.to_bits()
-                && x.y.to_bits() == y.y.to_bits()
-                && x.z.to_bits() == y.z.to_bits()
-                && x.range.to_bits() == y.range.to_bits()
-                && x.azimuth.to_bits() == y.azimuth.to_bits()
-                && x.time.to_bits() == y.time.to_bits()
-                && x.intensity == y.intensity
-        })
-}
-
 /// Independent reference for the fog echo: the paper's integral in its own variable t,
 /// P_s(R) = pi kappa beta (c/2) int_0^{2 tau_H} s(t) exp(-2 alpha r) xi(r) / r^2 dt,
 /// r = R - c t / 2, r <= R0, by composite Simpson on 4,000 intervals, maximised over R
@@ -283,7 +270,10 @@ fn zero_weather_is_the_identity() {
         if extra.contains("inf") || extra.contains("rate_mm_h = 0") {
             assert_eq!(out.fate, base.fate, "{extra}");
             assert_eq!(out.power, base.power, "{extra}");
-            assert!(same_returns(&out.survivors(), &base.survivors()), "{extra}");
+            assert!(
+                common::same_returns(&out.survivors(), &base.survivors()),
+                "{extra}"
+            );
         }
     }
     // backscatter = false written out is the default.
@@ -291,7 +281,7 @@ fn zero_weather_is_the_identity() {
         "seed = 5\n[[noise]]\ntype = \"rain\"\nmodel = \"goodin\"\nrate_mm_h = 7\nbackscatter = false\n",
         &f,
     );
-    assert!(same_returns(&off.survivors(), &base.survivors()));
+    assert!(common::same_returns(&off.survivors(), &base.survivors()));
 }
 
 #[test]
@@ -393,10 +383,13 @@ fn weather_chain_is_deterministic_and_thread_independent() {
     for (a, b) in one.iter().zip(&two) {
         assert_eq!(a.fate, b.fate);
         assert_eq!(a.cause, b.cause);
-        assert!(same_returns(&a.survivors(), &b.survivors()));
+        assert!(common::same_returns(&a.survivors(), &b.survivors()));
     }
     let again = NoiseChain::new(&config(&text)).process(&frames[0]);
-    assert!(same_returns(&again.survivors(), &one[0].survivors()));
+    assert!(common::same_returns(
+        &again.survivors(),
+        &one[0].survivors()
+    ));
     // Another seed gives other flake and drop echoes.
     let other =
         NoiseChain::new(&config(&text.replace("seed = 42", "seed = 43"))).process(&frames[0]);

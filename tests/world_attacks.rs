@@ -86,20 +86,6 @@ fn sky_turn(kind: ReturnKind) -> Frame {
     }
 }
 
-fn same_returns(a: &[Return], b: &[Return]) -> bool {
-    a.len() == b.len()
-        && a.iter().zip(b).all(|(x, y)| {
-            x.x.to_bits() == y.x.to_bits()
-                && x.y.to_bits() == y.y.to_bits()
-                && x.z.to_bits() == y.z.to_bits()
-                && x.range.to_bits() == y.range.to_bits()
-                && x.azimuth.to_bits() == y.azimuth.to_bits()
-                && x.elevation.to_bits() == y.elevation.to_bits()
-                && x.time.to_bits() == y.time.to_bits()
-                && x.intensity == y.intensity
-        })
-}
-
 fn within_3_sigma(count: usize, n: usize, p: f64) -> bool {
     let mean = n as f64 * p;
     let sd = (n as f64 * p * (1.0 - p)).sqrt();
@@ -506,11 +492,14 @@ fn every_stage_at_zero_magnitude_is_the_identity() {
         assert_eq!(out.fate, base.fate, "{k}");
         assert_eq!(out.cause, base.cause, "{k}");
         assert_eq!(out.power, base.power, "{k}");
-        assert!(same_returns(&out.survivors(), &base.survivors()), "{k}");
+        assert!(
+            common::same_returns(&out.survivors(), &base.survivors()),
+            "{k}"
+        );
         all.push_str(&format!("[[noise]]\ntype = \"{k}\"\n{body}\n"));
     }
     let out = run(&all, &f);
-    assert!(same_returns(&out.survivors(), &base.survivors()));
+    assert!(common::same_returns(&out.survivors(), &base.survivors()));
     // And at their defaults they do change something.
     for (k, _) in ZERO {
         // Crosstalk's default (model A) is an equal interferer's reflection, which ties
@@ -558,17 +547,23 @@ fn world_chain_is_deterministic_and_thread_independent() {
     for (a, b) in one.iter().zip(&two) {
         assert_eq!(a.fate, b.fate);
         assert_eq!(a.cause, b.cause);
-        assert!(same_returns(&a.survivors(), &b.survivors()));
+        assert!(common::same_returns(&a.survivors(), &b.survivors()));
     }
     // Spurious returns do occur in this chain.
     assert!(one.iter().any(|o| o.fate.iter().any(|x| x.is_spurious())));
     let again = NoiseChain::new(&world_config()).process(&frames[0]);
-    assert!(same_returns(&again.survivors(), &one[0].survivors()));
+    assert!(common::same_returns(
+        &again.survivors(),
+        &one[0].survivors()
+    ));
     // Another seed gives other draws.
     let mut other = world_config();
     other.seed += 1;
     let moved = NoiseChain::new(&other).process(&frames[0]);
-    assert!(!same_returns(&moved.survivors(), &one[0].survivors()));
+    assert!(!common::same_returns(
+        &moved.survivors(),
+        &one[0].survivors()
+    ));
 }
 
 #[test]

@@ -177,3 +177,19 @@ pub fn refused_run(dir: &std::path::Path, config: &str) -> String {
     );
     String::from_utf8_lossy(&o.get_output().stderr).to_string()
 }
+
+/// True when both lists hold the same returns bit for bit (position, range, angles, time,
+/// intensity).
+pub fn same_returns(a: &[lidar_noise::frame::Return], b: &[lidar_noise::frame::Return]) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).all(|(x, y)| {
+            x.x.to_bits() == y.x.to_bits()
+                && x.y.to_bits() == y.y.to_bits()
+                && x.z.to_bits() == y.z.to_bits()
+                && x.range.to_bits() == y.range.to_bits()
+                && x.azimuth.to_bits() == y.azimuth.to_bits()
+                && x.elevation.to_bits() == y.elevation.to_bits()
+                && x.time.to_bits() == y.time.to_bits()
+                && x.intensity == y.intensity
+        })
+}

@@ -253,7 +253,9 @@ struct SizeBin {
 /// exponential through N at both bin ends: exact for Marshall-Palmer and Gunn-Marshall,
 /// an approximation within a bin for gamma with mu > 0), r with w(r)^3 uniform, and the
 /// exact power test (with extinction and rho(D)) keeps the detectable ones. Thinning a
-/// Poisson process keeps it Poisson, so the echoes have exactly the distribution of
+/// Poisson process keeps it Poisson (so does the thinning of each bin by the receiver's
+/// overlap at its r_b, the largest it reaches there, with the rest of xi(r) decided per
+/// particle), so the echoes have exactly the distribution of
 /// drawing every particle in the cone and keeping the detectable ones (tested against
 /// that brute force), at a cost of one uniform per beam.
 ///
@@ -293,6 +295,9 @@ pub struct Prepared {
     c: f64,
     /// a: the beam's radius at the sensor (m).
     a: f64,
+    /// Per bin: the overlap xi at r_b, a bound of xi over the bin's region (xi grows with
+    /// r), by which its particles are thinned before the draw (1 without optics).
+    xi_b: Vec<f64>,
     /// t: the growth of the beam's radius per metre.
     t: f64,
 }
@@ -401,10 +406,15 @@ impl Population {
             })
             .collect();
         let r_top = r_b.iter().copied().fold(0.0, f64::max);
+        let xi_b = r_b
+            .iter()
+            .map(|&r| self.optics.as_ref().map_or(1.0, |o| o.overlap(r)))
+            .collect();
         let c = std::f64::consts::PI / (3.0 * t);
         let mut p = Prepared {
             a,
             t,
+            xi_b,
             lo,
             r_b,
             r_top,
@@ -434,7 +444,7 @@ impl Population {
             let w = p.a + r * p.t;
             w * w * w
         };
-        self.bins[b].per_m3 * (w(range.min(p.r_b[b])) - w(p.lo)).max(0.0)
+        self.bins[b].per_m3 * p.xi_b[b] * (w(range.min(p.r_b[b])) - w(p.lo)).max(0.0)
     }
 
     /// Expected number of particles in the superset region of a beam to `range` m.
@@ -525,7 +535,8 @@ impl Population {
             // a particle bright enough to be detected).
             if let Some(o) = &self.optics {
                 let v: f64 = rng.random();
-                if v >= o.overlap(r) {
+                // The bin's particles were thinned by xi(r_b) >= xi(r) already.
+                if v * p.xi_b[bin] >= o.overlap(r) {
                     continue;
                 }
             }
@@ -768,6 +779,20 @@ mod population_tests {
             3e-3,
         );
         compare(&pop, 8000.0, l, 1e-4);
+    }
+
+    #[test]
+    fn the_hdl32e_overlap_never_falls_with_range() {
+        // The sampler thins each size bin by xi(r_b) as a bound of xi on [lo, r_b]: xi must
+        // not fall with r.
+        let o = super::super::fog::hdl32e_optics();
+        let mut last = 0.0;
+        for k in 0..=200_000 {
+            let x = o.overlap(f64::from(k) * 1e-3);
+            assert!(x >= last - 1e-12, "{k} mm: {x} < {last}");
+            last = x;
+        }
+        assert!(last > 0.999);
     }
 
     #[test]

@@ -141,3 +141,59 @@ fn no_frame_without_frames_names_the_whole_capture_not_a_range_nobody_gave() {
         &["in --frames 3..:"],
     );
 }
+
+#[test]
+fn a_calibration_file_inside_the_output_folder_is_never_replaced() {
+    // Issue 30, defect 4: `run C --calibration out/crossroad/summary.json -o out --force`
+    // replaced the calibration with the report.
+    let root = env!("CARGO_MANIFEST_DIR");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let first = bin()
+        .args(["--quiet", "run", "--frames", "0", "--no-ply", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(first.status.success());
+    let cal = out.join("crossroad/summary.json");
+    let text = std::fs::read(format!("{root}/fuzz/corpus/calibration/hdl32e_ros.yaml")).unwrap();
+    std::fs::write(&cal, &text).unwrap();
+    let c = cal.to_string_lossy().into_owned();
+    let o = out.to_string_lossy().into_owned();
+    for args in [
+        vec![
+            "--quiet",
+            "run",
+            "--frames",
+            "0",
+            "--no-ply",
+            "--force",
+            "--calibration",
+            &c,
+            "-o",
+            &o,
+        ],
+        vec![
+            "--quiet",
+            "convert",
+            "fixtures/crossroad.pcap",
+            "--frames",
+            "0",
+            "--force",
+            "--calibration",
+            &c,
+            "-o",
+            &o,
+        ],
+    ] {
+        let r = bin().args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_ne!(r.status.code(), Some(0), "{args:?}: accepted");
+        assert!(err.contains("input"), "{args:?}: {err}");
+        assert_eq!(
+            std::fs::read(&cal).unwrap(),
+            text,
+            "{args:?}: calibration replaced"
+        );
+    }
+}

@@ -67,7 +67,9 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             }
         })
         .collect();
-    let inputs: Vec<&Path> = args.captures.iter().map(PathBuf::as_path).collect();
+    let mut inputs: Vec<&Path> = args.captures.iter().map(PathBuf::as_path).collect();
+    // A calibration file inside the output folder would be replaced by a frame.
+    inputs.extend(args.decoder.calibration.as_deref());
     let mut old = Vec::new();
     for (capture, (_, target)) in args.captures.iter().zip(&targets) {
         let settings = convert_settings(&args, capture, output);

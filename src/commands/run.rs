@@ -173,6 +173,8 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     if let Some(c) = &args.config {
         inputs.push(c);
     }
+    // A calibration file inside the output folder would be replaced by a report.
+    inputs.extend(args.decoder.calibration.as_deref());
     if let Some(m) = args.chunk_frames {
         return super::run_chunks::run(&args, &plan, m, &inputs, global);
     }

@@ -228,6 +228,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         inputs.extend(c.labels.as_deref());
     }
     inputs.extend(args.config.as_deref());
+    inputs.extend(args.decoder.calibration.as_deref());
     let old = staging::check_replace(
         &args.output,
         "sweep",

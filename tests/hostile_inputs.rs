@@ -197,3 +197,37 @@ fn a_calibration_file_inside_the_output_folder_is_never_replaced() {
         );
     }
 }
+
+#[test]
+fn a_later_packet_of_another_sensor_is_refused_naming_record_and_offset() {
+    // Issue 30, defect 6: only the first 64 data packets identified the sensor, so an
+    // HDL-32E capture followed by a VLP-16 one decoded the VLP-16 packets as garbage.
+    let root = env!("CARGO_MANIFEST_DIR");
+    let mut bytes = std::fs::read(format!("{root}/fixtures/crossroad.pcap")).unwrap();
+    let (mut at, mut record, mut patched) = (24usize, 0u32, None);
+    while at + 16 <= bytes.len() {
+        let len = u32::from_le_bytes(bytes[at + 8..at + 12].try_into().unwrap()) as usize;
+        // Ethernet + IPv4 + UDP headers (42 bytes), then the 1206-byte payload whose last
+        // byte is the product id.
+        if len == 42 + 1206 && record >= 150 && patched.is_none() {
+            bytes[at + 16 + 42 + 1205] = 0x22;
+            patched = Some((record, at));
+        }
+        at += 16 + len;
+        record += 1;
+    }
+    let (record, offset) = patched.expect("a data packet past record 150");
+    let dir = tempfile::tempdir().unwrap();
+    let mixed = dir.path().join("mixed.pcap");
+    std::fs::write(&mixed, &bytes).unwrap();
+    let m = mixed.to_string_lossy().into_owned();
+    fails_with(
+        &["--quiet", "run", &m, "--pcap-out"],
+        &[
+            "mixed.pcap",
+            &format!("record {record} at byte offset {offset}"),
+            "0x22 (VLP-16)",
+            "mixes sensors",
+        ],
+    );
+}

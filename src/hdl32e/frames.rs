@@ -536,6 +536,27 @@ impl FrameReader {
                 self.summary.other_udp += 1;
                 continue;
             }
+            // The sensor was identified from the first data packets; a later packet of
+            // another product (a second sensor on the wire, or captures concatenated)
+            // would decode as garbage returns. One byte per packet checks it.
+            let product = packet::product_byte(d.payload);
+            let expected = self.summary.product_id;
+            if product != expected && product != 0 {
+                let (record, offset) = (d.record, d.offset);
+                return Err(Error::Capture {
+                    path: self.capture.path().to_path_buf(),
+                    message: format!(
+                        "data packet in record {} at byte offset {} has product id 0x{product:02x} \
+                         ({}) where the capture's first data packets have 0x{expected:02x} ({}): \
+                         the capture mixes sensors; keep one sensor's packets (e.g. filter by \
+                         UDP port) and rerun",
+                        record,
+                        offset,
+                        packet::product_name(product),
+                        packet::product_name(expected)
+                    ),
+                });
+            }
             let record = d.record;
             let ports = (d.src_port, d.dst_port);
             // The datagram borrows the reader; copy the 1206 bytes so frame state can change.

@@ -231,3 +231,37 @@ fn a_later_packet_of_another_sensor_is_refused_naming_record_and_offset() {
         ],
     );
 }
+
+#[test]
+fn duplicated_packets_are_reported() {
+    // Issue 30, defect 6: every packet twice gave frames of doubled returns, silently.
+    let root = env!("CARGO_MANIFEST_DIR");
+    let bytes = std::fs::read(format!("{root}/fixtures/crossroad.pcap")).unwrap();
+    let mut out = bytes[..24].to_vec();
+    let mut at = 24usize;
+    let mut data = 0u64;
+    while at + 16 <= bytes.len() {
+        let len = u32::from_le_bytes(bytes[at + 8..at + 12].try_into().unwrap()) as usize;
+        let rec = &bytes[at..at + 16 + len];
+        out.extend_from_slice(rec);
+        out.extend_from_slice(rec);
+        data += u64::from(len == 42 + 1206);
+        at += 16 + len;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let dup = dir.path().join("dup.pcap");
+    std::fs::write(&dup, &out).unwrap();
+    let o = bin()
+        .args(["run", "--no-ply", "-o"])
+        .arg(dir.path().join("out"))
+        .arg(&dup)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    // Every copy starts before the packet read before it ended.
+    assert!(
+        err.contains(&format!("clock runs backwards {data} times")),
+        "{err}"
+    );
+}

@@ -41,6 +41,17 @@ pub fn warn_capture(global: Global, path: &Path, s: &CaptureSummary, check_inten
             s.bad_data_packets
         ));
     }
+    if s.clock_backward_steps > 0 {
+        global.warn(&format!(
+            "{}: the sensor clock runs backwards {} time{} between data packets: the capture \
+             holds reordered or duplicated packets (or the sensor's clock was reset), so \
+             frames may repeat or mix returns; sort and deduplicate the packets (e.g. by \
+             timestamp) if that was not intended",
+            path.display(),
+            s.clock_backward_steps,
+            if s.clock_backward_steps == 1 { "" } else { "s" }
+        ));
+    }
     let dead = s.dead_lasers();
     if !dead.is_empty() {
         global.warn(&format!(

@@ -750,34 +750,30 @@ mod population_tests {
         }
     }
 
+    /// Marshall-Palmer drops (0.05-6 mm) at `rate` mm/h in a 3 mrad beam, and Lambda.
+    fn marshall_palmer(rate: f64, reflectance: Reflectance) -> (Population, f64) {
+        let dsd = Dsd::MarshallPalmer { rate_mm_h: rate };
+        let pop = Population::new(&dsd, D_MIN_MM, 6.0, reflectance, 3e-3);
+        (pop, 4.1 * rate.powf(-0.21))
+    }
+
+    /// Exact-180 degree Mie backscatter of water at 905 nm.
+    fn water_mie() -> Reflectance {
+        Reflectance::Mie {
+            table: mie::water_905(),
+            wavelength_m: mie::WAVELENGTH_905_M,
+        }
+    }
+
     #[test]
     fn detectable_sampling_matches_brute_force_fresnel() {
-        let rate: f64 = 7.0;
-        let l = 4.1 * rate.powf(-0.21);
-        let pop = Population::new(
-            &Dsd::MarshallPalmer { rate_mm_h: rate },
-            D_MIN_MM,
-            6.0,
-            Reflectance::Fresnel(fresnel(1.328)),
-            3e-3,
-        );
+        let (pop, l) = marshall_palmer(7.0, Reflectance::Fresnel(fresnel(1.328)));
         compare(&pop, 8000.0, l, 1e-5);
     }
 
     #[test]
     fn detectable_sampling_matches_brute_force_mie() {
-        let rate: f64 = 7.0;
-        let l = 4.1 * rate.powf(-0.21);
-        let pop = Population::new(
-            &Dsd::MarshallPalmer { rate_mm_h: rate },
-            D_MIN_MM,
-            6.0,
-            Reflectance::Mie {
-                table: mie::water_905(),
-                wavelength_m: mie::WAVELENGTH_905_M,
-            },
-            3e-3,
-        );
+        let (pop, l) = marshall_palmer(7.0, water_mie());
         compare(&pop, 8000.0, l, 1e-4);
     }
 
@@ -799,19 +795,8 @@ mod population_tests {
     fn detectable_sampling_matches_brute_force_through_the_hdl32e_optics() {
         // A heavier rain, so that enough drops pass the exit aperture's wider beam and the
         // receiver's field for the comparison.
-        let rate: f64 = 50.0;
-        let l = 4.1 * rate.powf(-0.21);
-        let pop = Population::new(
-            &Dsd::MarshallPalmer { rate_mm_h: rate },
-            D_MIN_MM,
-            6.0,
-            Reflectance::Mie {
-                table: mie::water_905(),
-                wavelength_m: mie::WAVELENGTH_905_M,
-            },
-            3e-3,
-        )
-        .with_optics(super::super::fog::hdl32e_optics());
+        let (pop, l) = marshall_palmer(50.0, water_mie());
+        let pop = pop.with_optics(super::super::fog::hdl32e_optics());
         compare(&pop, 8000.0, l, 1e-5);
     }
 

@@ -390,46 +390,8 @@ impl NoiseStage for Rain {
     }
 
     fn apply(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
-        if self.model == Model::Mie {
-            self.apply_mie(frame, rng);
-            return;
-        }
-        let two_alpha = 2.0 * self.alpha;
-        for ((range, power), fate) in frame
-            .range
-            .iter_mut()
-            .zip(frame.power.iter_mut())
-            .zip(frame.fate.iter())
-        {
-            // Draw before looking at the fate: one draw per return keeps streams aligned.
-            let draw = match self.range_noise {
-                RangeNoise::Goodin => rng.sample::<f64, _>(StandardNormal),
-                RangeNoise::Mavs => MAVS_JITTER_M * (2.0 * rng.random::<f64>() - 1.0),
-                // Not reachable with model = "goodin" (build refuses it), kept total.
-                RangeNoise::Lisa => rng.sample::<f64, _>(StandardNormal),
-            };
-            if !fate.is_alive() {
-                continue;
-            }
-            let r_i = f64::from(*range);
-            *power *= (-two_alpha * r_i).exp();
-            let delta = match self.range_noise {
-                RangeNoise::Goodin => self.sigma_per_m * r_i * draw,
-                RangeNoise::Mavs => draw,
-                RangeNoise::Lisa => 0.0,
-            };
-            *range = (r_i + delta) as f32;
-        }
-        if let Some(b) = &self.backscatter {
-            super::snow::propose_particle_echoes(frame, rng, &b.drops, self.alpha, b.empty_slots);
-        }
-    }
-}
-
-impl Rain {
-    /// The mie model's pass: one draw per return (normal, or uniform for mavs), then the
-    /// drop echoes.
-    fn apply_mie(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
+        // One pass for both models: goodin's build refuses `range_noise = "lisa"`, so for
+        // goodin the draws, powers and ranges are exactly those of before the mie model.
         let two_alpha = 2.0 * self.alpha;
         let p_th = frame.threshold;
         for ((range, power), fate) in frame
@@ -438,9 +400,10 @@ impl Rain {
             .zip(frame.power.iter_mut())
             .zip(frame.fate.iter())
         {
+            // Draw before looking at the fate: one draw per return keeps streams aligned.
             let draw = match self.range_noise {
                 RangeNoise::Mavs => MAVS_JITTER_M * (2.0 * rng.random::<f64>() - 1.0),
-                _ => rng.sample::<f64, _>(StandardNormal),
+                RangeNoise::Goodin | RangeNoise::Lisa => rng.sample::<f64, _>(StandardNormal),
             };
             if !fate.is_alive() {
                 continue;
@@ -456,6 +419,11 @@ impl Rain {
                 RangeNoise::Lisa => 0.0,
             };
             *range = (r_i + delta) as f32;
+        }
+        // Drop echoes after every range draw, from the same stream: goodin's LISA cone,
+        // or mie's population through the sensor's optics.
+        if let Some(b) = &self.backscatter {
+            super::snow::propose_particle_echoes(frame, rng, &b.drops, self.alpha, b.empty_slots);
         }
         if let Some(m) = &self.mie_drops {
             super::particles::propose_population_echoes(

@@ -59,6 +59,7 @@ pub mod registry;
 pub mod sensor;
 pub mod spurious;
 pub mod summary;
+pub mod transmission;
 pub mod world;
 
 pub use registry::{build_stage, StageKind, REGISTRY};
@@ -399,6 +400,13 @@ impl Moved {
     }
 }
 
+/// Room kept in a frame's columns for the returns the chain may add in empty firing
+/// slots (a real HDL-32E frame has about 15 % of its slots empty), so that adding them
+/// does not move every column of a 50k-return frame (a tenth of a fog stage's time).
+fn room_for_added(n: usize) -> usize {
+    n / 4 + 64
+}
+
 impl NoisyFrame {
     /// Starts a noisy frame: ranges are the clean ranges, powers the ideal powers.
     pub fn new(index: u32, clean: Vec<Return>, ideal: &IdealPower) -> Self {
@@ -414,8 +422,8 @@ impl NoisyFrame {
     /// the same pass (for the intensity rule).
     fn new_keeping_bytes(index: u32, clean: Vec<Return>, ideal: &IdealPower) -> (Self, Vec<u8>) {
         let n = clean.len();
-        let mut range = Vec::with_capacity(n);
-        let mut power = Vec::with_capacity(n);
+        let mut range = Vec::with_capacity(n + room_for_added(n));
+        let mut power = Vec::with_capacity(n + room_for_added(n));
         let mut bytes = Vec::with_capacity(n);
         for r in &clean {
             range.push(r.range);
@@ -433,8 +441,8 @@ impl NoisyFrame {
     /// 2.4 MB, and the three passes of `new` and `Layout::of` each streamed them).
     pub fn with_layout(index: u32, clean: Vec<Return>, ideal: &IdealPower) -> Self {
         let n = clean.len();
-        let mut range = Vec::with_capacity(n);
-        let mut power = Vec::with_capacity(n);
+        let mut range = Vec::with_capacity(n + room_for_added(n));
+        let mut power = Vec::with_capacity(n + room_for_added(n));
         // The same values as `new`, a chunk at a time (see `Layout::build`).
         let l = Layout::build(&clean, |chunk| {
             range.extend(chunk.iter().map(|r| r.range));
@@ -451,14 +459,19 @@ impl NoisyFrame {
         layout: Option<Arc<Layout>>,
     ) -> Self {
         let n = clean.len();
+        let room = range.capacity().max(n);
+        let mut fate = Vec::with_capacity(room);
+        fate.resize(n, Fate::Kept);
+        let mut cause = Vec::with_capacity(room);
+        cause.resize(n, NO_CAUSE);
         NoisyFrame {
             index,
             clean,
             clean_len: n,
             range,
             power,
-            fate: vec![Fate::Kept; n],
-            cause: vec![NO_CAUSE; n],
+            fate,
+            cause,
             threshold: crate::config::DetectionConfig::default().min_power,
             min_range: crate::config::DetectionConfig::default().min_range_m,
             stage: 0,
@@ -911,7 +924,10 @@ impl NoiseChain {
 
     /// Runs ideal power, the stages and the detection filters on a copy of `frame`.
     pub fn process(&self, frame: &Frame) -> NoisyFrame {
-        self.process_returns(frame.index, frame.returns.clone())
+        let n = frame.returns.len();
+        let mut returns = Vec::with_capacity(n + room_for_added(n));
+        returns.extend_from_slice(&frame.returns);
+        self.process_returns(frame.index, returns)
     }
 
     /// Same as [`NoiseChain::process`], taking the frame's returns without copying.
@@ -920,7 +936,12 @@ impl NoiseChain {
     }
 
     /// Runs the chain on returns of the frame with capture index `index`.
-    pub fn process_returns(&self, index: u32, returns: Vec<Return>) -> NoisyFrame {
+    pub fn process_returns(&self, index: u32, mut returns: Vec<Return>) -> NoisyFrame {
+        if !self.stages.is_empty() {
+            // Moves the returns only when they lack the room (a decoder's vector usually
+            // has it from growing).
+            returns.reserve(room_for_added(returns.len()));
+        }
         // The recorded bytes for the intensity rule: read with the ideal powers when
         // no layout (which holds them) is built.
         let (mut noisy, recorded) = if self.layout {

@@ -88,14 +88,56 @@ pub struct Slots {
 const NONE: u32 = u32::MAX;
 const LASERS: usize = 32;
 
+/// Firing number of each (packet, block) seen: a table indexed by packet and block when
+/// the frame's packets span a short range (always, for a decoded capture: a frame's
+/// packets are consecutive records), else a hash map (a hash per firing was a tenth of
+/// a weather chain's time).
+enum FiringIndex {
+    Table { first: u32, of: Vec<u32> },
+    Map(HashMap<(u32, u8), u32>),
+}
+
+impl FiringIndex {
+    /// For `n` returns of packets `lo..=hi` (`lo > hi` for none).
+    fn new(lo: u32, hi: u32, n: usize) -> Self {
+        let span = u64::from(hi.saturating_sub(lo)) + 1;
+        // 256 blocks a packet (any u8), so the table is bounded by the frame's size.
+        if lo <= hi && span * 256 <= 64 * n as u64 + 65_536 {
+            FiringIndex::Table {
+                first: lo,
+                of: vec![NONE; span as usize * 256],
+            }
+        } else {
+            FiringIndex::Map(HashMap::new())
+        }
+    }
+
+    fn get_or_insert(&mut self, key: (u32, u8), new: impl FnOnce() -> u32) -> u32 {
+        match self {
+            FiringIndex::Table { first, of } => {
+                let at = &mut of[(key.0 - *first) as usize * 256 + usize::from(key.1)];
+                if *at == NONE {
+                    *at = new();
+                }
+                *at
+            }
+            FiringIndex::Map(m) => *m.entry(key).or_insert_with(new),
+        }
+    }
+}
+
 impl Slots {
     /// The slots of a frame's recorded returns (the first `clean_len` of `returns`).
     pub fn of(returns: &[Return]) -> Slots {
         // A dual capture decoded with one of its two returns behaves like that single
         // mode: its slots hold one return of that kind.
-        let mut kinds = 0u8;
+        // One pass for the kinds and the span of packets (the returns are 48 bytes each:
+        // every pass over a frame's returns streams megabytes).
+        let (mut kinds, mut lo, mut hi) = (0u8, u32::MAX, 0u32);
         for r in returns {
             kinds |= 1 << (r.kind as u8);
+            lo = lo.min(r.packet);
+            hi = hi.max(r.packet);
         }
         let has = |k: ReturnKind| kinds & (1 << (k as u8)) != 0;
         let mode = match (has(ReturnKind::DualLast), has(ReturnKind::DualStrongest)) {
@@ -108,7 +150,7 @@ impl Slots {
         let mut firings: Vec<Firing> = Vec::new();
         let mut occupants: Vec<[u32; 2]> = Vec::new();
         let mut slot_of = Vec::with_capacity(returns.len());
-        let mut index: HashMap<(u32, u8), u32> = HashMap::new();
+        let mut index = FiringIndex::new(lo, hi, returns.len());
         let mut last_key = None;
         for (i, r) in returns.iter().enumerate() {
             let block = if mode == SlotMode::Dual {
@@ -119,7 +161,7 @@ impl Slots {
             let key = (r.packet, block);
             let f = match last_key {
                 Some((k, f)) if k == key => f,
-                _ => *index.entry(key).or_insert_with(|| {
+                _ => index.get_or_insert(key, || {
                     firings.push(Firing {
                         packet: r.packet,
                         block,
@@ -308,8 +350,10 @@ impl NoisyFrame {
     /// Proposes an echo in a firing slot (occupied or vacant).
     pub fn propose_slot(&mut self, slot: SlotId, echo: Echo) {
         if self.candidates.capacity() == 0 {
-            // Scatter stages often propose for most returns: grow once, not by doubling.
-            self.candidates.reserve(self.len());
+            // Scatter stages often propose for most returns (fog: every one), and a
+            // chain's other scatter stages a few percent more: room for them all, so the
+            // buffer is not copied as it grows.
+            self.candidates.reserve(self.len() + self.len() / 4 + 1024);
         }
         if echo.range.is_finite() && echo.power.is_finite() {
             self.candidates.push(Candidate {
@@ -317,6 +361,31 @@ impl NoisyFrame {
                 echo,
                 stage: self.stage,
             });
+        }
+    }
+
+    /// Makes room for `n` more returns in every per-return column.
+    fn reserve_returns(&mut self, n: usize) {
+        self.range.reserve(n);
+        self.power.reserve(n);
+        self.fate.reserve(n);
+        self.cause.reserve(n);
+        self.clean.reserve(n);
+        let m = &mut self.moved;
+        for v in [&mut m.azimuth_deg, &mut m.elevation_deg]
+            .into_iter()
+            .flatten()
+        {
+            v.reserve(n);
+        }
+        if let Some(v) = &mut m.time {
+            v.reserve(n);
+        }
+        if let Some(v) = &mut m.intensity {
+            v.reserve(n);
+        }
+        if let Some(ix) = m.pose.as_mut().and_then(|p| p.index.as_mut()) {
+            ix.reserve(n);
         }
     }
 
@@ -390,12 +459,108 @@ pub fn resolve(frame: &mut NoisyFrame) {
     }
     let slots = frame.slots();
     let mut candidates = std::mem::take(&mut frame.candidates);
+    let mut contenders: Vec<Contender> = Vec::with_capacity(8);
+    if slots.mode == SlotMode::Dual {
+        resolve_dual(frame, &slots, &mut candidates, &mut contenders);
+    } else {
+        // One report per slot: only each slot's best detectable echo (the first of the
+        // highest power, or of the farthest range, in proposal order) can win, so the
+        // others need no grouping (sorting a frame's worth of echoes by slot was a tenth
+        // of a weather chain's time). Slots are then settled in slot order, as in dual.
+        let last = slots.mode == SlotMode::Last;
+        let n = candidates
+            .iter()
+            .map(|c| c.slot as usize + 1)
+            .max()
+            .unwrap_or(0);
+        let mut best = vec![NONE; n];
+        for (k, c) in candidates.iter().enumerate() {
+            if !frame.detectable(c.echo.range, c.echo.power) {
+                continue;
+            }
+            let b = &mut best[c.slot as usize];
+            let better = *b == NONE || {
+                let o = &candidates[*b as usize].echo;
+                if last {
+                    c.echo.range > o.range
+                } else {
+                    c.echo.power > o.power
+                }
+            };
+            if better {
+                *b = k as u32;
+            }
+        }
+        // Room for every return the vacant slots could gain, so the columns grow once.
+        let gains = best
+            .iter()
+            .enumerate()
+            .filter(|&(slot, &b)| {
+                b != NONE && slots.occupants.get(slot).is_none_or(|o| o[0] == NONE)
+            })
+            .count();
+        frame.reserve_returns(gains);
+        for (slot, &b) in best.iter().enumerate() {
+            if b == NONE {
+                continue;
+            }
+            let c = candidates[b as usize];
+            match slots.occupants.get(slot) {
+                // The common case, one recorded return, as `resolve_slot` decides it.
+                Some(&[i, NONE]) if i != NONE => {
+                    let i = i as usize;
+                    if frame.fate[i] == Fate::Occluded {
+                        continue;
+                    }
+                    let alive = frame.fate[i].is_alive()
+                        && frame.detectable(frame.range[i], frame.power[i]);
+                    let wins = !alive
+                        || if last {
+                            c.echo.range > frame.range[i]
+                        } else {
+                            c.echo.power > frame.power[i]
+                        };
+                    if wins {
+                        frame.replace(i, c.echo, c.stage);
+                    }
+                }
+                _ => resolve_slot(frame, &slots, slot as SlotId, &[c], &mut contenders),
+            }
+        }
+    }
+    // Hand the (cleared) buffer back so a later chain run on this frame reuses it.
+    candidates.clear();
+    frame.candidates = candidates;
+}
+
+/// [`resolve`] in dual-return mode: every slot's echoes compete together.
+fn resolve_dual(
+    frame: &mut NoisyFrame,
+    slots: &Slots,
+    candidates: &mut Vec<Candidate>,
+    contenders: &mut Vec<Contender>,
+) {
     // Group by slot; a stable sort keeps proposal order inside a slot (stages mostly
     // propose in slot order, which the sort only checks).
     if !candidates.is_sorted_by_key(|c| c.slot) {
-        candidates.sort_by_key(|c| c.slot);
+        *candidates = sort_by_slot(std::mem::take(candidates));
     }
-    let mut contenders: Vec<Contender> = Vec::with_capacity(8);
+    // Room for every return the vacant slots could gain (two each), so the columns grow
+    // once.
+    let mut gains = 0;
+    let mut last = None;
+    for c in candidates.iter() {
+        if last != Some(c.slot)
+            && slots
+                .occupants
+                .get(c.slot as usize)
+                .is_none_or(|o| o[0] == NONE)
+        {
+            gains += 2;
+        }
+        last = Some(c.slot);
+    }
+    frame.reserve_returns(gains);
     let mut start = 0;
     while start < candidates.len() {
         let slot = candidates[start].slot;
@@ -403,18 +568,34 @@ pub fn resolve(frame: &mut NoisyFrame) {
         while end < candidates.len() && candidates[end].slot == slot {
             end += 1;
         }
-        resolve_slot(
-            frame,
-            &slots,
-            slot,
-            &candidates[start..end],
-            &mut contenders,
-        );
+        resolve_slot(frame, slots, slot, &candidates[start..end], contenders);
         start = end;
     }
-    // Hand the (cleared) buffer back so a later chain run on this frame reuses it.
-    candidates.clear();
-    frame.candidates = candidates;
+}
+
+/// The candidates in slot order, proposal order kept within a slot (a counting sort:
+/// linear in candidates and slots, where a comparison sort of a frame's worth of echoes
+/// was a tenth of a weather chain's time).
+fn sort_by_slot(candidates: Vec<Candidate>) -> Vec<Candidate> {
+    let slots = candidates
+        .iter()
+        .map(|c| c.slot as usize + 1)
+        .max()
+        .unwrap_or(0);
+    let mut start = vec![0u32; slots + 1];
+    for c in &candidates {
+        start[c.slot as usize + 1] += 1;
+    }
+    for k in 1..start.len() {
+        start[k] += start[k - 1];
+    }
+    let mut sorted = vec![candidates[0]; candidates.len()];
+    for c in candidates {
+        let at = &mut start[c.slot as usize];
+        sorted[*at as usize] = c;
+        *at += 1;
+    }
+    sorted
 }
 
 fn resolve_slot(

@@ -216,8 +216,19 @@ impl Biaxial {
 
     /// xi(r): intersection of beam and field over the beam's area.
     pub fn overlap(&self, r: f64) -> f64 {
-        let wt = self.beam_radius(r);
-        let inter = disk_intersection(self.separation_m, wt, self.field_radius(r));
+        self.overlap_with(
+            r,
+            (self.divergence_rad / 2.0).tan(),
+            (self.fov_rad / 2.0).tan(),
+        )
+    }
+
+    /// [`Biaxial::overlap`] given tan(theta_t / 2) and tan(theta_r / 2), for callers that
+    /// evaluate it per particle.
+    pub fn overlap_with(&self, r: f64, tan_beam: f64, tan_field: f64) -> f64 {
+        let wt = self.tx_radius_m + r * tan_beam;
+        let wr = self.rx_radius_m + r * tan_field;
+        let inter = disk_intersection(self.separation_m, wt, wr);
         (inter / (std::f64::consts::PI * wt * wt)).min(1.0)
     }
 }
@@ -727,16 +738,14 @@ impl NoiseStage for Fog {
 
     fn apply(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
         let two_alpha = 2.0 * self.alpha();
+        // Hard targets: two-way extinction (alive returns only).
+        crate::noise::transmission::attenuate(
+            &mut frame.power,
+            &frame.range,
+            &frame.fate,
+            two_alpha,
+        );
         if !self.echoes() {
-            if two_alpha > 0.0 {
-                for ((power, &range), fate) in
-                    frame.power.iter_mut().zip(&frame.range).zip(&frame.fate)
-                {
-                    if fate.is_alive() {
-                        *power *= (-two_alpha * f64::from(range)).exp();
-                    }
-                }
-            }
             return;
         }
         let kappa = frame
@@ -773,14 +782,14 @@ impl NoiseStage for Fog {
         } else {
             0
         };
-        frame.candidates.reserve(frame.clean_len + vacant);
+        // Its own echoes, and room for a later stage's few (drops, flakes) so the buffer
+        // is not copied as it grows.
+        frame
+            .candidates
+            .reserve(frame.clean_len + vacant + frame.clean_len / 8 + 1024);
         for i in 0..frame.clean_len {
             let r0 = f64::from(frame.range[i]);
             let fate = frame.fate[i];
-            // Hard target: two-way extinction (alive returns only).
-            if fate.is_alive() {
-                frame.power[i] *= (-two_alpha * r0).exp();
-            }
             let echo = if r0 >= far_from && n == 0.0 {
                 if !far_ok {
                     continue;

@@ -233,6 +233,8 @@ struct SizeBin {
     hi: f64,
     per_m3: f64,
     slope: f64,
+    /// 1 - exp(-slope (hi - lo)): the truncated exponential's mass on the bin.
+    span: f64,
     rho_max: f64,
 }
 
@@ -246,14 +248,15 @@ struct SizeBin {
 /// target hides what lies behind it) and P(r, D) >= threshold. P falls with r, so for a
 /// size bin [D1, D2] every detectable particle lies nearer than r_b, the range where the
 /// bound kappa rho_max(bin) min(1, (D2 / 2 w(r))^2) / r^2 (no extinction) meets the
-/// threshold. The superset {r in [lo, min(R, r_b)], D in bin} holds a Poisson number of
-/// particles with mean Lambda(R) = sum_b n_b (pi / 3t) (w(min(R, r_b))^3 - w(lo)^3)+ (the
+/// threshold. The superset {r in [lo, r_b], D in bin}, over all bins, holds a Poisson
+/// number of particles with mean Lambda = sum_b n_b (pi / 3t) (w(r_b)^3 - w(lo)^3)+ (the
 /// lit volume), n_b the bin's particles per m^3: one Poisson count per beam (inversion of one
-/// uniform), then per particle a bin (weight of its term), D from the bin's N(D) (an
+/// uniform), then per particle a bin (weight of its term), r with w(r)^3 uniform (a
+/// particle behind the target, r > R, is hidden and dropped), D from the bin's N(D) (an
 /// exponential through N at both bin ends: exact for Marshall-Palmer and Gunn-Marshall,
-/// an approximation within a bin for gamma with mu > 0), r with w(r)^3 uniform, and the
-/// exact power test (with extinction and rho(D)) keeps the detectable ones. Thinning a
-/// Poisson process keeps it Poisson (so does the thinning of each bin by the receiver's
+/// an approximation within a bin for gamma with mu > 0), and the exact power test (with
+/// extinction and rho(D)) keeps the detectable ones. Thinning a Poisson process keeps it
+/// Poisson (so do the target's shadow and the thinning of each bin by the receiver's
 /// overlap at its r_b, the largest it reaches there, with the rest of xi(r) decided per
 /// particle), so the echoes have exactly the distribution of
 /// drawing every particle in the cone and keeping the detectable ones (tested against
@@ -281,13 +284,11 @@ pub struct Population {
 #[derive(Clone, Debug)]
 pub struct Prepared {
     lo: f64,
-    /// Per bin: r_b (m).
-    r_b: Vec<f64>,
-    /// Largest r_b: beams whose target lies beyond it all share `lambda_max`.
-    r_top: f64,
+    /// Per bin: w(r_b)^3, the cube of the lit beam's radius at r_b.
+    w3_b: Vec<f64>,
     lambda_max: f64,
     p0_max: f64,
-    /// Cumulative bin weights of a beam beyond `r_top` (the common case).
+    /// Cumulative bin weights of the superset region (every bin to its r_b).
     cum_max: Vec<f64>,
     kappa: f64,
     threshold: f64,
@@ -300,6 +301,8 @@ pub struct Prepared {
     xi_b: Vec<f64>,
     /// t: the growth of the beam's radius per metre.
     t: f64,
+    /// The growth of the receiver's field radius per metre (optics only).
+    tan_field: f64,
 }
 
 impl Population {
@@ -336,6 +339,7 @@ impl Population {
                 hi,
                 per_m3,
                 slope,
+                span: 1.0 - (-slope * h).exp(),
                 rho_max: reflectance.max_on(lo, hi),
             });
         }
@@ -405,19 +409,28 @@ impl Population {
                 near.min(root) * (1.0 + 1e-9)
             })
             .collect();
-        let r_top = r_b.iter().copied().fold(0.0, f64::max);
         let xi_b = r_b
             .iter()
             .map(|&r| self.optics.as_ref().map_or(1.0, |o| o.overlap(r)))
             .collect();
         let c = std::f64::consts::PI / (3.0 * t);
+        let w3_b = r_b
+            .iter()
+            .map(|&r| {
+                let w = a + r * t;
+                w * w * w
+            })
+            .collect();
         let mut p = Prepared {
             a,
             t,
+            tan_field: self
+                .optics
+                .as_ref()
+                .map_or(0.0, |o| (o.fov_rad / 2.0).tan()),
             xi_b,
+            w3_b,
             lo,
-            r_b,
-            r_top,
             lambda_max: 0.0,
             p0_max: 1.0,
             cum_max: Vec::new(),
@@ -425,37 +438,28 @@ impl Population {
             threshold,
             c,
         };
-        p.lambda_max = self.expected(&p, f64::INFINITY);
+        p.lambda_max = self.expected(&p);
         p.p0_max = (-p.lambda_max).exp();
         let mut acc = 0.0;
         p.cum_max = (0..self.bins.len())
             .map(|b| {
-                acc += self.weight(&p, b, f64::INFINITY);
+                acc += self.weight(&p, b);
                 acc
             })
             .collect();
         p
     }
 
-    /// Weight of bin `b` for a beam whose target lies at `range` m.
+    /// Weight of bin `b`: its particles in the superset region, over pi / 3t.
     #[inline]
-    fn weight(&self, p: &Prepared, b: usize, range: f64) -> f64 {
-        let w = |r: f64| {
-            let w = p.a + r * p.t;
-            w * w * w
-        };
-        self.bins[b].per_m3 * p.xi_b[b] * (w(range.min(p.r_b[b])) - w(p.lo)).max(0.0)
+    fn weight(&self, p: &Prepared, b: usize) -> f64 {
+        let w = p.a + p.lo * p.t;
+        self.bins[b].per_m3 * p.xi_b[b] * (p.w3_b[b] - w * w * w).max(0.0)
     }
 
-    /// Expected number of particles in the superset region of a beam to `range` m.
-    pub fn expected(&self, p: &Prepared, range: f64) -> f64 {
-        // Also false for a NaN range.
-        if range.is_nan() || range <= p.lo {
-            return 0.0;
-        }
-        p.c * (0..self.bins.len())
-            .map(|b| self.weight(p, b, range))
-            .sum::<f64>()
+    /// Expected number of particles in a beam's superset region (every bin to its r_b).
+    pub fn expected(&self, p: &Prepared) -> f64 {
+        p.c * (0..self.bins.len()).map(|b| self.weight(p, b)).sum::<f64>()
     }
 
     /// Draws the detectable particles of a beam whose target lies at `range` m (infinite
@@ -471,20 +475,16 @@ impl Population {
     ) {
         let u: f64 = rng.random();
         // Also false for a NaN range.
-        if range.is_nan() || range <= p.lo {
+        if range.is_nan() || range <= p.lo || u < p.p0_max {
             return;
         }
-        let (lambda, p0) = if range >= p.r_top {
-            (p.lambda_max, p.p0_max)
-        } else {
-            let l = self.expected(p, range);
-            (l, (-l).exp())
-        };
-        if u < p0 {
-            return;
-        }
+        // Every beam draws the particles of the whole superset region (to each bin's r_b,
+        // whatever the target's range) and drops those behind its target: thinning a
+        // Poisson process keeps it Poisson, so this is exact, and it spares the per-beam
+        // sum over the bins a nearer target would need (most beams draw no particle).
+        let lambda = p.lambda_max;
         // Poisson inversion of the same uniform.
-        let (mut count, mut term, mut cdf) = (1u32, p0 * lambda, p0 + p0 * lambda);
+        let (mut count, mut term, mut cdf) = (1u32, p.p0_max * lambda, p.p0_max * (1.0 + lambda));
         while u >= cdf && count < 100_000 {
             count += 1;
             term *= lambda / f64::from(count);
@@ -498,36 +498,32 @@ impl Population {
         let lo3 = w3(p.lo);
         for _ in 0..count {
             let (a, b, c): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
-            // The bin: by the cumulative weights (a binary search beyond r_top, else a
-            // walk over the bins for this beam's range).
-            let left = a * total;
-            let bin = if range >= p.r_top {
-                p.cum_max
-                    .partition_point(|&c| c <= left)
-                    .min(self.bins.len() - 1)
-            } else {
-                let mut left = left;
-                let mut bin = self.bins.len() - 1;
-                for k in 0..self.bins.len() {
-                    let w = self.weight(p, k, range);
-                    if left < w {
-                        bin = k;
-                        break;
-                    }
-                    left -= w;
-                }
-                bin
-            };
+            // The bin, by the cumulative weights.
+            let bin = p
+                .cum_max
+                .partition_point(|&w| w <= a * total)
+                .min(self.bins.len() - 1);
+            let r = ((lo3 + c * (p.w3_b[bin] - lo3)).cbrt() - p.a) / p.t;
+            // The target hides what lies behind it.
+            if r > range {
+                continue;
+            }
             let sb = &self.bins[bin];
             let width = sb.hi - sb.lo;
             let d = if sb.slope.abs() * width < 1e-9 {
                 sb.lo + b * width
             } else {
-                sb.lo - (1.0 - b * (1.0 - (-sb.slope * width).exp())).ln() / sb.slope
+                sb.lo - (1.0 - b * sb.span).ln() / sb.slope
             };
-            let top = range.min(p.r_b[bin]);
-            let r = ((lo3 + c * (w3(top) - lo3)).cbrt() - p.a) / p.t;
-            let pw = self.power(r, d, alpha, p.kappa);
+            // `power` with the beam's radius a + r t of `prepare` (the tangent once a
+            // frame, not per particle).
+            let db = 2.0 * (p.a + r * p.t);
+            let share = ((d * 1e-3) / db).powi(2).min(1.0);
+            let pw = p.kappa
+                * self.reflectance.at(d)
+                * crate::noise::transmission::exp_nonpositive(-2.0 * alpha * r)
+                * share
+                / (r * r);
             if pw < p.threshold {
                 continue;
             }
@@ -536,7 +532,7 @@ impl Population {
             if let Some(o) = &self.optics {
                 let v: f64 = rng.random();
                 // The bin's particles were thinned by xi(r_b) >= xi(r) already.
-                if v * p.xi_b[bin] >= o.overlap(r) {
+                if v * p.xi_b[bin] >= o.overlap_with(r, p.t, p.tan_field) {
                     continue;
                 }
             }

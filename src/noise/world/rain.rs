@@ -410,7 +410,12 @@ impl NoiseStage for Rain {
             }
             let r_i = f64::from(*range);
             let before = *power;
-            *power *= (-two_alpha * r_i).exp();
+            // Goodin's powers stay bit for bit those of its study (libm's exp).
+            *power *= if self.model == Model::Goodin {
+                (-two_alpha * r_i).exp()
+            } else {
+                crate::noise::transmission::exp_nonpositive(-two_alpha * r_i)
+            };
             let delta = match self.range_noise {
                 RangeNoise::Goodin => self.sigma_per_m * r_i * draw,
                 RangeNoise::Mavs => draw,

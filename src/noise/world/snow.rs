@@ -190,12 +190,12 @@ impl NoiseStage for Snow {
         if self.rate_mm_h <= 0.0 {
             return;
         }
-        let two_alpha = 2.0 * self.alpha;
-        for ((power, &range), fate) in frame.power.iter_mut().zip(&frame.range).zip(&frame.fate) {
-            if fate.is_alive() {
-                *power *= (-two_alpha * f64::from(range)).exp();
-            }
-        }
+        crate::noise::transmission::attenuate(
+            &mut frame.power,
+            &frame.range,
+            &frame.fate,
+            2.0 * self.alpha,
+        );
         super::particles::propose_population_echoes(
             frame,
             rng,

@@ -21,7 +21,7 @@
 
 use super::mie::{Dsd, MieTable};
 use crate::noise::{Echo, Fate, NoisyFrame};
-use rand::Rng;
+use rand::{Rng, RngCore};
 use rand_chacha::ChaCha8Rng;
 
 /// LISA ignores particles nearer than this (m).
@@ -262,7 +262,8 @@ struct SizeBin {
 /// drawing every particle in the cone and keeping the detectable ones (tested against
 /// that brute force), at a cost of one uniform per beam.
 ///
-/// Draw pattern: one uniform per lit beam, whatever its range; three per particle drawn,
+/// Draw pattern: one 32-bit uniform per lit beam, whatever its range (so as a rate grows,
+/// the beams that hold particles at a lower rate still hold them); three per particle drawn,
 /// and with [`Population::optics`] one more per particle bright enough to be detected.
 #[derive(Clone, Debug)]
 pub struct Population {
@@ -464,7 +465,7 @@ impl Population {
 
     /// Draws the detectable particles of a beam whose target lies at `range` m (infinite
     /// for an empty slot) and calls `out` with each echo; `alpha` is the extinction of the
-    /// medium (1/m). Always draws one uniform first.
+    /// medium (1/m). Always draws one 32-bit uniform first.
     pub fn beam(
         &self,
         p: &Prepared,
@@ -473,7 +474,9 @@ impl Population {
         alpha: f64,
         mut out: impl FnMut(Echo),
     ) {
-        let u: f64 = rng.random();
+        // A 32-bit uniform (the midpoint of its 2^-32 cell): most beams draw no particle,
+        // and half a 64-bit draw per beam was a tenth of a weather chain's time.
+        let u = (f64::from(rng.next_u32()) + 0.5) * (1.0 / 4_294_967_296.0);
         // Also false for a NaN range.
         if range.is_nan() || range <= p.lo || u < p.p0_max {
             return;
@@ -569,8 +572,9 @@ pub fn propose_population_echoes(
             continue;
         }
         let range = f64::from(frame.range[i]);
-        let slot = slots.slot_of(i);
-        pop.beam(&prep, rng, range, alpha, |e| frame.propose_slot(slot, e));
+        pop.beam(&prep, rng, range, alpha, |e| {
+            frame.propose_slot(slots.slot_of(i), e)
+        });
     }
     if empty_slots {
         for slot in 0..slots.len() as u32 {

@@ -25,6 +25,7 @@
 
 mod describe;
 mod grid;
+mod msf;
 mod tree;
 
 pub use describe::{describe, describe_subset, ClusterInfo, ObjectRule, OrientedBox};

@@ -1,8 +1,7 @@
 //! The single-linkage merge tree (SciPy linkage-matrix layout) and the cuts on it.
 
-use super::{point_distance, search_radius_sq, FinitePoints};
+use super::{point_distance, FinitePoints};
 use crate::error::{Error, Result};
-use kiddo::SquaredEuclidean;
 use std::io::Write;
 
 /// A cut of a merge tree into flat clusters, as SciPy's `fcluster` criteria.
@@ -95,8 +94,8 @@ fn label_edges(n: usize, edges: impl IntoIterator<Item = (u32, u32, f64)>) -> Ve
 /// distances between the `f32` points. Points not connected below the bound stay in separate
 /// trees (fewer than n-1 rows, a forest); non-finite points are never merged.
 ///
-/// With a finite bound the rows are Kruskal's: candidate edges from a radius search, sorted
-/// by (length, i, j). With an infinite bound it runs SciPy's own MST algorithm (Prim's, in
+/// With a finite bound the rows are Kruskal's over the edges sorted by (length, i, j), from
+/// the minimum spanning forest under that order (`msf`, in memory linear in the points). With an infinite bound it runs SciPy's own MST algorithm (Prim's, in
 /// O(n^2) time and O(n) memory, distances computed on the fly), so equal heights come out in
 /// SciPy's order too. Both give the same heights and, without ties, the same rows.
 pub fn linkage(points: &[[f32; 3]], max_edge_m: f64) -> Result<Vec<[f64; 4]>> {
@@ -114,8 +113,22 @@ pub fn linkage(points: &[[f32; 3]], max_edge_m: f64) -> Result<Vec<[f64; 4]>> {
     if max_edge_m.is_infinite() {
         return Ok(label_edges(n, prim_edges(&fp)));
     }
+    let edges = super::msf::forest(&fp.points, max_edge_m, |i| fp.global(i));
+    Ok(label_edges(n, edges.into_iter().map(|(d, i, j)| (i, j, d))))
+}
+
+/// The rows Kruskal's algorithm gives over every edge up to `max_edge_m` (what `linkage`
+/// did before its forest was found in linear memory): the reference of the tests.
+#[cfg(test)]
+fn kruskal_linkage(points: &[[f32; 3]], max_edge_m: f64) -> Vec<[f64; 4]> {
+    use kiddo::SquaredEuclidean;
+    let fp = FinitePoints::new(points).expect("points");
+    let n = points.len();
+    if fp.points.len() < 2 {
+        return Vec::new();
+    }
     let tree = fp.tree();
-    let r2 = search_radius_sq(max_edge_m);
+    let r2 = super::search_radius_sq(max_edge_m);
     let mut edges: Vec<(f64, u32, u32)> = Vec::new();
     for (i, p) in fp.points.iter().enumerate() {
         for nb in tree.within_unsorted::<SquaredEuclidean>(p, r2) {
@@ -129,9 +142,8 @@ pub fn linkage(points: &[[f32; 3]], max_edge_m: f64) -> Result<Vec<[f64; 4]>> {
             }
         }
     }
-    // Distances are finite and non-negative, so total_cmp is the numeric order.
     edges.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
-    Ok(label_edges(n, edges.into_iter().map(|(d, i, j)| (i, j, d))))
+    label_edges(n, edges.into_iter().map(|(d, i, j)| (i, j, d)))
 }
 
 /// SciPy's `mst_single_linkage` order: Prim's from the first point, each row (last added,
@@ -332,6 +344,51 @@ pub fn write_linkage_csv<W: Write>(mut w: W, z: &[[f64; 4]]) -> std::io::Result<
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// Random clouds with ties (points on a coarse grid, repeated points) and non-finite
+    /// points: the linear-memory forest gives exactly Kruskal's rows.
+    #[test]
+    fn forest_rows_are_kruskal_rows() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        for case in 0..60 {
+            let n = [2, 3, 17, 40, 300, 2_000][case % 6];
+            let grid = case % 3 == 0;
+            let mut pts: Vec<[f32; 3]> = (0..n)
+                .map(|_| {
+                    let mut p = [0f32; 3];
+                    for c in &mut p {
+                        *c = if grid {
+                            f32::from(rng.random_range(0u8..6)) * 0.5
+                        } else {
+                            rng.random_range(-8.0f32..8.0)
+                        };
+                    }
+                    p
+                })
+                .collect();
+            if case % 4 == 1 {
+                pts[n / 2] = [f32::NAN, 0.0, 0.0];
+                pts[0] = pts[n - 1];
+            }
+            for max_edge in [0.0, 0.5, 0.75, 1.3, 4.0, 100.0] {
+                let fast = linkage(&pts, max_edge).expect("linkage");
+                let want = kruskal_linkage(&pts, max_edge);
+                assert_eq!(
+                    fast.len(),
+                    want.len(),
+                    "case {case} n {n} max_edge {max_edge}"
+                );
+                for (a, b) in fast.iter().zip(&want) {
+                    assert_eq!(
+                        a.map(f64::to_bits),
+                        b.map(f64::to_bits),
+                        "case {case} max_edge {max_edge}"
+                    );
+                }
+            }
+        }
+    }
 
     /// Five points on a line at 0, 1, 2 (spacing 1), then 10, 12.
     /// Single linkage: (0,1)@1 -> 5, (2,5)@1 -> 6, (3,4)@2 -> 7, (6,7)@8 -> 8.

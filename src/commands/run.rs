@@ -228,10 +228,12 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             return Ok(());
         }
     }
-    for (reader, source, name, _) in &jobs {
+    for (reader, source, name, capture) in &jobs {
         if plan.pcap_out {
             let mode = reader.summary().return_mode;
-            crate::writers::pcap::check_capture(source, mode, plan.decoder.dual)?;
+            // Named by the path as given, as in every message of `run`.
+            let shown = capture.map_or_else(|| source.clone(), super::capture_shown);
+            crate::writers::pcap::check_capture(&shown, mode, plan.decoder.dual)?;
         }
         let target = args.output.join(name);
         check_target(&target, &inputs)?;

@@ -148,11 +148,6 @@ impl RawLaser {
     }
 }
 
-/// Checks the entries of a file and builds the calibration.
-///
-/// Real HDL-32E files (ROS `32db.yaml`, VeloView `HDL-32.xml`) carry 64 entries of
-/// which ids 32..63 are all-zero placeholders; those are skipped. Any non-zero entry
-/// outside 0..31 is an error, as is a missing or repeated id in 0..31.
 /// Smallest distance unit accepted (m).
 pub const MIN_DISTANCE_RESOLUTION_M: f64 = 1e-4;
 /// Largest distance unit accepted (m).
@@ -160,33 +155,63 @@ pub const MAX_DISTANCE_RESOLUTION_M: f64 = 0.1;
 /// Largest per-laser distance correction accepted (m).
 pub const MAX_DISTANCE_OFFSET_M: f64 = 10.0;
 
-fn assemble(path: &Path, raw: Vec<RawLaser>, distance_resolution_m: f64) -> Result<Calibration> {
-    let err = |message: String| Error::Config {
-        path: path.to_path_buf(),
-        message,
-    };
-    // Velodyne sensors count distance in 2 mm (HDL-32E, VLP-16, HDL-64E) or 4 mm (VLS-128)
-    // units: a unit outside 0.1 mm..10 cm is a unit mistake, and would drop or scatter
-    // every return.
-    if !(distance_resolution_m.is_finite()
-        && (MIN_DISTANCE_RESOLUTION_M..=MAX_DISTANCE_RESOLUTION_M).contains(&distance_resolution_m))
-    {
-        return Err(err(format!(
-            "distance resolution (ROS `distance_resolution`, VeloView `distLSB_` in cm) is \
-             {distance_resolution_m} m, outside the physically possible {MIN_DISTANCE_RESOLUTION_M} \
-             to {MAX_DISTANCE_RESOLUTION_M} m (the HDL-32E's is 0.002 m)"
-        )));
+/// Checks the entries of a file and builds the calibration.
+///
+/// Real HDL-32E files (ROS `32db.yaml`, VeloView `HDL-32.xml`) carry 64 entries of
+/// which ids 32..63 are all-zero placeholders; those are skipped. Any non-zero entry
+/// outside 0..31 is an error, as is a missing or repeated id in 0..31.
+///
+/// Entries are checked one at a time as a reader meets them, so a reader stops at the
+/// first bad entry instead of reading the rest of a long file first; each check is a
+/// constant-time lookup in the 32 slots, whatever the number of entries.
+struct Assembler<'p> {
+    path: &'p Path,
+    distance_resolution_m: f64,
+    slots: [Option<LaserCal>; LASERS],
+    places: [Option<String>; LASERS],
+}
+
+impl<'p> Assembler<'p> {
+    /// Checks the distance unit (read before the entries in both formats).
+    fn new(path: &'p Path, distance_resolution_m: f64) -> Result<Self> {
+        let lasers = Assembler {
+            path,
+            distance_resolution_m,
+            slots: [None; LASERS],
+            places: std::array::from_fn(|_| None),
+        };
+        // Velodyne sensors count distance in 2 mm (HDL-32E, VLP-16, HDL-64E) or 4 mm
+        // (VLS-128) units: a unit outside 0.1 mm..10 cm is a unit mistake, and would drop
+        // or scatter every return.
+        if !(distance_resolution_m.is_finite()
+            && (MIN_DISTANCE_RESOLUTION_M..=MAX_DISTANCE_RESOLUTION_M)
+                .contains(&distance_resolution_m))
+        {
+            return Err(lasers.err(format!(
+                "distance resolution (ROS `distance_resolution`, VeloView `distLSB_` in cm) is \
+                 {distance_resolution_m} m, outside the physically possible {MIN_DISTANCE_RESOLUTION_M} \
+                 to {MAX_DISTANCE_RESOLUTION_M} m (the HDL-32E's is 0.002 m)"
+            )));
+        }
+        Ok(lasers)
     }
-    let mut slots: [Option<LaserCal>; LASERS] = [None; LASERS];
-    let mut places: [Option<String>; LASERS] = std::array::from_fn(|_| None);
-    for laser in raw {
+
+    fn err(&self, message: String) -> Error {
+        Error::Config {
+            path: self.path.to_path_buf(),
+            message,
+        }
+    }
+
+    /// Checks one entry and files it under its id; the error names the entry's place.
+    fn push(&mut self, laser: RawLaser) -> Result<()> {
         let id = laser.id;
         let in_range = (0..LASERS as i64).contains(&id);
         if !in_range {
             if id >= LASERS as i64 && laser.is_placeholder() {
-                continue;
+                return Ok(());
             }
-            return Err(err(format!(
+            return Err(self.err(format!(
                 "{}: laser id {id} is outside 0..{} (an HDL-32E has {LASERS} lasers; only \
                  all-zero placeholder entries may use other ids)",
                 laser.place,
@@ -194,15 +219,15 @@ fn assemble(path: &Path, raw: Vec<RawLaser>, distance_resolution_m: f64) -> Resu
             )));
         }
         let idx = id as usize;
-        if let Some(first) = &places[idx] {
-            return Err(err(format!(
+        if let Some(first) = &self.places[idx] {
+            return Err(self.err(format!(
                 "{}: duplicate laser id {id} (first defined at {first})",
                 laser.place
             )));
         }
         for &(key, value) in &laser.unsupported {
             if value != 0.0 {
-                return Err(err(format!(
+                return Err(self.err(format!(
                     "{}: laser {id}: `{key}` = {value} is not supported (only zero \
                      horizontal/vertical offset corrections can be used)",
                     laser.place
@@ -215,56 +240,63 @@ fn assemble(path: &Path, raw: Vec<RawLaser>, distance_resolution_m: f64) -> Resu
             ("distance correction", laser.distance_offset_m),
         ] {
             if !value.is_finite() {
-                return Err(err(format!(
+                return Err(self.err(format!(
                     "{}: laser {id}: {what} is not a finite number",
                     laser.place
                 )));
             }
         }
         if laser.azimuth_offset_deg.abs() > 180.0 {
-            return Err(err(format!(
+            return Err(self.err(format!(
                 "{}: laser {id}: rotational correction {} degrees is outside [-180, 180] \
                  (real corrections are a few degrees)",
                 laser.place, laser.azimuth_offset_deg
             )));
         }
         if laser.distance_offset_m.abs() > MAX_DISTANCE_OFFSET_M {
-            return Err(err(format!(
+            return Err(self.err(format!(
                 "{}: laser {id}: distance correction {} m is outside +-{MAX_DISTANCE_OFFSET_M} m \
                  (real corrections are under 2 m; centimetres and metres mixed up?)",
                 laser.place, laser.distance_offset_m
             )));
         }
         if laser.elevation_deg.abs() > 90.0 {
-            return Err(err(format!(
+            return Err(self.err(format!(
                 "{}: laser {id}: elevation {} degrees is outside [-90, 90] (radians and degrees mixed up?)",
                 laser.place, laser.elevation_deg
             )));
         }
-        slots[idx] = Some(LaserCal {
+        self.slots[idx] = Some(LaserCal {
             elevation_deg: laser.elevation_deg,
             azimuth_offset_deg: laser.azimuth_offset_deg,
             distance_offset_m: laser.distance_offset_m,
         });
-        places[idx] = Some(laser.place);
+        self.places[idx] = Some(laser.place);
+        Ok(())
     }
-    let missing: Vec<String> = (0..LASERS)
-        .filter(|&i| slots[i].is_none())
-        .map(|i| i.to_string())
-        .collect();
-    if !missing.is_empty() {
-        return Err(err(format!(
-            "missing laser id(s) {}: an HDL-32E calibration needs ids 0..{} exactly once",
-            missing.join(", "),
-            LASERS - 1
-        )));
+
+    /// The calibration, once every id 0..31 was given.
+    fn finish(self) -> Result<Calibration> {
+        let missing: Vec<String> = (0..LASERS)
+            .filter(|&i| self.slots[i].is_none())
+            .map(|i| i.to_string())
+            .collect();
+        if !missing.is_empty() {
+            return Err(self.err(format!(
+                "missing laser id(s) {}: an HDL-32E calibration needs ids 0..{} exactly once",
+                missing.join(", "),
+                LASERS - 1
+            )));
+        }
+        let lasers = self
+            .slots
+            .map(|s| s.expect("checked above: every slot is filled"));
+        Ok(Calibration {
+            lasers,
+            distance_resolution_m: self.distance_resolution_m,
+            source: self.path.display().to_string(),
+        })
     }
-    let lasers = slots.map(|s| s.expect("checked above: every slot is filled"));
-    Ok(Calibration {
-        lasers,
-        distance_resolution_m,
-        source: path.display().to_string(),
-    })
 }
 
 #[cfg(test)]

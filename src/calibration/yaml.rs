@@ -8,7 +8,7 @@
 //! The two-point distance correction (`dist_correction_x`/`_y`) is only used by the
 //! ROS driver when `two_pt_correction_available` is true, which is refused here.
 
-use super::{assemble, Calibration, RawLaser, LASERS};
+use super::{Assembler, Calibration, RawLaser, LASERS};
 use crate::error::{Error, Result};
 use serde::Deserialize;
 use std::path::Path;
@@ -62,12 +62,99 @@ struct RosLaser {
     max_intensity: Option<f64>,
 }
 
+/// Deepest collection nesting accepted. ROS files nest two levels (a list of maps); the
+/// YAML parser takes time quadratic in the nesting (16,000 nested `[` took 3.9 s).
+pub const MAX_DEPTH: usize = 64;
+
+/// The line of the first collection nested deeper than `max` levels, by one scan of the
+/// text: flow collections (`[`, `{`) that open a node and block sequence entries written
+/// on one line (`- - - x`) count; quoted scalars and comments are skipped. `None` when
+/// the nesting stays within `max`.
+fn too_deep(text: &str, max: usize) -> Option<usize> {
+    let mut depth = 0usize;
+    // Inside a quoted scalar (which may span lines): its quote character.
+    let mut quote: Option<u8> = None;
+    for (n, line) in text.lines().enumerate() {
+        let b = line.as_bytes();
+        // Block sequence entries opening this line.
+        let mut block = 0usize;
+        // The last character that was not a blank: a `[`, `{` or quote after one of
+        // these (or at the start) opens a node.
+        let mut prev: Option<u8> = None;
+        // Inside a plain scalar (`x[[`): brackets there are text, up to the `,`, `]`, `}`
+        // or `: ` that ends it in a flow collection, or the end of the line.
+        let mut plain = false;
+        let mut i = 0;
+        while i < b.len() {
+            let c = b[i];
+            let blank_before = i == 0 || matches!(b[i - 1], b' ' | b'\t');
+            let blank_after = matches!(b.get(i + 1), None | Some(b' ' | b'\t'));
+            match quote {
+                Some(b'"') if c == b'\\' => i += 1,
+                Some(q) if c == q => {
+                    // `''` inside a single-quoted scalar is an escaped quote.
+                    if q == b'\'' && b.get(i + 1) == Some(&b'\'') {
+                        i += 1;
+                    } else {
+                        quote = None;
+                        prev = Some(c);
+                    }
+                }
+                Some(_) => {}
+                None if c == b'#' && blank_before => break,
+                None if plain => {
+                    let ends = match c {
+                        b',' => true,
+                        b':' => blank_after,
+                        b']' | b'}' => {
+                            depth = depth.saturating_sub(1);
+                            true
+                        }
+                        _ => false,
+                    };
+                    if ends {
+                        plain = false;
+                        prev = Some(c);
+                    }
+                }
+                None => {
+                    let opens =
+                        matches!(prev, None | Some(b':' | b'-' | b',' | b'[' | b'{' | b'?'));
+                    match c {
+                        b' ' | b'\t' => {}
+                        b'"' | b'\'' if opens => quote = Some(c),
+                        b'[' | b'{' if opens => depth += 1,
+                        b']' | b'}' => depth = depth.saturating_sub(1),
+                        b'-' if (prev.is_none() || prev == Some(b'-')) && blank_after => block += 1,
+                        b',' | b':' | b'?' => {}
+                        _ => plain = true,
+                    }
+                    if !matches!(c, b' ' | b'\t') {
+                        prev = Some(c);
+                    }
+                }
+            }
+            if depth + block > max {
+                return Some(n + 1);
+            }
+            i += 1;
+        }
+    }
+    None
+}
+
 /// Parses ROS YAML calibration text; `path` is only used in messages and as the source.
 pub fn parse_str(text: &str, path: &Path) -> Result<Calibration> {
     let err = |message: String| Error::Config {
         path: path.to_path_buf(),
         message,
     };
+    if let Some(line) = too_deep(text, MAX_DEPTH) {
+        return Err(err(format!(
+            "collections nested more than {MAX_DEPTH} levels deep at line {line}: not a ROS \
+             velodyne calibration file (they nest two levels)"
+        )));
+    }
     // serde_norway's message already carries "at line L column C" where it knows it.
     let file: RosFile = serde_norway::from_str(text)
         .map_err(|e| err(format!("not a ROS velodyne calibration YAML: {e}")))?;
@@ -79,44 +166,40 @@ pub fn parse_str(text: &str, path: &Path) -> Result<Calibration> {
         }
     }
     let lines = laser_id_lines(text, file.lasers.len());
-    let raw = file
-        .lasers
-        .iter()
-        .enumerate()
-        .map(|(i, l)| {
-            let place = match lines.as_ref().map(|v| v[i]) {
-                Some(line) => format!("lasers[{i}] (line {line})"),
-                None => format!("lasers[{i}]"),
-            };
-            if l.two_pt_correction_available
-                && (l.dist_correction_x != 0.0 || l.dist_correction_y != 0.0)
-            {
-                return Err(err(format!(
-                    "{place}: laser {}: `two_pt_correction_available` with non-zero \
-                     dist_correction_x/dist_correction_y is not supported",
-                    l.laser_id
-                )));
-            }
-            Ok(RawLaser {
-                id: l.laser_id,
-                place,
-                elevation_deg: l.vert_correction.to_degrees(),
-                // Both ROS and VeloView compute point azimuth = block azimuth - rot_correction.
-                azimuth_offset_deg: -l.rot_correction.to_degrees(),
-                distance_offset_m: l.dist_correction,
-                unsupported: vec![
-                    ("horiz_offset_correction", l.horiz_offset_correction),
-                    ("vert_offset_correction", l.vert_offset_correction),
-                ],
-            })
-        })
-        .collect::<Result<Vec<_>>>()?;
-    assemble(
+    let mut lasers = Assembler::new(
         path,
-        raw,
         file.distance_resolution
             .unwrap_or(DEFAULT_DISTANCE_RESOLUTION_M),
-    )
+    )?;
+    for (i, l) in file.lasers.iter().enumerate() {
+        let place = match lines.as_ref().map(|v| v[i]) {
+            Some(line) => format!("lasers[{i}] (line {line})"),
+            None => format!("lasers[{i}]"),
+        };
+        if l.two_pt_correction_available
+            && (l.dist_correction_x != 0.0 || l.dist_correction_y != 0.0)
+        {
+            return Err(err(format!(
+                "{place}: laser {}: `two_pt_correction_available` with non-zero \
+                 dist_correction_x/dist_correction_y is not supported",
+                l.laser_id
+            )));
+        }
+        // Checked at once: the first bad entry ends the read.
+        lasers.push(RawLaser {
+            id: l.laser_id,
+            place,
+            elevation_deg: l.vert_correction.to_degrees(),
+            // Both ROS and VeloView compute point azimuth = block azimuth - rot_correction.
+            azimuth_offset_deg: -l.rot_correction.to_degrees(),
+            distance_offset_m: l.dist_correction,
+            unsupported: vec![
+                ("horiz_offset_correction", l.horiz_offset_correction),
+                ("vert_offset_correction", l.vert_offset_correction),
+            ],
+        })?;
+    }
+    lasers.finish()
 }
 
 /// Line number (1-based) of each `laser_id` key, in file order, for messages.
@@ -294,6 +377,37 @@ mod tests {
         assert!(message(parse_str(&text, &fake_path()).unwrap_err()).contains("num_lasers is 64"));
         let m = message(parse_str("just a string", &fake_path()).unwrap_err());
         assert!(m.contains("/calib/test.yaml"), "{m}");
+    }
+
+    #[test]
+    fn deep_nesting_is_refused_before_parsing_naming_the_line() {
+        // Issue 30, defect 7: 16,000 nested `[` took 3.9 s to parse (quadratic).
+        let n = 16_000;
+        for text in [
+            format!("lasers:\n  {}{}\n", "[".repeat(n), "]".repeat(n)),
+            format!("lasers:\n  {}x{}\n", "{a: ".repeat(n), "}".repeat(n)),
+            format!("# comment\nlasers:\n{}x\n", "- ".repeat(n)),
+        ] {
+            let m = message(parse_str(&text, &fake_path()).unwrap_err());
+            assert!(
+                m.contains("/calib/test.yaml")
+                    && m.contains("nested more than 64 levels deep at line"),
+                "{m}"
+            );
+        }
+        assert_eq!(
+            too_deep(&format!("a:\n  {}\n", "[".repeat(65)), 64),
+            Some(2)
+        );
+        // Brackets in quotes, comments and plain scalars open nothing; the real layouts
+        // nest two levels.
+        let quiet = format!(
+            "a: \"{0}\"\nb: '{0}'' {0}'\nc: x{0}\nd: 1 # {0}\n",
+            "[".repeat(100)
+        );
+        assert_eq!(too_deep(&quiet, 64), None);
+        assert_eq!(too_deep(&ros_yaml(&ids(), &builtin_rad(), 0.0), 2), None);
+        assert_eq!(too_deep("a: [[[x]]]\n", 2), Some(1));
     }
 
     #[test]

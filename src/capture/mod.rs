@@ -69,6 +69,69 @@ pub struct Datagram<'a> {
     pub payload: &'a [u8],
 }
 
+/// First four bytes of the file headers the reader knows: classic pcap in either byte
+/// order with microsecond or nanosecond timestamps, and the pcapng section header block.
+const MAGICS: [[u8; 4]; 5] = [
+    [0xd4, 0xc3, 0xb2, 0xa1],
+    [0xa1, 0xb2, 0xc3, 0xd4],
+    [0x4d, 0x3c, 0xb2, 0xa1],
+    [0xa1, 0xb2, 0x3c, 0x4d],
+    [0x0a, 0x0d, 0x0d, 0x0a],
+];
+
+/// The message for a stream that does not start like a capture.
+const NOT_A_CAPTURE: &str = "not a pcap or pcapng capture (unknown file header); \
+                             record the sensor with tcpdump, Wireshark or VeloView";
+
+/// Checks the first bytes of a capture (at most 4 are looked at): the file header
+/// decides pcap or pcapng, so anything else is refused before the rest is read.
+pub fn check_file_header(first: &[u8], path: &Path) -> Result<()> {
+    let fail = |message: &str| {
+        Err(Error::Capture {
+            path: path.to_path_buf(),
+            message: message.into(),
+        })
+    };
+    match first.get(..4) {
+        _ if first.is_empty() => fail("the file is empty, not a pcap or pcapng capture"),
+        Some(magic) if MAGICS.iter().any(|m| m == magic) => Ok(()),
+        Some(_) => fail(NOT_A_CAPTURE),
+        // A short stream that could still be a header's start ends inside it.
+        None if MAGICS.iter().any(|m| m.starts_with(first)) => {
+            fail("the file ends inside the capture's file header")
+        }
+        None => fail(NOT_A_CAPTURE),
+    }
+}
+
+/// Reads a stream (standard input, a FIFO) that can be read only once into memory, after
+/// checking its file header: a stream that is no capture (`/dev/zero`, a text) is refused
+/// after its first four bytes instead of being read to its end.
+pub fn read_stream(mut stream: impl Read, path: &Path) -> Result<Vec<u8>> {
+    let mut bytes = vec![0u8; 4];
+    let mut got = 0;
+    while got < bytes.len() {
+        match stream.read(&mut bytes[got..]) {
+            Ok(0) => break,
+            Ok(n) => got += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(Error::io(path, e)),
+        }
+    }
+    bytes.truncate(got);
+    check_file_header(&bytes, path)?;
+    stream
+        .read_to_end(&mut bytes)
+        .map_err(|e| Error::io(path, e))?;
+    Ok(bytes)
+}
+
+/// True when `path` names something other than a regular file or a folder (a FIFO, a
+/// device, a socket), which can be read only once and not at an offset.
+pub fn is_stream(path: &Path) -> bool {
+    std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
+}
+
 /// A streaming capture reader.
 pub struct CaptureReader {
     inner: Box<dyn PcapReaderIterator + Send>,
@@ -119,6 +182,19 @@ struct Found {
 impl CaptureReader {
     /// Opens a capture file.
     pub fn open(path: &Path) -> Result<Self> {
+        // A FIFO read a second time starts wherever the first read stopped, which came out
+        // as "unknown file header". The frame reader reads one into memory once (see
+        // `FrameReader::open`); the readers that open a capture several times or resume
+        // it at an offset refuse it, before opening it (which waits for a writer).
+        if is_stream(path) {
+            return Err(Error::Capture {
+                path: path.to_path_buf(),
+                message: "is a FIFO or a device, not a regular file: it can be read only once \
+                          and not at an offset; save the capture to a file, or give `-` and \
+                          redirect it to standard input"
+                    .into(),
+            });
+        }
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
         // Reading a folder fails only at the first read, as "could not be read": say why.
         if file.metadata().is_ok_and(|m| m.is_dir()) {
@@ -142,11 +218,7 @@ impl CaptureReader {
             PcapError::Incomplete(_) | PcapError::UnexpectedEof => {
                 fail("the file ends inside the capture's file header".into())
             }
-            _ => fail(
-                "not a pcap or pcapng capture (unknown file header); \
-                 record the sensor with tcpdump, Wireshark or VeloView"
-                    .into(),
-            ),
+            _ => fail(NOT_A_CAPTURE.into()),
         })?;
         Ok(CaptureReader {
             inner,

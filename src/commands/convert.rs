@@ -121,7 +121,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         for (target, written, capture) in done {
             eprintln!(
                 "{}: wrote {written} frame{} to {}",
-                capture.display(),
+                super::capture_shown(capture),
                 if written == 1 { "" } else { "s" },
                 target.display()
             );
@@ -187,15 +187,13 @@ fn convert_one(
     })?;
     progress.finish_and_clear();
     let summary = reader.summary();
-    super::warn_truncation(global, capture, &summary);
-    super::warn_capture(global, capture, &summary, false);
+    // Named as `run` names it: the path as given, `<stdin>` for `-`.
+    let shown = super::capture_shown(capture);
+    super::warn_truncation(global, Path::new(&shown), &summary);
+    super::warn_capture(global, Path::new(&shown), &summary, false);
     if written == 0 {
         // Same message as `run`'s: the capture's full frames counted to its end.
-        return Err(super::run::no_frame_error(
-            &capture.display().to_string(),
-            range,
-            &mut reader,
-        ));
+        return Err(super::run::no_frame_error(&shown, range, &mut reader));
     }
     Ok(written)
 }

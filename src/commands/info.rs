@@ -113,6 +113,15 @@ fn write_text(out: &mut impl Write, path: &std::path::Path, s: &CaptureSummary) 
             if s.clock_backward_steps == 1 { "" } else { "s" }
         )?;
     }
+    if s.duplicate_packets > 0 {
+        writeln!(
+            out,
+            "  duplicates    {} data packet{} dropped (exact copies of one of the {} before)",
+            s.duplicate_packets,
+            if s.duplicate_packets == 1 { "" } else { "s" },
+            crate::hdl32e::frames::DUPLICATE_WINDOW
+        )?;
+    }
     match s.capture.truncated_at {
         Some(offset) => writeln!(out, "  truncated     at byte offset {offset}")?,
         None => writeln!(out, "  truncated     no")?,

@@ -41,6 +41,17 @@ pub fn warn_capture(global: Global, path: &Path, s: &CaptureSummary, check_inten
             s.bad_data_packets
         ));
     }
+    if s.duplicate_packets > 0 {
+        global.warn(&format!(
+            "{}: dropped {} duplicate data packet{} (exact copies, same timestamp and bytes, \
+             of one of the {} data packets before; the capture was recorded or merged twice?): \
+             frames are decoded from the first copies only",
+            path.display(),
+            s.duplicate_packets,
+            if s.duplicate_packets == 1 { "" } else { "s" },
+            crate::hdl32e::frames::DUPLICATE_WINDOW
+        ));
+    }
     if s.clock_backward_steps > 0 {
         global.warn(&format!(
             "{}: the sensor clock runs backwards {} time{} between data packets: the capture \
@@ -123,26 +134,34 @@ pub fn capture_label(path: &Path) -> String {
 
 /// Opens a capture file, or reads standard input to its end for `-` (the reader reads the
 /// capture twice, to identify the sensor and then to decode, so a pipe is buffered in
-/// memory).
+/// memory); a stream that does not start with a capture's file header is refused at once.
 pub fn open_capture(
     path: &Path,
     options: &crate::hdl32e::frames::DecoderOptions,
 ) -> anyhow::Result<crate::hdl32e::frames::FrameReader> {
-    use anyhow::Context;
-    use std::io::Read;
     if !is_stdin(path) {
         return Ok(crate::hdl32e::frames::FrameReader::open(path, options)?);
     }
-    let mut bytes = Vec::new();
-    std::io::stdin()
-        .lock()
-        .read_to_end(&mut bytes)
-        .context("cannot read the capture from standard input")?;
+    let name = Path::new(STDIN_NAME);
+    let bytes = crate::capture::read_stream(std::io::stdin().lock(), name)?;
     Ok(crate::hdl32e::frames::FrameReader::from_bytes(
         std::sync::Arc::from(bytes),
-        Path::new("<stdin>"),
+        name,
         options,
     )?)
+}
+
+/// How messages name standard input.
+pub const STDIN_NAME: &str = "<stdin>";
+
+/// How messages name a capture: the path as given, `<stdin>` for `-` (outputs name it by
+/// [`capture_label`]).
+pub fn capture_shown(path: &Path) -> String {
+    if is_stdin(path) {
+        STDIN_NAME.to_string()
+    } else {
+        path.display().to_string()
+    }
 }
 
 /// Refuses `-` given more than once (standard input can be read only once).

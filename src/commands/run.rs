@@ -171,6 +171,14 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         if args.captures.iter().any(|p| super::is_stdin(p)) {
             anyhow::bail!("--pcap-out needs capture files: standard input (`-`) is not kept");
         }
+        // The noisy capture is a copy of the input read again: a FIFO would wait for ever.
+        if let Some(p) = args.captures.iter().find(|p| crate::capture::is_stream(p)) {
+            anyhow::bail!(
+                "--pcap-out needs capture files: {} is a FIFO or a device, which can be read \
+                 only once; save the capture to a file first",
+                p.display()
+            );
+        }
     }
     let mut inputs: Vec<&Path> = args.captures.iter().map(PathBuf::as_path).collect();
     if let Some(c) = &args.config {
@@ -223,10 +231,12 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             return Ok(());
         }
     }
-    for (reader, source, name, _) in &jobs {
+    for (reader, source, name, capture) in &jobs {
         if plan.pcap_out {
             let mode = reader.summary().return_mode;
-            crate::writers::pcap::check_capture(source, mode, plan.decoder.dual)?;
+            // Named by the path as given, as in every message of `run`.
+            let shown = capture.map_or_else(|| source.clone(), super::capture_shown);
+            crate::writers::pcap::check_capture(&shown, mode, plan.decoder.dual)?;
         }
         let target = args.output.join(name);
         check_target(&target, &inputs)?;
@@ -415,15 +425,18 @@ fn run_capture(
     )?;
     progress.finish_and_clear();
     let capture_summary = reader.summary();
-    super::warn_truncation(global, Path::new(source), &capture_summary);
+    // Messages name the capture by the path as given, as `convert`'s do; the outputs name
+    // it by `source`, its file name, so that they do not depend on the working folder.
+    let shown = capture.map_or_else(|| source.to_string(), super::capture_shown);
+    super::warn_truncation(global, Path::new(&shown), &capture_summary);
     super::warn_capture(
         global,
-        Path::new(source),
+        Path::new(&shown),
         &capture_summary,
         plan.config.sensor.intensity == crate::config::IntensityMode::Reflectivity,
     );
     if spool.frames == 0 {
-        return Err(no_frame_error(source, &plan.frames, &mut reader));
+        return Err(no_frame_error(&shown, &plan.frames, &mut reader));
     }
     let (summary, _) = documents(plan, source, &capture_summary, spool.totals.clone());
     let frames = spool.frames;
@@ -432,13 +445,13 @@ fn run_capture(
         let lost = p.finish()?;
         if lost > 0 {
             global.warn(&format!(
-                "{source}: {lost} kept returns lie outside the range a packet can hold \
+                "{shown}: {lost} kept returns lie outside the range a packet can hold \
                  (0 to 131.07 m) and are written as no return in {name}"
             ));
         }
     }
     spool.finish(&summary, dir, inputs)?;
-    Ok(report_line(source, frames, &summary.totals))
+    Ok(report_line(&shown, frames, &summary.totals))
 }
 
 /// The capture's summary.json and clusters.json, with empty `frames` arrays (the frames

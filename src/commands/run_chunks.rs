@@ -52,6 +52,13 @@ struct Job {
 }
 
 impl Job {
+    /// How messages name it: the path as given (as `convert`'s do), else its label.
+    fn shown(&self) -> String {
+        self.path
+            .as_deref()
+            .map_or_else(|| self.source.clone(), super::capture_shown)
+    }
+
     fn scan(&self, plan: &Plan) -> Result<FrameScan> {
         Ok(match &self.path {
             Some(p) => FrameScan::open(p, &plan.decoder)?,
@@ -297,7 +304,7 @@ pub(super) fn run(
             bail!(
                 "{}: no frame to process in {}; pick others with --frames or add \
                  --keep-partial",
-                job.source,
+                job.shown(),
                 crate::options::frames_phrase(&plan.frames)
             );
         }
@@ -526,7 +533,7 @@ fn merge(
         let dir = args.output.join(&job.name);
         let names: Vec<String> = (0..chunks.ranges.len()).map(|j| part_name(m, j)).collect();
         if merged(&dir, settings) {
-            lines.push(format!("{}: already merged", job.source));
+            lines.push(format!("{}: already merged", job.shown()));
             continue;
         }
         lines.push(join_capture(
@@ -609,10 +616,10 @@ fn join_capture(
     let mut reader = job.open(plan, None)?;
     while !reader.next_batch(64, &plan.frames)?.is_empty() {}
     let capture_summary = reader.summary();
-    super::warn_truncation(global, Path::new(&job.source), &capture_summary);
+    super::warn_truncation(global, Path::new(&job.shown()), &capture_summary);
     super::warn_capture(
         global,
-        Path::new(&job.source),
+        Path::new(&job.shown()),
         &capture_summary,
         plan.config.sensor.intensity == crate::config::IntensityMode::Reflectivity,
     );
@@ -664,7 +671,7 @@ fn join_capture(
     for name in names {
         std::fs::remove_file(dir.join(name)).ok();
     }
-    Ok(single::report_line(&job.source, frames, &summary.totals))
+    Ok(single::report_line(&job.shown(), frames, &summary.totals))
 }
 
 #[cfg(test)]

@@ -4,6 +4,11 @@
 
 use super::Diffs;
 use std::io::Cursor;
+use std::path::Path;
+
+/// Points decoded per batch: memory follows the points the file holds, not the count its
+/// header claims.
+const BATCH_POINTS: u64 = 1 << 16;
 
 /// One file's points as named columns.
 struct Columns {
@@ -31,9 +36,11 @@ fn extra_value(ty: u8, b: &[u8]) -> Option<(f64, usize)> {
 }
 
 fn read(bytes: &[u8]) -> Result<Columns, String> {
+    check_point_count(bytes)?;
     let mut reader =
         las::Reader::new(Cursor::new(bytes.to_vec())).map_err(|e| format!("not LAS/LAZ: {e}"))?;
     let header = reader.header().clone();
+    let points = header.number_of_points();
     let mut extra: Vec<(String, u8)> = Vec::new();
     if let Some(vlr) = header
         .vlrs()
@@ -55,27 +62,41 @@ fn read(bytes: &[u8]) -> Result<Columns, String> {
         .collect();
     names.extend(extra.iter().map(|(n, _)| n.clone()));
     let mut columns = vec![Vec::new(); names.len()];
-    let data = reader.read_all().map_err(|e| format!("points: {e}"))?;
-    for (i, p) in data.points().enumerate() {
-        let p = p.map_err(|e| format!("point {i}: {e}"))?;
-        let base = [
-            p.x,
-            p.y,
-            p.z,
-            f64::from(p.intensity),
-            f64::from(u8::from(p.classification)),
-            p.gps_time.unwrap_or(f64::NAN),
-        ];
-        for (c, v) in columns.iter_mut().zip(base) {
-            c.push(v);
+    let mut data = las::PointDataBuilder::new().for_header(&header).build();
+    let mut read = 0u64;
+    while read < points {
+        let got = reader
+            .fill_points((points - read).min(BATCH_POINTS), &mut data)
+            .map_err(|e| format!("point {read}: {e}"))?;
+        if got == 0 {
+            return Err(format!(
+                "the header claims {points} points, but the point data ends after {read}: \
+                 the file is truncated or its header is corrupt; write it again"
+            ));
         }
-        let mut at = 0;
-        for (k, (name, ty)) in extra.iter().enumerate() {
-            let (v, n) = extra_value(*ty, &p.extra_bytes[at.min(p.extra_bytes.len())..])
-                .ok_or_else(|| format!("point {i}: cannot decode extra dimension {name}"))?;
-            columns[6 + k].push(v);
-            at += n;
+        for (k, p) in data.points().enumerate() {
+            let i = read + k as u64;
+            let p = p.map_err(|e| format!("point {i}: {e}"))?;
+            let base = [
+                p.x,
+                p.y,
+                p.z,
+                f64::from(p.intensity),
+                f64::from(u8::from(p.classification)),
+                p.gps_time.unwrap_or(f64::NAN),
+            ];
+            for (c, v) in columns.iter_mut().zip(base) {
+                c.push(v);
+            }
+            let mut at = 0;
+            for (k, (name, ty)) in extra.iter().enumerate() {
+                let (v, n) = extra_value(*ty, &p.extra_bytes[at.min(p.extra_bytes.len())..])
+                    .ok_or_else(|| format!("point {i}: cannot decode extra dimension {name}"))?;
+                columns[6 + k].push(v);
+                at += n;
+            }
         }
+        read += got;
     }
     Ok(Columns {
         format: header.point_format().to_u8().unwrap_or(0),
@@ -84,10 +105,46 @@ fn read(bytes: &[u8]) -> Result<Columns, String> {
     })
 }
 
-/// Compares two LAS or LAZ files.
-pub fn compare(expected: &[u8], actual: &[u8], diffs: &mut Diffs<'_>) -> Result<(), String> {
-    let e = read(expected).map_err(|m| format!("the expected file: {m}"))?;
-    let a = read(actual).map_err(|m| format!("the actual file: {m}"))?;
+/// Checks the header's point count against the file's size before the las crate sees it:
+/// it sizes its buffer by the count (a header claiming 2^63 points filled the memory) and
+/// computes the end of the points by an unchecked product. Uncompressed records must fit
+/// in the file; compressed ones are read in batches (see [`BATCH_POINTS`]), so a false
+/// count ends at the data's end, once the end it implies is a number.
+fn check_point_count(bytes: &[u8]) -> Result<(), String> {
+    let raw =
+        las::raw::Header::read_from(Cursor::new(bytes)).map_err(|e| format!("not LAS/LAZ: {e}"))?;
+    // As the las crate reads it: the legacy 32-bit count unless it is 0.
+    let points = match (raw.number_of_point_records, raw.large_file) {
+        (0, Some(large)) => large.number_of_point_records,
+        (n, _) => u64::from(n),
+    };
+    let record = u64::from(raw.point_data_record_length);
+    let start = u64::from(raw.offset_to_point_data);
+    let compressed = raw.point_data_record_format & 0x80 != 0;
+    let room = (bytes.len() as u64).saturating_sub(start);
+    let claimed = points
+        .checked_mul(record)
+        .filter(|&n| start.checked_add(n).is_some());
+    match claimed {
+        Some(n) if compressed || n <= room => Ok(()),
+        _ => Err(format!(
+            "the header claims {points} points of {record} bytes, but the file holds {room} \
+             bytes of point data (from byte offset {start} to its end at {}): the file is \
+             truncated or its header is corrupt; write it again",
+            bytes.len()
+        )),
+    }
+}
+
+/// Compares two LAS or LAZ files, each given by its path (for messages) and its bytes.
+pub fn compare(
+    (expected_path, expected): (&Path, &[u8]),
+    (actual_path, actual): (&Path, &[u8]),
+    diffs: &mut Diffs<'_>,
+) -> Result<(), String> {
+    let e = read(expected)
+        .map_err(|m| format!("the expected file {}: {m}", expected_path.display()))?;
+    let a = read(actual).map_err(|m| format!("the actual file {}: {m}", actual_path.display()))?;
     if e.format != a.format {
         diffs.push(format!(
             "point format: expected {}, actual {}",

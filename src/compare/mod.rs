@@ -378,7 +378,7 @@ pub fn compare_file(expected: &Path, actual: &Path, tolerances: &Tolerances) -> 
                 "json" => json::compare(&e, &a, &mut diffs),
                 "csv" => csv::compare(&e, &a, &mut diffs),
                 "ply" => ply::compare(&e, &a, &mut diffs),
-                "las" | "laz" => las::compare(&e, &a, &mut diffs),
+                "las" | "laz" => las::compare((expected, &e), (actual, &a), &mut diffs),
                 _ => {
                     if e != a {
                         diffs.push("the bytes differ".to_string());

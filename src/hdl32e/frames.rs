@@ -95,6 +95,11 @@ pub struct CaptureSummary {
     /// of reports when 0.
     #[serde(skip_serializing_if = "is_zero")]
     pub clock_backward_steps: u64,
+    /// Data packets dropped as exact copies of one of the few data packets before them
+    /// (same timestamp and payload): a capture recorded or merged twice. Left out of
+    /// reports when 0.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub duplicate_packets: u64,
     /// Decoder counters.
     pub decode: DecodeCounts,
     /// Container-level counters (records, fragments, truncation).
@@ -176,9 +181,45 @@ pub(super) struct SweepState {
     first_time_us: Option<f64>,
     /// Rotation so far (forward steps only), centidegrees.
     unwrapped_centideg: u64,
+    /// The last data packets kept (see [`SweepState::is_duplicate`]).
+    recent: RecentPackets,
+}
+
+/// Data packets compared with each new one to find exact duplicates.
+pub const DUPLICATE_WINDOW: usize = 8;
+
+/// Timestamp and xxh3 hash of the payload of each of the last [`DUPLICATE_WINDOW`] data
+/// packets kept, in a ring: a fixed size whatever the capture's length, and small enough
+/// to be copied into every seek point, so that a resumed reader drops the same packets.
+#[derive(Clone, Copy, Debug, Default)]
+struct RecentPackets {
+    entries: [(u32, u64); DUPLICATE_WINDOW],
+    /// Entries filled so far (up to the window).
+    len: usize,
+    /// Where the next entry goes.
+    next: usize,
 }
 
 impl SweepState {
+    /// True when a data packet is an exact copy (same timestamp, same payload hash) of one
+    /// of the last [`DUPLICATE_WINDOW`] data packets kept; a kept packet joins the window.
+    /// A capture recorded twice over the same interface, or merged with itself, repeats
+    /// every packet: decoding the copies doubled every return and cut extra frames where a
+    /// copy straddles the cut angle.
+    #[inline]
+    pub(super) fn is_duplicate(&mut self, payload: &[u8]) -> bool {
+        let ts = packet::timestamp_us(payload);
+        let hash = xxhash_rust::xxh3::xxh3_64(payload);
+        let r = &mut self.recent;
+        if r.entries[..r.len].contains(&(ts, hash)) {
+            return true;
+        }
+        r.entries[r.next] = (ts, hash);
+        r.next = (r.next + 1) % DUPLICATE_WINDOW;
+        r.len = (r.len + 1).min(DUPLICATE_WINDOW);
+        false
+    }
+
     /// Takes a data packet's timestamp and its first firing's time past the hour; returns
     /// that firing's time in the capture.
     #[inline]
@@ -252,7 +293,7 @@ pub(super) fn identify_in(mut capture: CaptureReader) -> Result<Identity> {
     let mut sample = Sample::default();
     while let Some(d) = capture.next_datagram()? {
         if packet::is_data_packet(d.payload) {
-            sample.push(d.payload, d.ts_ns);
+            sample.push(d.payload, d.ts_ns, d.record, d.offset);
             if sample.is_full() {
                 break;
             }
@@ -285,8 +326,14 @@ impl AsRef<[u8]> for ArcBytes {
 }
 
 impl FrameReader {
-    /// Opens a capture, refusing it unless it is an HDL-32E capture.
+    /// Opens a capture, refusing it unless it is an HDL-32E capture. A FIFO (or device)
+    /// is read once into memory, its file header checked first, as standard input is.
     pub fn open(path: &Path, options: &DecoderOptions) -> Result<Self> {
+        if crate::capture::is_stream(path) {
+            let stream = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+            let bytes = crate::capture::read_stream(stream, path)?;
+            return Self::from_bytes(Arc::from(bytes), path, options);
+        }
         Self::with_source(|| CaptureReader::open(path), options)
     }
 
@@ -344,6 +391,7 @@ impl FrameReader {
                 returns_in_full_frames: 0,
                 duration_s: 0.0,
                 clock_backward_steps: 0,
+                duplicate_packets: 0,
                 decode: DecodeCounts::default(),
                 capture: CaptureStats::default(),
                 returns_per_laser: vec![0; packet::LASERS],
@@ -574,6 +622,12 @@ impl FrameReader {
             self.summary.bad_data_packets += 1;
             return;
         };
+        // The frame index drops the same packets (see `index::FrameScan`), so that both
+        // cut the same frames.
+        if self.sweep.is_duplicate(payload) {
+            self.summary.duplicate_packets += 1;
+            return;
+        }
         self.summary.data_packets += 1;
         if self.summary.data_ports.len() < 8 && !self.summary.data_ports.contains(&ports) {
             self.summary.data_ports.push(ports);

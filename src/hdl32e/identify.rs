@@ -18,14 +18,19 @@ pub struct Sample {
     pub device_us: Vec<u32>,
     /// Capture timestamp (ns) of each sampled data packet.
     pub capture_ns: Vec<u64>,
+    /// Record number and byte offset in the capture of each sampled data packet, for
+    /// messages (empty when the sample was built without them).
+    pub places: Vec<(u32, u64)>,
 }
 
 /// How many data packets [`identify`] wants to see.
 pub const SAMPLE_PACKETS: usize = 64;
 
 impl Sample {
-    /// Adds one data packet to the sample.
-    pub fn push(&mut self, payload: &[u8], capture_ns: u64) {
+    /// Adds one data packet to the sample: its payload, capture time, record number and
+    /// byte offset.
+    pub fn push(&mut self, payload: &[u8], capture_ns: u64, record: u32, offset: u64) {
+        self.places.push((record, offset));
         self.products.push(packet::product_byte(payload));
         self.modes.push(packet::return_mode_byte(payload));
         self.device_us.push(packet::timestamp_us(payload));
@@ -96,10 +101,20 @@ pub fn identify(sample: &Sample) -> Result<Identity, String> {
                 .into(),
         );
     };
-    if let Some(&other) = sample.products.iter().find(|&&p| p != product) {
+    if let Some(k) = sample.products.iter().position(|&p| p != product) {
+        let other = sample.products[k];
+        let place = |i: usize| match sample.places.get(i) {
+            Some((record, offset)) => format!(" (record {record} at byte offset {offset})"),
+            None => String::new(),
+        };
         return Err(format!(
-            "data packets disagree on the product id (0x{product:02x} and 0x{other:02x}): \
-             the capture mixes sensors; filter one sensor's packets first"
+            "data packets disagree on the product id: data packet {k}{} has 0x{other:02x} ({}) \
+             where data packet 0{} has 0x{product:02x} ({}): the capture mixes sensors; keep \
+             one sensor's packets (e.g. filter by UDP port) and rerun",
+            place(k),
+            packet::product_name(other),
+            place(0),
+            packet::product_name(product)
         ));
     }
     if product != packet::PRODUCT_HDL32E && product != 0 {
@@ -183,5 +198,22 @@ mod tests {
         let mut mixed = sample(0x21, 0x37, 553);
         mixed.products[3] = 0x22;
         assert!(identify(&mixed).is_err());
+    }
+
+    #[test]
+    fn mixed_products_name_the_packet_and_its_offset() {
+        // Issue 30, defect 8: the message named no packet nor offset.
+        let mut payload = vec![0u8; packet::DATA_PACKET_BYTES];
+        let mut s = Sample::default();
+        for i in 0..10u32 {
+            payload[packet::DATA_PACKET_BYTES - 1] = if i == 6 { 0x22 } else { 0x21 };
+            s.push(&payload, u64::from(i), i + 2, 24 + 1264 * u64::from(i + 2));
+        }
+        let m = identify(&s).unwrap_err();
+        assert!(
+            m.contains("data packet 6 (record 8 at byte offset 10136) has 0x22 (VLP-16)")
+                && m.contains("data packet 0 (record 2 at byte offset 2552) has 0x21"),
+            "{m}"
+        );
     }
 }

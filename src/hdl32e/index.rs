@@ -141,6 +141,10 @@ impl FrameScan {
                 open: self.building.is_some(),
                 sweep: self.sweep,
             };
+            // Its state before the duplicate check: a reader resumed here checks again.
+            if self.sweep.is_duplicate(d.payload) {
+                continue;
+            }
             let offset = d.offset;
             let (firings, n) = self.decoder.firings(d.payload, mode);
             self.sweep.on_packet(

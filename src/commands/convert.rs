@@ -70,19 +70,36 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     let mut inputs: Vec<&Path> = args.captures.iter().map(PathBuf::as_path).collect();
     // A calibration file inside the output folder would be replaced by a frame.
     inputs.extend(args.decoder.calibration.as_deref());
-    let mut old = Vec::new();
-    for (capture, (_, target)) in args.captures.iter().zip(&targets) {
-        let settings = convert_settings(&args, capture, output);
-        old = staging::check_replace(
-            target,
-            "convert",
-            &settings,
-            &is_convert_output,
-            args.force,
-            &inputs,
-        )?;
-    }
+    let check = || -> Result<Vec<String>> {
+        let mut old = Vec::new();
+        for (capture, (_, target)) in args.captures.iter().zip(&targets) {
+            let settings = convert_settings(&args, capture, output);
+            old = staging::check_replace(
+                target,
+                "convert",
+                &settings,
+                &is_convert_output,
+                &|_| false,
+                args.force,
+                &inputs,
+            )?;
+        }
+        Ok(old)
+    };
+    let mut old = check()?;
     let folder = OutputFolder::lock(&args.output)?;
+    if folder.repaired() {
+        // The lock finished a killed run's commit: the folders checked may have changed.
+        match check() {
+            Ok(o) => old = o,
+            Err(e) => {
+                folder.abandon();
+                return Err(e);
+            }
+        }
+    }
+    // Only now, the checks passed: what killed runs of this tool left.
+    folder.remove_leftovers(&|rel| is_convert_output(rel.rsplit('/').next().unwrap_or(rel)));
     let mut staged: Vec<(Staged, PathBuf, u32, &Path)> = Vec::new();
     for (capture, (stage_name, target)) in args.captures.iter().zip(targets) {
         let settings = convert_settings(&args, capture, output);

@@ -478,7 +478,18 @@ pub fn written_by_sweep(path: &Path) -> bool {
     if std::fs::metadata(path).map_or(true, |m| !m.is_file() || m.len() > MAX_CELL_BYTES) {
         return false;
     }
-    std::fs::read(path).is_ok_and(|bytes| bytes.windows(TOOL.len()).any(|w| w == TOOL))
+    let holds = |bytes: &[u8]| bytes.windows(TOOL.len()).any(|w| w == TOOL);
+    // As written, the file starts with it; only a file rewritten with other key order
+    // is read whole.
+    let mut head = Vec::with_capacity(256);
+    let Ok(file) = std::fs::File::open(path) else {
+        return false;
+    };
+    use std::io::Read;
+    if file.take(256).read_to_end(&mut head).is_ok() && holds(&head) {
+        return true;
+    }
+    std::fs::read(path).is_ok_and(|bytes| holds(&bytes))
 }
 
 /// Cells in table order: `--vary` values (first key slowest), then seed.

@@ -267,8 +267,14 @@ fn lock_nesting(dir: &Path) -> Result<Vec<File>> {
             Err(fs::TryLockError::Error(_)) => {}
         }
     }
-    let mut stack = vec![resolved];
-    while let Some(d) = stack.pop() {
+    // Below: a run inside that started while this folder had no lock file yet (else its
+    // shared lock on ours made our lock fail). Bounded, so that `-o .` in a large tree
+    // stays cheap: our results lie at most three levels down (`plots/<capture>/x.png`).
+    const DEPTH: usize = 4;
+    const MAX_FOLDERS: usize = 100_000;
+    let mut stack = vec![(resolved, 0usize)];
+    let mut seen = 0usize;
+    while let Some((d, depth)) = stack.pop() {
         let Ok(entries) = fs::read_dir(&d) else {
             continue;
         };
@@ -277,6 +283,10 @@ fn lock_nesting(dir: &Path) -> Result<Vec<File>> {
             if !e.file_type().is_ok_and(|t| t.is_dir()) {
                 continue;
             }
+            seen += 1;
+            if seen > MAX_FOLDERS {
+                return Ok(around);
+            }
             let sub = e.path();
             let lock = sub.join(LOCK_FILE);
             if let Ok(file) = open_lock(&lock, false) {
@@ -284,7 +294,9 @@ fn lock_nesting(dir: &Path) -> Result<Vec<File>> {
                     return Err(busy(&sub, &lock, "which is inside this folder"));
                 }
             }
-            stack.push(sub);
+            if depth + 1 < DEPTH {
+                stack.push((sub, depth + 1));
+            }
         }
     }
     Ok(around)

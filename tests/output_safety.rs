@@ -390,3 +390,81 @@ fn labels_inside_the_output_folder_are_never_overwritten() {
     assert!(!o.status.success(), "{}", stderr(&o));
     assert_eq!(std::fs::read_to_string(&calibration).unwrap(), text);
 }
+
+#[cfg(target_os = "linux")]
+#[test]
+fn a_sweep_force_killed_mid_way_keeps_the_old_results() {
+    // Issue 30, 4: an interrupted `sweep --force` left neither the old nor the new results
+    // (20 of 30 tries). The new sweep is stopped at a known point, without timing: its
+    // labels are a FIFO, which it reads while computing its cells; once it has the FIFO
+    // open (a writer can then open it without blocking), it waits for bytes that never
+    // come, and gets SIGKILL or SIGINT there.
+    use std::os::unix::fs::OpenOptionsExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    ok(&sweep(&crossroad(), &out, "rain.rate_mm_h=0,3", &[]));
+    let before = files(&out);
+    let fifo = tmp.path().join("labels.fifo");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    for signal in ["KILL", "INT"] {
+        let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin!("lidar-noise"))
+            .env("RAYON_NUM_THREADS", "2")
+            .args(["--quiet", "sweep"])
+            .arg(crossroad())
+            .args(["--vary", "occlusion=on,off", "--frames", "0", "--force"])
+            .arg("--labels")
+            .arg(&fifo)
+            .arg("-o")
+            .arg(&out)
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let writer = loop {
+            match std::fs::File::options()
+                .write(true)
+                .custom_flags(libc::O_NONBLOCK)
+                .open(&fifo)
+            {
+                Ok(w) => break w,
+                Err(e) if e.raw_os_error() == Some(libc::ENXIO) => {
+                    if let Some(status) = child.try_wait().unwrap() {
+                        let mut err = String::new();
+                        use std::io::Read;
+                        child
+                            .stderr
+                            .take()
+                            .unwrap()
+                            .read_to_string(&mut err)
+                            .unwrap();
+                        panic!("the sweep ended before reading its labels: {status}: {err}");
+                    }
+                    // Polling, not a deadline: the test waits as long as the sweep needs.
+                    std::thread::sleep(std::time::Duration::from_millis(5));
+                }
+                Err(e) => panic!("{e}"),
+            }
+        };
+        let killed = std::process::Command::new("kill")
+            .args([format!("-{signal}"), child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(killed.success());
+        let status = child.wait().unwrap();
+        drop(writer);
+        assert!(!status.success(), "{signal}: {status}");
+        assert!(
+            leftovers(&out).is_empty(),
+            "{signal}: {:?}",
+            leftovers(&out)
+        );
+        assert!(
+            files(&out) == before,
+            "{signal}: the earlier results changed: {:?}",
+            files(&out).keys()
+        );
+    }
+}

@@ -131,7 +131,12 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         }
         staging::commit(stages)?;
     } else if let Some((s, target, written, capture)) = staged.pop() {
-        staging::commit_files(s, &args.output, &old)?;
+        // The frames go into the output folder itself: replaced as a sweep's results are,
+        // in one commit a kill cannot leave half done (the earlier frames the new ones do
+        // not replace go last).
+        let new = staging::result_files(s.path());
+        let replaces: Vec<String> = old.into_iter().filter(|f| !new.contains(f)).collect();
+        staging::commit_into(s, &replaces)?;
         done.push((target, written, capture));
     }
     if !global.quiet {

@@ -514,33 +514,8 @@ pub fn commit(staged: Vec<Staged>) -> Result<()> {
     result
 }
 
-/// Moves every file of a staging folder into `dir` (the folder the files belong in, for
-/// commands such as `convert` whose output folder is the target itself), after deleting
-/// `old` (an earlier run's results, from [`check_replace`]), with signals held off; then
-/// deletes the staging folder.
-pub fn commit_files(mut staged: Staged, dir: &Path, old: &[String]) -> Result<()> {
-    signals::critical(|g| {
-        remove_results(dir, old, &|_| false);
-        let entries = fs::read_dir(&staged.path).map_err(|e| Error::io(&staged.path, e))?;
-        let mut names: Vec<_> = entries
-            .filter_map(|e| e.ok())
-            .map(|e| e.file_name())
-            .filter(|n| n != STAGING_MARKER)
-            .collect();
-        names.sort();
-        for name in names {
-            let target = dir.join(&name);
-            fs::rename(staged.path.join(&name), &target).map_err(|e| Error::io(&target, e))?;
-        }
-        signals::remove_path(&staged.path);
-        g.unregister(&staged.path);
-        staged.done = true;
-        Ok(())
-    })
-}
-
-/// Replaces results in the folder that holds the staging folder (for `sweep`, whose
-/// output folder is its results): the staging folder holds the new files and their
+/// Replaces results in the folder that holds the staging folder (for `sweep` and a
+/// one-capture `convert`, whose output folder is their results): the staging folder holds the new files and their
 /// manifest (written by the caller, listing them); `replaces` are files of the earlier
 /// results to delete (relative paths). The list is written into the staging folder
 /// first, which makes it complete: from then on the commit goes to its end even if the

@@ -561,9 +561,25 @@ fn apply_staged(stage: &Path, dir: &Path) -> Result<()> {
         .ok()
         .and_then(|b| serde_json::from_slice(&b).ok())
         .ok_or_else(|| Error::Invalid(format!("{}: unreadable", list.display())))?;
+    // Paths come from files in the output folder, which someone else may have written:
+    // only plain relative paths below it, never through a link, are acted on.
+    if let Some(bad) = replaces.iter().find(|f| !inside(dir, f)) {
+        return Err(Error::Invalid(format!(
+            "{}: lists `{bad}`, not a path inside {}",
+            list.display(),
+            dir.display()
+        )));
+    }
     // The manifest moves last of the new files: while it is in the staging folder, some
     // of its files may still be there.
     if let Some(manifest) = read_manifest(stage) {
+        if let Some(bad) = manifest.files.iter().find(|f| !inside(dir, f)) {
+            return Err(Error::Invalid(format!(
+                "{}: lists `{bad}`, not a path inside {}",
+                stage.join(MANIFEST).display(),
+                dir.display()
+            )));
+        }
         for f in &manifest.files {
             let from = stage.join(f);
             if fs::symlink_metadata(&from).is_err() {
@@ -586,6 +602,23 @@ fn apply_staged(stage: &Path, dir: &Path) -> Result<()> {
     }
     signals::remove_path(stage);
     Ok(())
+}
+
+/// True when `rel` is a relative path of plain names (no `..`, no root) whose folders
+/// inside `dir` are not links: acting on `dir/rel` stays inside `dir`.
+fn inside(dir: &Path, rel: &str) -> bool {
+    use std::path::Component;
+    let rel = Path::new(rel);
+    if rel.as_os_str().is_empty() || !rel.components().all(|c| matches!(c, Component::Normal(_))) {
+        return false;
+    }
+    let mut at = dir.to_path_buf();
+    let mut parts: Vec<_> = rel.components().collect();
+    parts.pop();
+    parts.into_iter().all(|c| {
+        at.push(c);
+        fs::symlink_metadata(&at).map_or(true, |m| !m.file_type().is_symlink())
+    })
 }
 
 #[cfg(test)]
@@ -1100,6 +1133,38 @@ mod tests {
         want.push(LOCK_FILE.into());
         want.sort();
         assert_eq!(entries(&out), want);
+    }
+
+    #[test]
+    fn a_planted_replacement_cannot_reach_outside_the_folder() {
+        // A staging folder is a file in the output folder: one written by someone else
+        // must not make the next run delete or move files elsewhere.
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let victim = dir.path().join("victim.txt");
+        fs::write(&victim, "keep").unwrap();
+        fs::create_dir_all(dir.path().join("elsewhere")).unwrap();
+        fs::write(dir.path().join("elsewhere/x.txt"), "keep").unwrap();
+        fs::create_dir_all(&out).unwrap();
+        #[cfg(unix)]
+        std::os::unix::fs::symlink(dir.path().join("elsewhere"), out.join("link")).unwrap();
+        for list in [
+            r#"["../victim.txt"]"#,
+            r#"["/tmp/../victim.txt"]"#,
+            r#"["link/x.txt"]"#,
+        ] {
+            let stage = out.join(".sweep.staging-1");
+            fs::create_dir_all(&stage).unwrap();
+            mark(&stage).unwrap();
+            write_manifest(&stage, "sweep", &serde_json::json!(1), vec![]).unwrap();
+            fs::write(stage.join(REPLACES), list).unwrap();
+            let e = apply_staged(&stage, &out).unwrap_err().to_string();
+            assert!(e.contains("not a path inside"), "{e}");
+            drop(OutputFolder::lock(&out).unwrap());
+            signals::remove_path(&stage);
+        }
+        assert_eq!(fs::read_to_string(&victim).unwrap(), "keep");
+        assert!(dir.path().join("elsewhere/x.txt").exists());
     }
 
     #[test]

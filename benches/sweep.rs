@@ -51,6 +51,7 @@ fn bench(c: &mut Criterion) {
                     &outcome.rows,
                     None,
                     &[],
+                    &[],
                 )
                 .unwrap();
                 dir

@@ -112,6 +112,24 @@ pub fn unregister(path: &Path) {
 pub fn remove_path(path: &Path) {
     match std::fs::symlink_metadata(path) {
         Ok(m) if m.is_dir() => {
+            // A staging folder's marker goes last, so that a kill in the middle leaves a
+            // folder the next run still knows as a leftover of ours.
+            let marker = crate::writers::staging::STAGING_MARKER;
+            if let Ok(entries) = std::fs::read_dir(path) {
+                for e in entries.filter_map(|e| e.ok()) {
+                    if e.file_name() != marker {
+                        let p = e.path();
+                        match e.file_type() {
+                            Ok(t) if t.is_dir() => {
+                                let _ = std::fs::remove_dir_all(&p);
+                            }
+                            _ => {
+                                let _ = std::fs::remove_file(&p);
+                            }
+                        }
+                    }
+                }
+            }
             let _ = std::fs::remove_dir_all(path);
         }
         Ok(_) => {

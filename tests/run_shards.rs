@@ -248,7 +248,12 @@ fn merge_lists_missing_parts_trusts_no_broken_one_and_refuses_another_chunk_size
     let part = out.join("crossroad/.run.chunk1-00001.json");
     let bytes = std::fs::read(&part).unwrap();
     std::fs::write(&part, &bytes[..bytes.len() / 2]).unwrap();
-    std::fs::write(out.join("crossroad/.run.chunk1-00002.json.a1b2.tmp"), b"{").unwrap();
+    // (named as our writer names its temporary files: `.NAME.XXXXXX.tmp`)
+    std::fs::write(
+        out.join("crossroad/..run.chunk1-00002.json.a1b2c3.tmp"),
+        b"{",
+    )
+    .unwrap();
     ok(go(&["--chunk-frames", "1", "--shard", "2/3"]));
     let err = failed(go(&["--chunk-frames", "1", "--merge"]));
     assert!(err.contains("1 capture chunk part is missing"), "{err}");

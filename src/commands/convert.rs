@@ -70,19 +70,36 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     let mut inputs: Vec<&Path> = args.captures.iter().map(PathBuf::as_path).collect();
     // A calibration file inside the output folder would be replaced by a frame.
     inputs.extend(args.decoder.calibration.as_deref());
-    let mut old = Vec::new();
-    for (capture, (_, target)) in args.captures.iter().zip(&targets) {
-        let settings = convert_settings(&args, capture, output);
-        old = staging::check_replace(
-            target,
-            "convert",
-            &settings,
-            &is_convert_output,
-            args.force,
-            &inputs,
-        )?;
-    }
+    let check = || -> Result<Vec<String>> {
+        let mut old = Vec::new();
+        for (capture, (_, target)) in args.captures.iter().zip(&targets) {
+            let settings = convert_settings(&args, capture, output);
+            old = staging::check_replace(
+                target,
+                "convert",
+                &settings,
+                &is_convert_output,
+                &|_| false,
+                args.force,
+                &inputs,
+            )?;
+        }
+        Ok(old)
+    };
+    let mut old = check()?;
     let folder = OutputFolder::lock(&args.output)?;
+    if folder.repaired() {
+        // The lock finished a killed run's commit: the folders checked may have changed.
+        match check() {
+            Ok(o) => old = o,
+            Err(e) => {
+                folder.abandon();
+                return Err(e);
+            }
+        }
+    }
+    // Only now, the checks passed: what killed runs of this tool left.
+    folder.remove_leftovers(&|rel| is_convert_output(rel.rsplit('/').next().unwrap_or(rel)));
     let mut staged: Vec<(Staged, PathBuf, u32, &Path)> = Vec::new();
     for (capture, (stage_name, target)) in args.captures.iter().zip(targets) {
         let settings = convert_settings(&args, capture, output);
@@ -114,7 +131,12 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         }
         staging::commit(stages)?;
     } else if let Some((s, target, written, capture)) = staged.pop() {
-        staging::commit_files(s, &args.output, &old)?;
+        // The frames go into the output folder itself: replaced as a sweep's results are,
+        // in one commit a kill cannot leave half done (the earlier frames the new ones do
+        // not replace go last).
+        let new = staging::result_files(s.path());
+        let replaces: Vec<String> = old.into_iter().filter(|f| !new.contains(f)).collect();
+        staging::commit_into(s, &replaces)?;
         done.push((target, written, capture));
     }
     if !global.quiet {

@@ -231,30 +231,44 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             return Ok(());
         }
     }
-    for (reader, source, name, capture) in &jobs {
-        if plan.pcap_out {
-            let mode = reader.summary().return_mode;
-            // Named by the path as given, as in every message of `run`.
-            let shown = capture.map_or_else(|| source.clone(), super::capture_shown);
-            crate::writers::pcap::check_capture(&shown, mode, plan.decoder.dual)?;
+    let check = || -> Result<()> {
+        for (reader, source, name, capture) in &jobs {
+            if plan.pcap_out {
+                let mode = reader.summary().return_mode;
+                // Named by the path as given, as in every message of `run`.
+                let shown = capture.map_or_else(|| source.clone(), super::capture_shown);
+                crate::writers::pcap::check_capture(&shown, mode, plan.decoder.dual)?;
+            }
+            let target = args.output.join(name);
+            check_target(&target, &inputs)?;
+            staging::check_replace(
+                &target,
+                "run",
+                &run_settings(&plan, source),
+                &is_run_output,
+                &|_| false,
+                args.force,
+                &inputs,
+            )?;
         }
-        let target = args.output.join(name);
-        check_target(&target, &inputs)?;
-        staging::check_replace(
-            &target,
-            "run",
-            &run_settings(&plan, source),
-            &is_run_output,
-            args.force,
-            &inputs,
-        )?;
-    }
+        Ok(())
+    };
+    check()?;
     // Shards of one batch write distinct capture folders side by side.
     let folder = if args.shard.is_some() {
         OutputFolder::lock_shared(&args.output)?
     } else {
         OutputFolder::lock(&args.output)?
     };
+    if folder.repaired() {
+        // The lock finished a killed run's commit: the folders checked may have changed.
+        if let Err(e) = check() {
+            folder.abandon();
+            return Err(e);
+        }
+    }
+    // Only now, the checks passed: what killed runs of this tool left.
+    folder.remove_leftovers(&is_run_path);
     let mut staged = Vec::new();
     let mut reports = Vec::new();
     for (reader, source, name, capture) in jobs {
@@ -331,6 +345,18 @@ pub(super) fn is_run_output(name: &str) -> bool {
     matches!(name, "summary.json" | "clusters.json" | "clusters.csv")
         || numbered(name, "frame_", &[".ply", ".las", ".laz"])
         || numbered(name, "linkage_", &[".csv"])
+}
+
+/// True for the paths, relative to a run's output folder, of the files `run` writes
+/// (`<capture>/<file>`, parts of `--chunk-frames` included): the clean-up of what killed
+/// runs left removes their temporary files only.
+pub(super) fn is_run_path(rel: &str) -> bool {
+    rel.split_once('/').is_some_and(|(_, f)| {
+        !f.contains('/')
+            && (is_run_output(f)
+                || f == "noisy.pcap"
+                || (f.starts_with(".run.chunk") && f.ends_with(".json")))
+    })
 }
 
 /// True for `<prefix>NNNNN<ext>` with five or more digits and one of `exts`.

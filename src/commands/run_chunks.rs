@@ -229,7 +229,9 @@ fn check_folder(
     // Only refuses files this tool did not write (and inputs): with `force` set, results
     // of an earlier run pass, and the manifest was compared above.
     let ours = |f: &str| single::is_run_output(f) || part_chunk_size(f).is_some();
-    staging::check_replace(target, "run", settings, &ours, true, inputs)?;
+    // Parts are written in place by shards and never listed in a manifest.
+    let parts = |f: &str| part_chunk_size(f).is_some();
+    staging::check_replace(target, "run", settings, &ours, &parts, true, inputs)?;
     Ok(())
 }
 
@@ -317,6 +319,10 @@ pub(super) fn run(
         OutputFolder::lock(&args.output)?
     };
     let result = units(args, plan, m, &jobs, &plans, total, inputs, global);
+    if result.is_ok() {
+        // The checks passed and the merge is done: what killed runs of this tool left.
+        folder.remove_leftovers(&single::is_run_path);
+    }
     if result.is_err() {
         // A folder this (exclusive) run created, with nothing in it, goes again.
         folder.abandon();

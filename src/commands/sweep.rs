@@ -215,8 +215,8 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         settings.base.cell_config(&settings.varies, &cell)?;
     }
     // One sweep per folder at a time (its shards excepted: they share the lock and write
-    // distinct cells); leftovers of killed sweeps are removed under the exclusive lock.
-    let _folder = if args.shard.is_some() {
+    // distinct cells).
+    let folder = if args.shard.is_some() {
         staging::OutputFolder::lock_shared(&args.output)?
     } else {
         staging::OutputFolder::lock(&args.output)?
@@ -229,43 +229,86 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     }
     inputs.extend(args.config.as_deref());
     inputs.extend(args.decoder.calibration.as_deref());
-    let old = staging::check_replace(
+    let is_cell = |f: &str| is_cell_file(&args.output, f);
+    let old = match staging::check_replace(
         &args.output,
         "sweep",
         &plan,
         &is_sweep_output,
+        &is_cell,
         args.force,
         &inputs,
-    )?;
-    let n_cells = crate::sweep::plan::cells(&settings.varies, &settings.seeds).len();
-    if args.force && !old.is_empty() {
-        // Cells of this plan stay (they are recomputed when their settings differ).
-        let cells = crate::sweep::run::canonical_cells(&settings);
-        let mut keep = HashSet::new();
-        for c in &captures {
-            for cell in &cells {
-                keep.insert(format!(
-                    "cells/{}/{}",
-                    c.name,
-                    cell.file_name(&settings.varies)
-                ));
-            }
+    ) {
+        Ok(old) => old,
+        Err(e) => {
+            folder.abandon();
+            return Err(e);
         }
-        // Parts of this plan's cells stay too (checked against their settings likewise).
-        let part_of_kept = |f: &str| {
-            f.rsplit_once('/').is_some_and(|(folder, name)| {
-                crate::sweep::chunks::part_chunk_size(name).is_some()
-                    && keep.iter().any(|k| k.starts_with(&format!("{folder}/")))
-            })
-        };
-        staging::remove_results(&args.output, &old, &|f| keep.contains(f) || part_of_kept(f));
-    }
-    if staging::read_manifest(&args.output)
-        .is_none_or(|m| m.command != "sweep" || m.settings != plan)
-    {
-        // Recorded before any cell, so that a later sweep of another plan is refused.
+    };
+    // Only now, the checks passed: what killed runs of this tool left.
+    folder.remove_leftovers(&|f| is_sweep_output(f) || f.starts_with("cells/"));
+    let earlier = staging::read_manifest(&args.output);
+    // A new folder records the plan before any cell, so that a sweep of another plan is
+    // refused while its cells accumulate (shards, an interrupted sweep). A folder holding
+    // results keeps their record until the new results replace them whole.
+    let fresh = old.is_empty() && earlier.is_none();
+    if fresh {
         staging::write_manifest(&args.output, "sweep", &plan, Vec::new())?;
     }
+    let result = sweep_into(
+        &args,
+        &settings,
+        &captures,
+        &folder,
+        (&plan, &old, earlier.as_ref()),
+        global,
+    );
+    if result.is_err() && args.shard.is_none() && fresh {
+        // A failed first sweep leaves no folder, no record and no empty cell folder;
+        // cells it finished stay (with their record), a rerun loads them.
+        for c in &captures {
+            let _ = std::fs::remove_dir(args.output.join("cells").join(&c.name));
+        }
+        let _ = std::fs::remove_dir(args.output.join("cells"));
+        if staging::result_files(&args.output).is_empty() {
+            let _ = std::fs::remove_file(args.output.join(staging::MANIFEST));
+        }
+        folder.abandon();
+    }
+    result
+}
+
+/// Computes the cells and writes the tables, plots and page into a staging folder, then
+/// replaces the folder's earlier results with them as a whole (`staging::commit_into`):
+/// a failure or an interruption before that leaves the earlier results as they were.
+/// `earlier`: the plan, the files `check_replace` returned and the folder's manifest.
+fn sweep_into(
+    args: &Args,
+    settings: &SweepSettings,
+    captures: &[CaptureInput],
+    folder: &staging::OutputFolder,
+    (plan, old, earlier): (&serde_json::Value, &[String], Option<&staging::Manifest>),
+    global: Global,
+) -> Result<()> {
+    let n_cells = crate::sweep::plan::cells(&settings.varies, &settings.seeds).len();
+    // The cells of this plan (and their parts) are kept: the old plan's go at the end.
+    let cells = crate::sweep::run::canonical_cells(settings);
+    let mut keep = HashSet::new();
+    for c in captures {
+        for cell in &cells {
+            keep.insert(format!(
+                "cells/{}/{}",
+                c.name,
+                cell.file_name(&settings.varies)
+            ));
+        }
+    }
+    let part_of_kept = |f: &str| {
+        f.rsplit_once('/').is_some_and(|(folder, name)| {
+            crate::sweep::chunks::part_chunk_size(name).is_some()
+                && keep.iter().any(|k| k.starts_with(&format!("{folder}/")))
+        })
+    };
     let mode = match (args.shard, args.merge) {
         (Some(shard), _) => Mode::Shard(shard),
         (None, true) => Mode::Merge,
@@ -278,7 +321,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     };
     let chunked = args.chunk_frames.is_some();
     let bars = Bars::new(global, if chunked { 0 } else { own as u64 }, chunked);
-    let outcome = run_sweep(&settings, &captures, &bars, mode)?;
+    let outcome = run_sweep(settings, captures, &bars, mode)?;
     bars.frames.finish_and_clear();
     bars.cells.finish_and_clear();
     if let Some(shard) = args.shard {
@@ -321,7 +364,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         }
     };
     let mut protected: Vec<&Path> = Vec::new();
-    for c in &captures {
+    for c in captures {
         protected.push(&c.path);
         if let Some(l) = &c.labels {
             protected.push(l);
@@ -331,20 +374,34 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         protected.push(c);
     }
     let names: Vec<String> = captures.iter().map(|c| c.name.clone()).collect();
+    let mut cell_files: Vec<String> = keep.iter().cloned().collect();
+    cell_files.sort();
+    let stage = folder.stage("sweep")?;
     let written = write_outputs(
-        &args.output,
+        stage.path(),
         &settings.varies,
         &names,
         &outcome.rows,
         figure.as_ref(),
         &protected,
+        &cell_files,
     )?;
-    let files = written
+    let files: Vec<String> = written
         .iter()
-        .filter_map(|p| p.strip_prefix(&args.output).ok())
+        .filter_map(|p| p.strip_prefix(stage.path()).ok())
         .map(|p| p.to_string_lossy().replace('\\', "/"))
         .collect();
-    staging::write_manifest(&args.output, "sweep", &plan, files)?;
+    staging::write_manifest(stage.path(), "sweep", plan, files.clone())?;
+    // Of the earlier results: the files of its record that the new ones do not replace
+    // and, with --force, the cells of another plan. Cells of this plan stay.
+    let listed = |f: &String| earlier.is_some_and(|m| m.files.contains(f));
+    let replaces: Vec<String> = old
+        .iter()
+        .filter(|f| !files.contains(f) && !keep.contains(*f) && !part_of_kept(f))
+        .filter(|f| args.force || listed(f))
+        .cloned()
+        .collect();
+    staging::commit_into(stage, &replaces)?;
     if !global.quiet {
         eprintln!(
             "sweep: {} cells computed, {} loaded from earlier runs, {} rows; open {}",
@@ -355,6 +412,13 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// True for a file under `DIR/cells/` that says by its content that a sweep wrote it (a
+/// cell or a part of one, even edited or cut): cells accumulate over runs and shards, so
+/// no one manifest lists them.
+fn is_cell_file(dir: &Path, rel: &str) -> bool {
+    rel.starts_with("cells/") && crate::sweep::run::written_by_sweep(&dir.join(rel))
 }
 
 /// What decides a sweep folder's tables, plots and page: a sweep with other settings is
@@ -401,7 +465,9 @@ fn is_sweep_output(name: &str) -> bool {
         [crate::sweep::outputs::TIDY_CSV]
         | [crate::sweep::outputs::TIDY_JSON]
         | [crate::sweep::outputs::AGGREGATE_CSV]
-        | [crate::sweep::outputs::INDEX_HTML] => true,
+        | [crate::sweep::outputs::INDEX_HTML]
+        | [crate::sweep::interactions::INTERACTIONS_CSV]
+        | [crate::sweep::interactions::INTERACTIONS_JSON] => true,
         ["cells", _, cell] => cell.ends_with(".json"),
         ["plots", .., png] => png.ends_with(".png"),
         _ => false,

@@ -251,28 +251,13 @@ fn folder_files(dir: &Path, skip: &str) -> Result<Vec<String>> {
     Ok(out)
 }
 
-/// Removes the PNG files under `DIR/plots/` that this run did not write: plots of an
-/// earlier run into the same folder whose metric is now all zero or absent. They are
-/// this tool's results, and left there they would sit beside the page as if current.
-fn remove_stale_plots(dir: &Path, written: &[PathBuf]) -> Result<()> {
-    let plots = dir.join("plots");
-    if !plots.is_dir() {
-        return Ok(());
-    }
-    for rel in folder_files(&plots, "")? {
-        let path = plots.join(&rel);
-        let png = path.extension().is_some_and(|e| e == "png");
-        if png && !written.contains(&path) {
-            std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
-        }
-    }
-    Ok(())
-}
-
 /// The section listing every file of the sweep folder, grouped: tables and other files
 /// at the top level, plots, and the cells of each capture (folded, they can be many).
-fn files_section(dir: &Path, titles: &[(String, String)]) -> Result<Section> {
-    let files = folder_files(dir, INDEX_HTML)?;
+fn files_section(dir: &Path, titles: &[(String, String)], cells: &[String]) -> Result<Section> {
+    let mut files = folder_files(dir, INDEX_HTML)?;
+    files.extend(cells.iter().cloned());
+    files.sort();
+    files.dedup();
     let link = |f: &String| Link {
         href: f.clone(),
         note: file_note(f, titles),
@@ -637,7 +622,9 @@ fn plot_sections(
     Ok(sections)
 }
 
-/// Writes every output file into `dir` and returns the paths written.
+/// Writes every output file into `dir` (a staging folder: it holds only what this call
+/// writes) and returns the paths written; `cells` are the cell files of the sweep
+/// (relative paths, in the final folder), which the page lists too.
 pub fn write_outputs(
     dir: &Path,
     varies: &[Vary],
@@ -645,6 +632,7 @@ pub fn write_outputs(
     rows: &[Row],
     figure: Option<&BirdsEye>,
     protected: &[&Path],
+    cells: &[String],
 ) -> Result<Vec<PathBuf>> {
     let keys: Vec<String> = varies.iter().map(|v| v.key.clone()).collect();
     let mut written = Vec::new();
@@ -859,8 +847,7 @@ pub fn write_outputs(
             page.sections.insert(1, section);
         }
     }
-    remove_stale_plots(dir, &written)?;
-    page.sections.push(files_section(dir, &titles)?);
+    page.sections.push(files_section(dir, &titles, cells)?);
     let path = dir.join(INDEX_HTML);
     crate::writers::write_file(&page, &path, protected)?;
     written.push(path);

@@ -399,7 +399,11 @@ fn retain_stage_indexes(table: &mut Table, keep: &[usize]) {
     }
 }
 
-/// Parses `--bands`: comma-separated, strictly ascending, finite edges of at least 0.
+/// Largest distance band edge (`--bands`), in metres: far beyond any sensor's range.
+pub const MAX_BAND_EDGE_M: f64 = 100_000.0;
+
+/// Parses `--bands`: comma-separated, strictly ascending edges from 0 to
+/// [`MAX_BAND_EDGE_M`].
 pub fn parse_bands(text: &str) -> Result<Vec<f64>> {
     let bad = |m: String| Error::Invalid(format!("--bands {text}: {m}"));
     let edges: Vec<f64> = text
@@ -408,8 +412,13 @@ pub fn parse_bands(text: &str) -> Result<Vec<f64>> {
             e.trim()
                 .parse::<f64>()
                 .ok()
-                .filter(|v| v.is_finite() && *v >= 0.0)
-                .ok_or_else(|| bad(format!("`{e}` is not a distance of 0 m or more")))
+                // Bounded: each band names plot files (a 1e308 m edge wrote 309 digits).
+                .filter(|v| v.is_finite() && (0.0..=MAX_BAND_EDGE_M).contains(v))
+                .ok_or_else(|| {
+                    bad(format!(
+                        "`{e}` is not a distance from 0 to {MAX_BAND_EDGE_M} m"
+                    ))
+                })
         })
         .collect::<Result<_>>()?;
     if let Some(w) = edges.windows(2).find(|w| w[0] >= w[1]) {

@@ -468,6 +468,30 @@ fn join_parts(
     Ok(())
 }
 
+/// True when the file at `path` names this tool as its writer as the cell files (and
+/// parts) a sweep writes do (`"tool": "lidar-noise ..."`), even edited or cut since:
+/// proof enough that a sweep wrote it, for the cells no manifest lists.
+pub fn written_by_sweep(path: &Path) -> bool {
+    const TOOL: &[u8] = b"\"tool\": \"lidar-noise ";
+    // Cells hold a few kB per frame; anything far larger is not one of them.
+    const MAX_CELL_BYTES: u64 = 1 << 30;
+    if std::fs::metadata(path).map_or(true, |m| !m.is_file() || m.len() > MAX_CELL_BYTES) {
+        return false;
+    }
+    let holds = |bytes: &[u8]| bytes.windows(TOOL.len()).any(|w| w == TOOL);
+    // As written, the file starts with it; only a file rewritten with other key order
+    // is read whole.
+    let mut head = Vec::with_capacity(256);
+    let Ok(file) = std::fs::File::open(path) else {
+        return false;
+    };
+    use std::io::Read;
+    if file.take(256).read_to_end(&mut head).is_ok() && holds(&head) {
+        return true;
+    }
+    std::fs::read(path).is_ok_and(|bytes| holds(&bytes))
+}
+
 /// Cells in table order: `--vary` values (first key slowest), then seed.
 pub fn canonical_cells(s: &SweepSettings) -> Vec<Cell> {
     let mut cells = super::plan::cells(&s.varies, &s.seeds);

@@ -123,7 +123,9 @@ pub fn temp_file_for(path: &Path) -> Result<tempfile::NamedTempFile> {
         .ok_or_else(|| Error::Invalid(format!("{}: not a file name", path.display())))?;
     let prefix = format!(".{}.", name.to_string_lossy());
     let mut builder = tempfile::Builder::new();
-    builder.prefix(&prefix).suffix(".tmp");
+    // Six random characters: the shape by which the next run's clean-up knows the file
+    // as ours (`staging::OutputFolder::remove_leftovers`).
+    builder.prefix(&prefix).suffix(".tmp").rand_bytes(6);
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;

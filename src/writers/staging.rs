@@ -1,17 +1,26 @@
 //! One writer per output folder, and results that appear all at once or not at all.
 //!
 //! `OutputFolder::lock` takes an exclusive lock on `DIR/.lidar-noise.lock` (a second run
-//! into the same folder fails at once) and removes what a killed run left (hidden
-//! `.*.staging-*` folders and `.*.tmp` files). Each capture's results are written into a
-//! hidden staging folder beside their target (`DIR/.NAME.staging-PID`) and renamed into
-//! place only when every capture of the run succeeded; on failure or on a signal the
-//! staging folders are deleted, and a folder the run created is removed again.
+//! into the same folder fails at once), and shared locks on the lock files of the folders
+//! that contain DIR, and it refuses a folder inside or around one another run is writing:
+//! a run into `out` renames its results into place and would remove what a run into
+//! `out/big` wrote. Each capture's results are written into a hidden staging folder beside
+//! their target (`DIR/.NAME.staging-PID`, marked by a `.lidar-noise.staging` file) and
+//! renamed into place only when every capture of the run succeeded; on failure or on a
+//! signal the staging folders are deleted, and a folder the run created is removed again.
+//!
+//! What a killed run left is removed by the next run into the folder, after its checks
+//! ([`OutputFolder::remove_leftovers`]), and only what proves to be this tool's: staging
+//! folders holding the marker or a manifest, earlier results moved aside by a commit
+//! (`.NAME.staging-PID.old`, marked the same way), and temporary files named as our
+//! writers name them (`.FILE.XXXXXX.tmp`) for a FILE the folder's manifest lists or the
+//! command writes. A user's `.draft.tmp` or a results folder named `.x.tmp` stays.
 //!
 //! Each result folder also holds a manifest (`.lidar-noise.json`): the command, the
 //! settings that decide its results and the files it wrote. [`check_replace`] reads it to
 //! tell a rerun of the same settings (replaced, same bytes) from another run's results
 //! (refused unless `--force`), and refuses, even with `--force`, a folder holding files
-//! this tool did not write, so that nothing but our own results is ever deleted.
+//! the manifest does not list, so that nothing but our own results is ever deleted.
 
 use crate::error::{Error, Result};
 use crate::signals;
@@ -24,15 +33,29 @@ pub const LOCK_FILE: &str = ".lidar-noise.lock";
 /// Name of the manifest in each result folder (the run that wrote it and its files).
 pub const MANIFEST: &str = ".lidar-noise.json";
 
+/// Name of the marker file in a staging folder (and in earlier results moved aside): it
+/// proves the folder is this tool's work, so that a killed run's leftover can be deleted.
+pub const STAGING_MARKER: &str = ".lidar-noise.staging";
+
+/// Name of the list of files a staged replacement deletes ([`commit_into`]); written last,
+/// so that a staging folder holding it is complete and a killed commit can be finished.
+pub const REPLACES: &str = ".lidar-noise.replaces";
+
 /// An output folder this process holds the lock of.
 pub struct OutputFolder {
     dir: PathBuf,
     created: bool,
+    exclusive: bool,
+    repaired: bool,
     _lock: File,
+    /// Shared locks on the lock files of the folders containing `dir`.
+    _around: Vec<File>,
 }
 
 impl OutputFolder {
-    /// Creates `dir` if needed, locks it and removes what killed runs left in it.
+    /// Creates `dir` if needed and locks it, finishing a replacement a killed run had
+    /// started (see [`commit_into`]); call [`OutputFolder::remove_leftovers`] after the
+    /// checks to remove what killed runs left.
     pub fn lock(dir: &Path) -> Result<Self> {
         Self::lock_as(dir, true)
     }
@@ -56,16 +79,18 @@ impl OutputFolder {
         let created = !dir.exists();
         fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         let lock_path = dir.join(LOCK_FILE);
-        let mut options = File::options();
-        options.create(true).truncate(false).write(true);
-        // Never through a link: a (dangling) link at the lock's name would make us create
-        // or lock a file outside the output folder.
-        #[cfg(target_os = "linux")]
-        {
-            use std::os::unix::fs::OpenOptionsExt;
-            options.custom_flags(libc::O_NOFOLLOW);
-        }
-        let file = options.open(&lock_path).map_err(|e| {
+        let had_lock = fs::symlink_metadata(&lock_path).is_ok();
+        // Refused before anything was written: a folder (and lock file) this call
+        // created goes again.
+        let undo = || {
+            if !had_lock {
+                let _ = fs::remove_file(&lock_path);
+            }
+            if created {
+                let _ = fs::remove_dir(dir);
+            }
+        };
+        let file = open_lock(&lock_path, true).map_err(|e| {
             if fs::symlink_metadata(&lock_path).is_ok_and(|m| m.file_type().is_symlink()) {
                 Error::Invalid(format!(
                     "{}: is a symbolic link; lidar-noise does not follow links for its lock \
@@ -85,17 +110,24 @@ impl OutputFolder {
             Ok(()) => {}
             Err(fs::TryLockError::WouldBlock) => {
                 return Err(Error::Invalid(format!(
-                    "{}: another lidar-noise run is writing into this folder (it holds {}); \
-                     wait for it to finish or choose another output folder",
+                    "{}: another lidar-noise run is writing into this folder or a folder \
+                     inside it (it holds {}); wait for it to finish or choose another output \
+                     folder",
                     dir.display(),
                     lock_path.display()
                 )))
             }
             Err(fs::TryLockError::Error(e)) => return Err(Error::io(&lock_path, e)),
         }
-        if exclusive {
-            remove_stale(dir);
-        }
+        let around = match lock_nesting(dir) {
+            Ok(around) => around,
+            Err(e) => {
+                drop(file);
+                undo();
+                return Err(e);
+            }
+        };
+        let repaired = exclusive && finish_commits(dir);
         if created && exclusive {
             signals::critical(|g| g.created_folder(dir, &lock_path));
         }
@@ -103,8 +135,17 @@ impl OutputFolder {
             dir: dir.to_path_buf(),
             // A shard never removes the folder again: another shard may be writing in it.
             created: created && exclusive,
+            exclusive,
+            repaired,
             _lock: file,
+            _around: around,
         })
+    }
+
+    /// True when locking finished a commit a killed run had left half done (results put
+    /// in place or back): checks made before the lock must then be made again.
+    pub fn repaired(&self) -> bool {
+        self.repaired
     }
 
     /// The folder.
@@ -121,13 +162,240 @@ impl OutputFolder {
         signals::critical(|g| {
             fs::create_dir(&path).map_err(|e| Error::io(&path, e))?;
             g.register(&path);
-            Ok(Staged {
+            let staged = Staged {
                 path,
                 target: self.dir.join(name),
                 done: false,
-            })
+            };
+            // The marker makes the folder recognisably ours should the process be killed.
+            mark(&staged.path)?;
+            Ok(staged)
         })
     }
+
+    /// Removes what killed runs of this tool left in the folder, and only that: staging
+    /// folders holding our marker or a manifest, earlier results a commit moved aside
+    /// (put back when their target is missing), and temporary files `.FILE.XXXXXX.tmp`
+    /// down to two levels below (the depth of our outputs, e.g. `plots/<capture>/`) whose
+    /// FILE (a path relative to the folder) `ours` accepts or the folder's manifest lists.
+    /// Call it after the run's checks; shared locks remove nothing (another shard may be
+    /// writing).
+    pub fn remove_leftovers(&self, ours: &dyn Fn(&str) -> bool) {
+        if !self.exclusive {
+            return;
+        }
+        let listed = read_manifest(&self.dir)
+            .map(|m| m.files)
+            .unwrap_or_default();
+        let owns = |rel: &str| rel == MANIFEST || ours(rel) || listed.iter().any(|f| f == rel);
+        let Ok(entries) = fs::read_dir(&self.dir) else {
+            return;
+        };
+        for e in entries.filter_map(|e| e.ok()) {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let path = e.path();
+            let is_dir = e.file_type().is_ok_and(|t| t.is_dir());
+            if is_dir && is_staging_name(&name) {
+                // Earlier results whose target is missing were not put back (see
+                // `finish_commits`): they are the only copy, never deleted.
+                if moved_aside_target(&self.dir, &name)
+                    .is_some_and(|t| fs::symlink_metadata(t).is_err())
+                {
+                    continue;
+                }
+                if is_our_staging(&path) {
+                    signals::remove_path(&path);
+                } else {
+                    // An empty one (a kill between the marker and the folder) holds nothing.
+                    let _ = fs::remove_dir(&path);
+                }
+            } else if is_dir {
+                remove_temporaries(&path, &format!("{name}/"), 1, &owns);
+            } else if temporary_of(&name).is_some_and(&owns) {
+                let _ = fs::remove_file(&path);
+            }
+        }
+    }
+}
+
+/// Opens (creating if asked) a lock file, never through a link: a (dangling) link at the
+/// lock's name would make us create or lock a file outside the output folder.
+fn open_lock(path: &Path, create: bool) -> std::io::Result<File> {
+    let mut options = File::options();
+    if create {
+        options.create(true).truncate(false).write(true);
+    } else {
+        options.read(true);
+    }
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_NOFOLLOW);
+    }
+    options.open(path)
+}
+
+/// Refuses `dir` when another run writes into a folder containing it or inside it, and
+/// returns shared locks on the lock files of the folders containing it: held while this
+/// run writes, they make a later run into such a folder wait its turn (refused). A run
+/// into a folder inside ours is refused by the same test from its side.
+fn lock_nesting(dir: &Path) -> Result<Vec<File>> {
+    let Ok(resolved) = fs::canonicalize(dir) else {
+        return Ok(Vec::new());
+    };
+    let busy = |other: &Path, lock: &Path, relation: &str| {
+        Error::Invalid(format!(
+            "{}: another lidar-noise run is writing into {} (it holds {}), {relation}; a run \
+             into one would replace or remove what the other writes: wait for it to finish \
+             or choose an output folder outside it",
+            dir.display(),
+            other.display(),
+            lock.display()
+        ))
+    };
+    let mut around = Vec::new();
+    for folder in resolved.ancestors().skip(1) {
+        let lock = folder.join(LOCK_FILE);
+        let Ok(file) = open_lock(&lock, false) else {
+            continue;
+        };
+        match file.try_lock_shared() {
+            Ok(()) => around.push(file),
+            Err(fs::TryLockError::WouldBlock) => {
+                return Err(busy(folder, &lock, "which contains this folder"))
+            }
+            Err(fs::TryLockError::Error(_)) => {}
+        }
+    }
+    // Below: a run inside that started while this folder had no lock file yet (else its
+    // shared lock on ours made our lock fail). Bounded, so that `-o .` in a large tree
+    // stays cheap: our results lie at most three levels down (`plots/<capture>/x.png`).
+    const DEPTH: usize = 4;
+    const MAX_FOLDERS: usize = 100_000;
+    let mut stack = vec![(resolved, 0usize)];
+    let mut seen = 0usize;
+    while let Some((d, depth)) = stack.pop() {
+        let Ok(entries) = fs::read_dir(&d) else {
+            continue;
+        };
+        for e in entries.filter_map(|e| e.ok()) {
+            // Links are not followed: what they point to is not replaced by this run.
+            if !e.file_type().is_ok_and(|t| t.is_dir()) {
+                continue;
+            }
+            seen += 1;
+            if seen > MAX_FOLDERS {
+                return Ok(around);
+            }
+            let sub = e.path();
+            let lock = sub.join(LOCK_FILE);
+            if let Ok(file) = open_lock(&lock, false) {
+                if let Err(fs::TryLockError::WouldBlock) = file.try_lock() {
+                    return Err(busy(&sub, &lock, "which is inside this folder"));
+                }
+            }
+            if depth + 1 < DEPTH {
+                stack.push((sub, depth + 1));
+            }
+        }
+    }
+    Ok(around)
+}
+
+/// Writes the staging marker into `dir`.
+fn mark(dir: &Path) -> Result<()> {
+    let path = dir.join(STAGING_MARKER);
+    let text = format!(
+        "{{\"tool\": \"lidar-noise\", \"pid\": {}}}\n",
+        std::process::id()
+    );
+    fs::write(&path, text).map_err(|e| Error::io(&path, e))
+}
+
+/// True for the names of staging folders and of results moved aside
+/// (`.NAME.staging-SUFFIX`, `.NAME.staging-SUFFIX.old`).
+fn is_staging_name(name: &str) -> bool {
+    name.starts_with('.') && name.contains(".staging-")
+}
+
+/// True when the folder at `path` proves to be this tool's staging folder (or earlier
+/// results moved aside by a commit): it holds the marker or a manifest of this tool.
+fn is_our_staging(path: &Path) -> bool {
+    fs::symlink_metadata(path).is_ok_and(|m| m.is_dir())
+        && (fs::symlink_metadata(path.join(STAGING_MARKER)).is_ok_and(|m| m.is_file())
+            || read_manifest(path).is_some_and(|m| m.tool == "lidar-noise"))
+}
+
+/// The FILE of a temporary file our writers create for it (`.FILE.XXXXXX.tmp`, six
+/// letters or digits: see `atomic::temp_file_for`), or None for any other name.
+fn temporary_of(name: &str) -> Option<&str> {
+    let rest = name.strip_prefix('.')?.strip_suffix(".tmp")?;
+    let (file, random) = rest.rsplit_once('.')?;
+    (!file.is_empty() && random.len() == 6 && random.bytes().all(|b| b.is_ascii_alphanumeric()))
+        .then_some(file)
+}
+
+/// Removes the temporary files of `dir` (at `prefix` in the output folder) and of its
+/// subfolders `depth` levels down whose FILE `owns` accepts.
+fn remove_temporaries(dir: &Path, prefix: &str, depth: u32, owns: &dyn Fn(&str) -> bool) {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.filter_map(|e| e.ok()) {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let Ok(t) = e.file_type() else {
+            continue;
+        };
+        if t.is_file() {
+            if temporary_of(&name).is_some_and(|f| owns(&format!("{prefix}{f}"))) {
+                let _ = fs::remove_file(e.path());
+            }
+        } else if t.is_dir() && depth > 0 {
+            remove_temporaries(&e.path(), &format!("{prefix}{name}/"), depth - 1, owns);
+        }
+    }
+}
+
+/// The target of earlier results a commit moved aside (`DIR/.NAME.staging-PID.old`:
+/// `DIR/NAME`), or None for another name.
+fn moved_aside_target(dir: &Path, name: &str) -> Option<PathBuf> {
+    let (target, _) = name
+        .strip_suffix(".old")?
+        .strip_prefix('.')?
+        .rsplit_once(".staging-")?;
+    Some(dir.join(target))
+}
+
+/// Finishes what killed commits left half done in `dir`, before the run's checks (which
+/// must see the folder as it stands): staging folders holding [`REPLACES`] are complete,
+/// and their commit is carried out; earlier results moved aside whose target is missing
+/// (killed between the two renames of [`commit`]) are put back. Best effort: what fails
+/// stays for a later run, never deleted, as it may hold the only copy of results.
+fn finish_commits(dir: &Path) -> bool {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return false;
+    };
+    let mut found: Vec<(String, PathBuf)> = entries
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+        .map(|e| (e.file_name().to_string_lossy().into_owned(), e.path()))
+        .filter(|(name, path)| is_staging_name(name) && is_our_staging(path))
+        .collect();
+    found.sort();
+    let mut changed = false;
+    for (name, path) in found {
+        if let Some(target) = moved_aside_target(dir, &name) {
+            if fs::symlink_metadata(&target).is_err() {
+                let _ = fs::remove_file(path.join(STAGING_MARKER));
+                let _ = fs::rename(&path, &target);
+                changed = true;
+            }
+        } else if path.join(REPLACES).is_file() {
+            let _ = signals::critical(|_| apply_staged(&path, dir));
+            changed = true;
+        }
+    }
+    changed
 }
 
 /// Refuses the root folder and the system's top-level folders as output folders: the
@@ -164,27 +432,6 @@ impl OutputFolder {
         if only_lock {
             let _ = fs::remove_file(self.dir.join(LOCK_FILE));
             let _ = fs::remove_dir(&self.dir);
-        }
-    }
-}
-
-/// Removes hidden leftovers of killed runs in `dir` and its subfolders two levels down
-/// (the depth of our outputs, e.g. `plots/<capture>/`): `.*.staging-*` folders and
-/// `.*.tmp` files. Call it only while holding the folder's lock.
-pub fn remove_stale(dir: &Path) {
-    remove_stale_below(dir, 2);
-}
-
-fn remove_stale_below(dir: &Path, depth: u32) {
-    let Ok(entries) = fs::read_dir(dir) else {
-        return;
-    };
-    for e in entries.filter_map(|e| e.ok()) {
-        let name = e.file_name().to_string_lossy().into_owned();
-        if name.starts_with('.') && (name.contains(".staging-") || name.ends_with(".tmp")) {
-            signals::remove_path(&e.path());
-        } else if depth > 0 && e.file_type().is_ok_and(|t| t.is_dir()) {
-            remove_stale_below(&e.path(), depth - 1);
         }
     }
 }
@@ -229,18 +476,24 @@ pub fn commit(staged: Vec<Staged>) -> Result<()> {
         while let Some(mut s) = queue.next() {
             // The earlier results move aside under a name of this process's own, so that
             // a leftover of a killed run (a partly deleted old folder) never blocks the
-            // rename; the start-up clean-up removes such leftovers (`.*.staging-*`).
+            // rename; the next run's clean-up removes such leftovers, or puts them back
+            // when a kill came before the new results were in place.
             let mut old = s.path.clone().into_os_string();
             old.push(".old");
             let old = PathBuf::from(old);
             let had_target = s.target.exists();
+            // The marker goes before the folder becomes the results (its manifest still
+            // marks it as ours until then).
+            let _ = fs::remove_file(s.path.join(STAGING_MARKER));
             let moved = (|| {
                 if had_target {
                     fs::rename(&s.target, &old).map_err(|e| Error::io(&s.target, e))?;
+                    let _ = mark(&old);
                 }
                 fs::rename(&s.path, &s.target).map_err(|e| {
                     // Put the earlier results back: a failed commit changes nothing.
                     if had_target {
+                        let _ = fs::remove_file(old.join(STAGING_MARKER));
                         let _ = fs::rename(&old, &s.target);
                     }
                     Error::io(&s.target, e)
@@ -261,28 +514,132 @@ pub fn commit(staged: Vec<Staged>) -> Result<()> {
     result
 }
 
-/// Moves every file of a staging folder into `dir` (the folder the files belong in, for
-/// commands such as `convert` whose output folder is the target itself), after deleting
-/// `old` (an earlier run's results, from [`check_replace`]), with signals held off; then
-/// deletes the staging folder.
-pub fn commit_files(mut staged: Staged, dir: &Path, old: &[String]) -> Result<()> {
+/// Replaces results in the folder that holds the staging folder (for `sweep` and a
+/// one-capture `convert`, whose output folder is their results): the staging folder holds the new files and their
+/// manifest (written by the caller, listing them); `replaces` are files of the earlier
+/// results to delete (relative paths). The list is written into the staging folder
+/// first, which makes it complete: from then on the commit goes to its end even if the
+/// process is killed, since the next run into the folder finishes it (see
+/// [`OutputFolder::lock`]). Signals are held off meanwhile. Before that point a failure or
+/// a kill leaves the earlier results as they were.
+pub fn commit_into(mut staged: Staged, replaces: &[String]) -> Result<()> {
+    let dir = match staged.path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    if read_manifest(&staged.path).is_none() {
+        return Err(Error::Invalid(format!(
+            "internal: {}: a staging folder without its manifest cannot be committed",
+            staged.path.display()
+        )));
+    }
+    let list = serde_json::to_vec_pretty(replaces)
+        .map_err(|e| Error::Invalid(format!("{}: {e}", staged.path.display())))?;
+    crate::writers::atomic::write_atomically(&staged.path.join(REPLACES), &[], |o| {
+        o.write_all(&list)
+    })?;
     signals::critical(|g| {
-        remove_results(dir, old, &|_| false);
-        let entries = fs::read_dir(&staged.path).map_err(|e| Error::io(&staged.path, e))?;
-        let mut names: Vec<_> = entries
-            .filter_map(|e| e.ok())
-            .map(|e| e.file_name())
-            .collect();
-        names.sort();
-        for name in names {
-            let target = dir.join(&name);
-            fs::rename(staged.path.join(&name), &target).map_err(|e| Error::io(&target, e))?;
-        }
-        signals::remove_path(&staged.path);
+        // Complete: never deleted from here on (on an error, the next run finishes it).
         g.unregister(&staged.path);
         staged.done = true;
-        Ok(())
+        apply_staged(&staged.path, &dir).map_err(|e| {
+            Error::Invalid(format!(
+                "{e}; the new results wait complete in {}: the next lidar-noise run into {} \
+                 puts them in place",
+                staged.path.display(),
+                dir.display()
+            ))
+        })
     })
+}
+
+/// Carries out a complete staged replacement (see [`commit_into`]); each step can be
+/// repeated, so a commit cut short by a kill is finished by calling it again.
+fn apply_staged(stage: &Path, dir: &Path) -> Result<()> {
+    let list = stage.join(REPLACES);
+    let replaces: Vec<String> = fs::read(&list)
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok())
+        .ok_or_else(|| Error::Invalid(format!("{}: unreadable", list.display())))?;
+    // Paths come from files in the output folder, which someone else may have written:
+    // only plain relative paths below it, never through a link, are acted on.
+    if let Some(bad) = replaces.iter().find(|f| !inside(dir, f)) {
+        return Err(Error::Invalid(format!(
+            "{}: lists `{bad}`, not a path inside {}",
+            list.display(),
+            dir.display()
+        )));
+    }
+    // The manifest moves last of the new files: while it is in the staging folder, some
+    // of its files may still be there.
+    if let Some(manifest) = read_manifest(stage) {
+        if let Some(bad) = manifest.files.iter().find(|f| !inside(dir, f)) {
+            return Err(Error::Invalid(format!(
+                "{}: lists `{bad}`, not a path inside {}",
+                stage.join(MANIFEST).display(),
+                dir.display()
+            )));
+        }
+        for f in &manifest.files {
+            let from = stage.join(f);
+            if fs::symlink_metadata(&from).is_err() {
+                continue;
+            }
+            let to = dir.join(f);
+            if let Some(parent) = to.parent() {
+                fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+            }
+            fault_point()?;
+            fs::rename(&from, &to).map_err(|e| Error::io(&to, e))?;
+        }
+        fault_point()?;
+        let to = dir.join(MANIFEST);
+        fs::rename(stage.join(MANIFEST), &to).map_err(|e| Error::io(&to, e))?;
+    }
+    for f in &replaces {
+        fault_point()?;
+        remove_results(dir, std::slice::from_ref(f), &|_| false);
+    }
+    signals::remove_path(stage);
+    Ok(())
+}
+
+/// True when `rel` is a relative path of plain names (no `..`, no root) whose folders
+/// inside `dir` are not links: acting on `dir/rel` stays inside `dir`.
+fn inside(dir: &Path, rel: &str) -> bool {
+    use std::path::Component;
+    let rel = Path::new(rel);
+    if rel.as_os_str().is_empty() || !rel.components().all(|c| matches!(c, Component::Normal(_))) {
+        return false;
+    }
+    let mut at = dir.to_path_buf();
+    let mut parts: Vec<_> = rel.components().collect();
+    parts.pop();
+    parts.into_iter().all(|c| {
+        at.push(c);
+        fs::symlink_metadata(&at).map_or(true, |m| !m.file_type().is_symlink())
+    })
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Steps of [`apply_staged`] left before an injected failure (tests of a killed
+    /// commit); 0: none.
+    static FAIL_AFTER: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+/// A step of [`apply_staged`]: fails when a test injected a failure here.
+fn fault_point() -> Result<()> {
+    #[cfg(test)]
+    {
+        let left = FAIL_AFTER.with(|f| f.get());
+        if left == 1 {
+            FAIL_AFTER.with(|f| f.set(0));
+            return Err(Error::Invalid("injected failure".into()));
+        }
+        FAIL_AFTER.with(|f| f.set(left.saturating_sub(1)));
+    }
+    Ok(())
 }
 
 /// The manifest of a result folder: which command wrote it, with which settings, and
@@ -342,57 +699,75 @@ pub fn write_manifest(
     crate::writers::atomic::write_atomically(&dir.join(MANIFEST), &[], |o| o.write_all(&bytes))
 }
 
-/// Files of a folder (relative, `/`-separated, sorted), without hidden leftovers of killed
-/// runs, the lock file and the manifest.
+/// Files of a folder (relative, `/`-separated, sorted), without the lock file, the
+/// manifest, our staging folders and the temporary files our writers name
+/// (`.FILE.XXXXXX.tmp`).
 pub fn result_files(dir: &Path) -> Vec<String> {
+    files_but_leftovers(dir, &|_| true)
+}
+
+/// [`result_files`], skipping only the temporary files whose FILE `owns` accepts.
+fn files_but_leftovers(dir: &Path, owns: &dyn Fn(&str) -> bool) -> Vec<String> {
     let mut out = Vec::new();
-    list_files(dir, "", &mut out);
-    out.retain(|f| f != LOCK_FILE && f != MANIFEST);
+    list_files(dir, "", owns, &mut out);
+    out.retain(|f| ![LOCK_FILE, MANIFEST, STAGING_MARKER, REPLACES].contains(&f.as_str()));
     out.sort();
     out
 }
 
-fn list_files(dir: &Path, prefix: &str, out: &mut Vec<String>) {
+fn list_files(dir: &Path, prefix: &str, owns: &dyn Fn(&str) -> bool, out: &mut Vec<String>) {
     let Ok(entries) = fs::read_dir(dir) else {
         return;
     };
     for e in entries.filter_map(|e| e.ok()) {
         let name = e.file_name().to_string_lossy().into_owned();
-        if is_leftover(&name) {
-            continue;
-        }
         let rel = format!("{prefix}{name}");
         if e.file_type().is_ok_and(|t| t.is_dir()) {
-            list_files(&e.path(), &format!("{rel}/"), out);
+            // Our staging folders (and results moved aside) are leftovers, not results.
+            if is_staging_name(&name) && is_our_staging(&e.path()) {
+                continue;
+            }
+            list_files(&e.path(), &format!("{rel}/"), owns, out);
+        } else if temporary_of(&name)
+            .is_some_and(|f| f == MANIFEST || owns(&format!("{prefix}{f}")))
+        {
+            continue;
         } else {
             out.push(rel);
         }
     }
 }
 
-/// True for the hidden temporary names our writers use (`.*.staging-*`, `.*.tmp`).
-fn is_leftover(name: &str) -> bool {
-    name.starts_with('.') && (name.contains(".staging-") || name.ends_with(".tmp"))
-}
-
 /// Checks that `target` may receive the results of `command` run with `settings`, and
 /// returns the files of an earlier run in it (to be replaced).
 ///
-/// `ours` tells whether a relative path is one of the command's output names (for folders
-/// written before manifests existed). Refused, even with `force`: a file neither named in
-/// the manifest nor matching `ours` (it was not written by this tool, and replacing the
-/// folder would delete it). Refused without `force`: results of another run (other
-/// command or settings, or no manifest to tell). An empty or missing folder and a rerun
-/// with the same settings are accepted.
+/// A file is this tool's when the folder's manifest lists it, when `unlisted` accepts it
+/// (files that say by their content that this tool wrote them, such as a sweep's cells,
+/// which no single manifest can list), or, in a folder without a manifest (written before
+/// manifests existed), when its name is one of the command's output names (`ours`).
+/// Refused, even with `force`: any other file (replacing the folder would delete it,
+/// even one that merely looks like an output, such as a `frame_00099.ply` of the user's
+/// beside a manifest that does not list it). Refused without `force`: results of another
+/// run (other command or settings, or no manifest to tell). An empty or missing folder
+/// and a rerun with the same settings are accepted.
 pub fn check_replace(
     target: &Path,
     command: &str,
     settings: &serde_json::Value,
     ours: &dyn Fn(&str) -> bool,
+    unlisted: &dyn Fn(&str) -> bool,
     force: bool,
     inputs: &[&Path],
 ) -> anyhow::Result<Vec<String>> {
-    let files = result_files(target);
+    let manifest = read_manifest(target);
+    let owns = |f: &str| {
+        unlisted(f)
+            || match &manifest {
+                Some(m) => m.files.iter().any(|x| x == f),
+                None => ours(f),
+            }
+    };
+    let files = files_but_leftovers(target, &owns);
     if files.is_empty() {
         return Ok(files);
     }
@@ -400,18 +775,21 @@ pub fn check_replace(
     for f in &files {
         crate::writers::atomic::refuse_inputs(&target.join(f), inputs)?;
     }
-    let manifest = read_manifest(target);
-    let listed = |f: &String| manifest.as_ref().is_some_and(|m| m.files.contains(f));
-    let foreign: Vec<&String> = files.iter().filter(|f| !listed(f) && !ours(f)).collect();
+    let foreign: Vec<&String> = files.iter().filter(|f| !owns(f)).collect();
     if !foreign.is_empty() {
         let mut names: Vec<String> = foreign.iter().take(5).map(|f| f.to_string()).collect();
         if foreign.len() > 5 {
             names.push(format!("and {} more", foreign.len() - 5));
         }
+        let listing = if manifest.is_some() {
+            " according to its record of the run (.lidar-noise.json)"
+        } else {
+            ""
+        };
         return Err(anyhow::Error::new(Refused(format!(
-            "{}: holds {} that `lidar-noise {command}` did not write ({}); refusing to \
-             write into it, even with --force, so as not to mix results with them or \
-             delete them; move them away or choose another output folder",
+            "{}: holds {} that `lidar-noise {command}` did not write{listing} ({}); \
+             refusing to write into it, even with --force, so as not to mix results with \
+             them or delete them; move them away or choose another output folder",
             target.display(),
             if foreign.len() == 1 {
                 "a file"
@@ -603,42 +981,59 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let t = dir.path().join("cap");
         let ours = |f: &str| f.ends_with(".ply");
+        let none = |_: &str| false;
         let a = serde_json::json!({"seed": 1, "frames": [0, 3]});
         let b = serde_json::json!({"seed": 2, "frames": [0, 3]});
         // Missing and empty folders take anything.
-        assert!(check_replace(&t, "run", &a, &ours, false, &[])
+        assert!(check_replace(&t, "run", &a, &ours, &none, false, &[])
             .unwrap()
             .is_empty());
         fs::create_dir_all(&t).unwrap();
         fs::write(t.join("frame_00000.ply"), "x").unwrap();
         fs::write(t.join("summary.json"), "{}").unwrap();
-        write_manifest(&t, "run", &a, vec!["summary.json".into()]).unwrap();
-        let files = check_replace(&t, "run", &a, &ours, false, &[]).unwrap();
+        write_manifest(
+            &t,
+            "run",
+            &a,
+            vec!["frame_00000.ply".into(), "summary.json".into()],
+        )
+        .unwrap();
+        let files = check_replace(&t, "run", &a, &ours, &none, false, &[]).unwrap();
         assert_eq!(files, vec!["frame_00000.ply", "summary.json"]);
-        let e = refused(check_replace(&t, "run", &b, &ours, false, &[]));
+        let e = refused(check_replace(&t, "run", &b, &ours, &none, false, &[]));
         assert!(e.contains("--force") && e.contains("different seed"), "{e}");
         assert!(!e.contains("frames"), "{e}");
-        let e = refused(check_replace(&t, "convert", &a, &ours, false, &[]));
+        let e = refused(check_replace(&t, "convert", &a, &ours, &none, false, &[]));
         assert!(e.contains("lidar-noise run"), "{e}");
         assert_eq!(
-            check_replace(&t, "run", &b, &ours, true, &[])
+            check_replace(&t, "run", &b, &ours, &none, true, &[])
                 .unwrap()
                 .len(),
             2
         );
         // Leftovers of killed runs are not foreign; a file of someone else is.
-        fs::write(t.join(".frame_00001.ply.x1.tmp"), "").unwrap();
-        check_replace(&t, "run", &a, &ours, false, &[]).unwrap();
+        fs::write(t.join(".frame_00000.ply.x1Y2z3.tmp"), "").unwrap();
+        check_replace(&t, "run", &a, &ours, &none, false, &[]).unwrap();
         fs::write(t.join("notes.txt"), "mine").unwrap();
-        let e = refused(check_replace(&t, "run", &a, &ours, true, &[]));
+        let e = refused(check_replace(&t, "run", &a, &ours, &none, true, &[]));
         assert!(
             e.contains("notes.txt") && e.contains("even with --force"),
             "{e}"
         );
-        // An input among the results is a plain error.
+        // Issue 30, 4: beside a manifest, a file that merely looks like an output (the
+        // command's names) is not ours either; without one, the names decide.
         fs::remove_file(t.join("notes.txt")).unwrap();
+        fs::write(t.join("frame_00099.ply"), "mine").unwrap();
+        let e = refused(check_replace(&t, "run", &a, &ours, &none, true, &[]));
+        assert!(e.contains("frame_00099.ply"), "{e}");
+        let cells = |f: &str| f == "frame_00099.ply";
+        check_replace(&t, "run", &a, &ours, &cells, false, &[]).unwrap();
+        fs::remove_file(t.join(MANIFEST)).unwrap();
+        let legacy = |f: &str| ours(f) || f == "summary.json";
+        check_replace(&t, "run", &a, &legacy, &none, true, &[]).unwrap();
+        // An input among the results is a plain error.
         let input = t.join("frame_00000.ply");
-        let e = check_replace(&t, "run", &a, &ours, true, &[&input]).unwrap_err();
+        let e = check_replace(&t, "run", &a, &ours, &none, true, &[&input]).unwrap_err();
         assert!(e.downcast_ref::<Refused>().is_none(), "{e}");
     }
 
@@ -660,5 +1055,255 @@ mod tests {
         remove_results(d, &files, &|f| f == "cells/a/2.json");
         assert_eq!(result_files(d), vec!["cells/a/2.json"]);
         assert!(!d.join("plots").exists());
+    }
+    fn entries(dir: &Path) -> Vec<String> {
+        let mut out: Vec<String> = result_files_all(dir);
+        out.sort();
+        out
+    }
+
+    /// Every file under `dir`, hidden or not (relative paths).
+    fn result_files_all(dir: &Path) -> Vec<String> {
+        let mut out = Vec::new();
+        let mut stack = vec![(dir.to_path_buf(), String::new())];
+        while let Some((d, prefix)) = stack.pop() {
+            for e in fs::read_dir(&d).unwrap() {
+                let e = e.unwrap();
+                let name = format!("{prefix}{}", e.file_name().to_string_lossy());
+                if e.file_type().unwrap().is_dir() {
+                    stack.push((e.path(), format!("{name}/")));
+                } else {
+                    out.push(name);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn leftovers_go_only_when_proved_ours_and_only_when_asked() {
+        // Issue 30, 4: every `.*.tmp` and `.*.staging-*` in the folder and two levels
+        // below went at start-up, the user's too, even when the run was then refused.
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let user = [
+            ".draft.tmp",
+            ".x.tmp/frame_00000.ply",
+            ".notes.staging-12/mine.txt",
+            "cap/.mine.txt.Ab12Cd.tmp",
+            "cap/.frame_00001.ply.tmp",
+            "plots/a/.draft.tmp",
+        ];
+        for f in user {
+            let p = out.join(f);
+            fs::create_dir_all(p.parent().unwrap()).unwrap();
+            fs::write(&p, "mine").unwrap();
+        }
+        // Ours: a killed run's staging folder (marked), earlier results a killed commit
+        // moved aside (marked, their target back in place), temporaries of our outputs.
+        {
+            let folder = OutputFolder::lock(&out).unwrap();
+            let s = folder.stage("cap").unwrap();
+            fs::write(s.path().join("frame_00000.ply"), "new").unwrap();
+            signals::unregister(s.path());
+            std::mem::forget(s);
+        }
+        let pid = std::process::id();
+        let old = out.join(format!(".cap.staging-{}.old", pid + 1));
+        fs::create_dir_all(&old).unwrap();
+        fs::write(old.join("frame_00000.ply"), "old").unwrap();
+        mark(&old).unwrap();
+        for f in [
+            "cap/.frame_00001.ply.Ab12Cd.tmp",
+            "plots/a/.x.png.Zz09Yy.tmp",
+            "..lidar-noise.json.q1W2e3.tmp",
+        ] {
+            fs::write(out.join(f), "partial").unwrap();
+        }
+        let ours = |f: &str| f.ends_with(".ply") || f.ends_with(".png");
+        let folder = OutputFolder::lock(&out).unwrap();
+        // Locking alone removes nothing (a refused run must leave everything).
+        assert!(out
+            .join(format!(".cap.staging-{pid}/{STAGING_MARKER}"))
+            .exists());
+        assert!(out.join("cap/.frame_00001.ply.Ab12Cd.tmp").exists());
+        folder.remove_leftovers(&ours);
+        drop(folder);
+        let mut want: Vec<String> = user.iter().map(|f| f.to_string()).collect();
+        want.push(LOCK_FILE.into());
+        want.sort();
+        assert_eq!(entries(&out), want);
+    }
+
+    #[test]
+    fn a_planted_replacement_cannot_reach_outside_the_folder() {
+        // A staging folder is a file in the output folder: one written by someone else
+        // must not make the next run delete or move files elsewhere.
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let victim = dir.path().join("victim.txt");
+        fs::write(&victim, "keep").unwrap();
+        fs::create_dir_all(dir.path().join("elsewhere")).unwrap();
+        fs::write(dir.path().join("elsewhere/x.txt"), "keep").unwrap();
+        fs::create_dir_all(&out).unwrap();
+        #[cfg(unix)]
+        std::os::unix::fs::symlink(dir.path().join("elsewhere"), out.join("link")).unwrap();
+        for list in [
+            r#"["../victim.txt"]"#,
+            r#"["/tmp/../victim.txt"]"#,
+            r#"["link/x.txt"]"#,
+        ] {
+            let stage = out.join(".sweep.staging-1");
+            fs::create_dir_all(&stage).unwrap();
+            mark(&stage).unwrap();
+            write_manifest(&stage, "sweep", &serde_json::json!(1), vec![]).unwrap();
+            fs::write(stage.join(REPLACES), list).unwrap();
+            let e = apply_staged(&stage, &out).unwrap_err().to_string();
+            assert!(e.contains("not a path inside"), "{e}");
+            drop(OutputFolder::lock(&out).unwrap());
+            signals::remove_path(&stage);
+        }
+        assert_eq!(fs::read_to_string(&victim).unwrap(), "keep");
+        assert!(dir.path().join("elsewhere/x.txt").exists());
+    }
+
+    #[test]
+    fn results_a_killed_commit_moved_aside_are_put_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let old = out.join(".cap.staging-7.old");
+        fs::create_dir_all(&old).unwrap();
+        fs::write(old.join("summary.json"), "old").unwrap();
+        mark(&old).unwrap();
+        // Put back when the folder is locked, before the run's checks look at it.
+        let folder = OutputFolder::lock(&out).unwrap();
+        assert_eq!(entries(&out), vec![LOCK_FILE, "cap/summary.json"]);
+        folder.remove_leftovers(&|_| false);
+        assert_eq!(entries(&out), vec![LOCK_FILE, "cap/summary.json"]);
+    }
+
+    #[test]
+    fn nested_output_folders_exclude_each_other() {
+        // Issue 30, 4: `run -o cc/out` and `convert -o cc/out/big` ran at once, and the
+        // run's rename removed what convert wrote.
+        let dir = tempfile::tempdir().unwrap();
+        let outer = dir.path().join("cc/out");
+        let inner = outer.join("big");
+        let a = OutputFolder::lock(&outer).unwrap();
+        let e = OutputFolder::lock(&inner).err().unwrap().to_string();
+        assert!(
+            e.contains("another lidar-noise run") && e.contains("contains"),
+            "{e}"
+        );
+        // Refused before writing: the folder it would have created is not left.
+        assert!(!inner.exists());
+        drop(a);
+        let b = OutputFolder::lock_shared(&inner).unwrap();
+        let e = OutputFolder::lock(&outer).err().unwrap().to_string();
+        assert!(
+            e.contains("another lidar-noise run") && e.contains("inside"),
+            "{e}"
+        );
+        // The outer folder had no lock file when the inner run started: found by the
+        // walk below the outer folder.
+        let other = dir.path().join("dd/out");
+        let _e = OutputFolder::lock(&other.join("big")).unwrap();
+        let e = OutputFolder::lock(&other).err().unwrap().to_string();
+        assert!(
+            e.contains("another lidar-noise run") && e.contains("inside"),
+            "{e}"
+        );
+        // Siblings do not conflict, nor does a folder that merely shares a prefix.
+        let _c = OutputFolder::lock(&outer.join("small")).unwrap();
+        let _d = OutputFolder::lock(&dir.path().join("cc/out2")).unwrap();
+        drop(b);
+        drop(_c);
+        OutputFolder::lock(&outer).unwrap();
+    }
+
+    /// Old results of a sweep-like folder (its own target) and a staged replacement.
+    fn staged_replacement(out: &Path) -> (OutputFolder, Staged, Vec<String>) {
+        fs::create_dir_all(out.join("plots/a")).unwrap();
+        for (f, text) in [
+            ("table.csv", "old table"),
+            ("gone.csv", "old only"),
+            ("plots/a/p.png", "old plot"),
+        ] {
+            fs::write(out.join(f), text).unwrap();
+        }
+        let old_files = vec![
+            "gone.csv".into(),
+            "plots/a/p.png".into(),
+            "table.csv".into(),
+        ];
+        write_manifest(out, "sweep", &serde_json::json!(1), old_files).unwrap();
+        let folder = OutputFolder::lock(out).unwrap();
+        let s = folder.stage("sweep").unwrap();
+        fs::create_dir_all(s.path().join("plots/b")).unwrap();
+        fs::write(s.path().join("table.csv"), "new table").unwrap();
+        fs::write(s.path().join("plots/b/q.png"), "new plot").unwrap();
+        let new_files = vec!["plots/b/q.png".into(), "table.csv".into()];
+        write_manifest(s.path(), "sweep", &serde_json::json!(2), new_files).unwrap();
+        (folder, s, vec!["gone.csv".into(), "plots/a/p.png".into()])
+    }
+
+    fn old_whole(out: &Path) -> bool {
+        entries(out)
+            == vec![
+                MANIFEST,
+                LOCK_FILE,
+                "gone.csv",
+                "plots/a/p.png",
+                "table.csv",
+            ]
+            && fs::read_to_string(out.join("table.csv")).unwrap() == "old table"
+            && read_manifest(out).unwrap().settings == serde_json::json!(1)
+    }
+
+    fn new_whole(out: &Path) -> bool {
+        entries(out) == vec![MANIFEST, LOCK_FILE, "plots/b/q.png", "table.csv"]
+            && fs::read_to_string(out.join("table.csv")).unwrap() == "new table"
+            && read_manifest(out).unwrap().settings == serde_json::json!(2)
+    }
+
+    #[test]
+    fn a_replacement_cut_at_any_step_leaves_the_old_or_is_finished_whole() {
+        // Issue 30, 4: an interrupted `sweep --force` left neither the old nor the new
+        // results. A failure injected at each step of the commit stands for a kill there.
+        let mut steps = 0;
+        for k in 1.. {
+            let dir = tempfile::tempdir().unwrap();
+            let out = dir.path().join("out");
+            let (folder, s, replaces) = staged_replacement(&out);
+            FAIL_AFTER.with(|f| f.set(k));
+            let r = commit_into(s, &replaces);
+            FAIL_AFTER.with(|f| f.set(0));
+            drop(folder);
+            if r.is_ok() {
+                assert!(new_whole(&out), "{k}: {:?}", entries(&out));
+                break;
+            }
+            steps += 1;
+            let e = r.unwrap_err().to_string();
+            assert!(e.contains("next lidar-noise run"), "{e}");
+            // The next run into the folder finishes the replacement.
+            let folder = OutputFolder::lock(&out).unwrap();
+            folder.remove_leftovers(&|_| false);
+            drop(folder);
+            assert!(new_whole(&out), "cut at step {k}: {:?}", entries(&out));
+        }
+        assert!(steps >= 5, "{steps}");
+        // Cut before the staging folder is complete (an error or a kill while writing
+        // the new results): the old results stay whole, the staging folder goes.
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let (folder, s, _) = staged_replacement(&out);
+        signals::unregister(s.path());
+        std::mem::forget(s);
+        drop(folder);
+        let folder = OutputFolder::lock(&out).unwrap();
+        folder.remove_leftovers(&|_| false);
+        drop(folder);
+        assert!(old_whole(&out), "{:?}", entries(&out));
     }
 }

@@ -7,7 +7,9 @@ For each file: opens it with laspy, requires LAS 1.4 point format 6, scale 0.001
 at least one point, the extra-bytes dimensions below with these types (the optional
 ones as written by `run`), plausible values in every dimension (finite coordinates
 within the sensor's range, rings and lasers 0-31, azimuth in [0, 360), classes 0, 1, 2
-or 7, fate 0-5 with class 7 exactly where fate > 0, cluster >= -1, finite GPS time).
+or 7, fate 0-5 with class 7 and the Withheld flag exactly where fate is 1-3 (dropped),
+the Synthetic flag exactly where fate is 4-5 (spurious echoes), class 2 exactly where
+ground = 1 among reported returns, cluster >= -1, finite GPS time).
 Prints one line per file and exits non-zero if any file fails.
 
 Needs: pip install laspy lazrs numpy
@@ -22,8 +24,15 @@ try:
 except ImportError:  # pragma: no cover - message for the user
     sys.exit("laspy is not installed: pip install laspy lazrs numpy")
 
-REQUIRED = {"ring": "u1", "laser": "u1", "azimuth": "f4", "range": "f4"}
-OPTIONAL = {"range_clean": "f4", "power": "f4", "fate": "u1", "cause": "u1", "cluster": "i4"}
+REQUIRED = {"ring": "u1", "laser": "u1", "azimuth": "f4", "range": "f4", "time": "f4"}
+OPTIONAL = {
+    "range_clean": "f4",
+    "power": "f4",
+    "ground": "u1",
+    "fate": "u1",
+    "cause": "u1",
+    "cluster": "i4",
+}
 MAX_RANGE_M = 150.0
 
 
@@ -85,8 +94,18 @@ def check(path):
         fate = np.asarray(las["fate"])
         if fate.max() > 5:
             problems.append("fate above 5")
-        if not np.array_equal(fate > 0, cls == 7):
-            problems.append("class 7 is not exactly the dropped and spurious returns (fate > 0)")
+        dropped = (fate >= 1) & (fate <= 3)
+        if not np.array_equal(dropped, cls == 7):
+            problems.append("class 7 is not exactly the dropped returns (fate 1-3)")
+        if not np.array_equal(dropped, np.asarray(las.withheld, dtype=bool)):
+            problems.append("the Withheld flag is not exactly the dropped returns (fate 1-3)")
+        if not np.array_equal(fate >= 4, np.asarray(las.synthetic, dtype=bool)):
+            problems.append("the Synthetic flag is not exactly the spurious echoes (fate 4-5)")
+    if "ground" in extra:
+        g = np.asarray(las["ground"])
+        reported = ~np.isin(cls, [7])
+        if not np.array_equal((g == 1)[reported], (cls == 2)[reported]):
+            problems.append("class 2 is not exactly the reported returns with ground = 1")
     if "cluster" in extra and np.asarray(las["cluster"]).min() < -1:
         problems.append("cluster below -1")
     summary = f"{n} points, {len(extra)} extra dimensions ({' '.join(extra)})"

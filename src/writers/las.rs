@@ -8,10 +8,11 @@
 //! |---|---|
 //! | `x`, `y`, `z` | X, Y, Z with scale 0.001 m and offset 0 (the sensor's quantum is 2 mm) |
 //! | `intensity` | Intensity, the sensor's byte unscaled (0-255) |
-//! | `time` | GPS Time: the return's absolute time, seconds past the hour as the HDL-32E stamps it (the sensor knows no GPS week); the PLY's `time` is this minus the frame start |
-//! | `ground` | Classification 2 (ground); other kept returns 1 (unclassified); `convert` writes 0 (never classified) |
-//! | `fate` > 0 | Classification 7 (low noise), plus the `fate` extra byte |
-//! | `ring`, `laser`, `azimuth`, `range`, `range_clean`, `power`, `fate`, `cause`, `cluster` | extra bytes, described in the Extra Bytes VLR (LASF_Spec, record 4) under those names |
+//! | `time` | GPS Time: the return's absolute time, seconds past the hour as the HDL-32E stamps it (the sensor knows no GPS week); and the extra byte `time`, the PLY's value (seconds since the frame start, float) |
+//! | `ground` | Classification 2 (ground), other reported returns 1 (unclassified), `convert` 0 (never classified); and the extra byte `ground` (1 or 0) |
+//! | `fate` 1-3 (dropped) | Classification 7 (low noise) and the Withheld flag: the sensor did not report them |
+//! | `fate` 4-5 (spurious echo) | ground or unclassified as any reported return, and the Synthetic flag (LAS 1.4: created by a technique other than the sensor's own measurement) |
+//! | `ring`, `laser`, `azimuth`, `range`, `time`, `range_clean`, `power`, `ground`, `fate`, `cause`, `cluster` | extra bytes, described in the Extra Bytes VLR (LASF_Spec, record 4) under those names |
 //!
 //! Return number and number of returns are both 1: each return of a dual-return capture
 //! is its own pulse record here. Provenance (the PLY's comment lines) is a VLR with user id
@@ -83,18 +84,21 @@ const fn dim(name: &'static str, ty: ExtraType, description: &'static str) -> Ex
 }
 
 /// Dimensions every file has, in record order.
-pub const BASE_DIMS: [ExtraDim; 4] = [
+pub const BASE_DIMS: [ExtraDim; 5] = [
     dim("ring", ExtraType::U8, "ring, 0 = lowest laser"),
     dim("laser", ExtraType::U8, "laser id (firing order)"),
     dim("azimuth", ExtraType::F32, "degrees clockwise from above"),
     dim("range", ExtraType::F32, "metres (after noise)"),
+    dim("time", ExtraType::F32, "s since frame start (as PLY)"),
 ];
 
 /// Optional dimensions, in record order, present when the frame has the column.
-/// (`ground` is the classification, not an extra dimension.)
-pub const OPTIONAL_DIMS: [ExtraDim; 5] = [
+/// (`ground` is also the classification; the byte keeps it readable where a tool
+/// reclassifies.)
+pub const OPTIONAL_DIMS: [ExtraDim; 6] = [
     dim("range_clean", ExtraType::F32, "metres before noise"),
     dim("power", ExtraType::F32, "fraction of emitted power"),
+    dim("ground", ExtraType::U8, "1 ground, 0 not"),
     dim("fate", ExtraType::U8, "0kept 1occl 2pow 3rng 4rep 5add"),
     dim("cause", ExtraType::U8, "stage index, 255 none/filters"),
     dim("cluster", ExtraType::I32, "cluster id, -1 = none"),
@@ -116,6 +120,7 @@ impl LasFrame<'_> {
         let present = [
             c.range_clean.is_some(),
             c.power.is_some(),
+            c.ground.is_some(),
             c.fate.is_some(),
             c.cause.is_some(),
             c.cluster.is_some(),
@@ -174,11 +179,15 @@ impl LasFrame<'_> {
             extra.extend_from_slice(&[r.ring, r.laser]);
             extra.extend_from_slice(&r.azimuth.to_le_bytes());
             extra.extend_from_slice(&r.range.to_le_bytes());
+            extra.extend_from_slice(&self.frame.relative_time(r).to_le_bytes());
             if let Some(v) = c.range_clean {
                 extra.extend_from_slice(&v[i].to_le_bytes());
             }
             if let Some(v) = c.power {
                 extra.extend_from_slice(&v[i].to_le_bytes());
+            }
+            if let Some(v) = c.ground {
+                extra.push(v[i]);
             }
             let fate = c.fate.map_or(0, |v| v[i]);
             if c.fate.is_some() {
@@ -190,7 +199,10 @@ impl LasFrame<'_> {
             if let Some(v) = c.cluster {
                 extra.extend_from_slice(&v[i].to_le_bytes());
             }
-            let classification = if fate != 0 {
+            // Dropped returns (fates 1-3) were never reported: noise, withheld. Spurious
+            // echoes (4, 5) are reported returns, classified as any, flagged synthetic.
+            let dropped = matches!(fate, 1..=3);
+            let classification = if dropped {
                 Classification::LowPoint
             } else {
                 match c.ground {
@@ -207,6 +219,8 @@ impl LasFrame<'_> {
                 return_number: 1,
                 number_of_returns: 1,
                 classification,
+                is_withheld: dropped,
+                is_synthetic: matches!(fate, 4 | 5),
                 gps_time: Some(r.time),
                 extra_bytes: extra,
                 ..Point::default()
@@ -253,7 +267,7 @@ mod tests {
 
     #[test]
     fn descriptors_are_192_bytes_with_name_type_and_description() {
-        let d = descriptor(&OPTIONAL_DIMS[4]);
+        let d = descriptor(&OPTIONAL_DIMS[5]);
         assert_eq!(d.len(), 192);
         assert_eq!(d[2], 6);
         assert_eq!(&d[4..11], b"cluster");

@@ -371,7 +371,7 @@ impl<'a> PlyFrame<'a> {
     }
 
     /// The `time` property of a return: seconds since the frame start, as f32.
-    fn relative_time(&self, r: &Return) -> f32 {
+    pub(crate) fn relative_time(&self, r: &Return) -> f32 {
         (r.time - self.frame_start_time) as f32
     }
 }

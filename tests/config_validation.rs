@@ -314,3 +314,33 @@ fn validate_command_accepts_good_and_rejects_bad() {
     let missing = dir.path().join("nope.toml");
     assert!(run(args(&missing, &[]), QUIET).is_err());
 }
+
+/// An unknown stage key is named with the stage's own options (all of them, not only the
+/// keys this entry sets) and the closest one; a misspelt required key is reported as the
+/// misspelling, not as the required key missing (issue 33).
+#[test]
+fn unknown_stage_keys_name_the_stage_options_and_the_closest() {
+    let e = err("[[noise]]\ntype = \"rain\"\nrate_mmh = 3.0\n");
+    assert_names(&e, "noise[0].rate_mmh", 3);
+    assert!(e.contains("did you mean `rate_mm_h`?"), "{e}");
+    assert!(!e.contains("required key missing"), "{e}");
+    let e = err("[[noise]]\ntype = \"rain\"\nrate_mm_h = 3.0\nbackscater = true\n");
+    assert_names(&e, "noise[0].backscater", 4);
+    assert!(e.contains("did you mean `backscatter`?"), "{e}");
+    // The options this entry did not set are listed too.
+    for option in ["divergence_mrad", "empty_slots", "model", "dsd"] {
+        assert!(e.contains(option), "{option} missing from: {e}");
+    }
+    // From --set: a prefix of the one option it begins.
+    let e = load(
+        "[[noise]]\ntype = \"rain\"\nrate_mm_h = 3.0\n",
+        &["rain.rate=3"],
+    )
+    .unwrap_err();
+    assert!(e.contains("noise[0].rate (from --set rain.rate=3)"), "{e}");
+    assert!(e.contains("did you mean `rate_mm_h`?"), "{e}");
+    // Nothing near: no guess, the list alone.
+    let e = err("[[noise]]\ntype = \"fog\"\nvisibility_m = 100.0\nzzz = 1\n");
+    assert!(!e.contains("did you mean"), "{e}");
+    assert!(e.contains("beta_r") && e.contains("overlap"), "{e}");
+}

@@ -297,13 +297,31 @@ impl<'a> Section<'a> {
 
     /// Fails on the first key of this table that was never asked for.
     pub fn finish(&self) -> crate::error::Result<()> {
-        let seen = self.seen.borrow();
-        // Report the unknown key that comes first in the file, which is what a reader
-        // scanning the file expects; keys without a line (from --set) come last.
+        let seen: Vec<String> = self.seen.borrow().iter().cloned().collect();
+        let known: Vec<&str> = seen.iter().map(String::as_str).collect();
+        self.finish_listing(&known)
+    }
+
+    /// [`Section::finish`] naming `options` (every key the table may hold) in the error,
+    /// with the one closest to the unknown key.
+    pub fn finish_listing(&self, options: &[&str]) -> crate::error::Result<()> {
+        match self
+            .unknown_keys(|k| self.seen.borrow().contains(k))
+            .first()
+        {
+            None => Ok(()),
+            Some(key) => Err(self.unknown_key_error(key, options)),
+        }
+    }
+
+    /// The keys of this table for which `known` is false, the first in the file first
+    /// (which is what a reader scanning the file expects); keys without a line (from
+    /// --set) come last.
+    pub fn unknown_keys(&self, known: impl Fn(&str) -> bool) -> Vec<String> {
         let mut unknown: Vec<(usize, usize, &String)> = self
             .table
             .keys()
-            .filter(|k| !seen.contains(*k))
+            .filter(|k| !known(k))
             .map(|k| {
                 let (line, col) = self
                     .ctx
@@ -316,17 +334,63 @@ impl<'a> Section<'a> {
             })
             .collect();
         unknown.sort();
-        match unknown.first() {
-            None => Ok(()),
-            Some((_, _, key)) => {
-                let known: Vec<&str> = seen.iter().map(String::as_str).collect();
-                Err(self.error(
-                    key,
-                    format!("unknown key (known keys here: {})", known.join(", ")),
-                ))
-            }
+        unknown.into_iter().map(|(_, _, k)| k.clone()).collect()
+    }
+
+    /// The error for an unknown `key`: the closest of `options` when one is near, and
+    /// the whole list.
+    pub fn unknown_key_error(&self, key: &str, options: &[&str]) -> Error {
+        let hint = closest(key, options)
+            .map(|c| format!("did you mean `{c}`? "))
+            .unwrap_or_default();
+        self.error(
+            key,
+            format!(
+                "unknown key ({hint}known keys here: {})",
+                options.join(", ")
+            ),
+        )
+    }
+}
+
+/// The option nearest to a misspelt `key` (edit distance at most a third of its length,
+/// at least 2; case ignored), else the only option it begins (`rate` for `rate_mm_h`).
+pub fn closest<'o>(key: &str, options: &[&'o str]) -> Option<&'o str> {
+    let key = key.to_lowercase();
+    let limit = (key.chars().count() / 3).max(2);
+    let near = options
+        .iter()
+        .map(|o| (edit_distance(&key, &o.to_lowercase()), *o))
+        .filter(|(d, _)| *d <= limit)
+        .min_by_key(|(d, _)| *d)
+        .map(|(_, o)| o);
+    near.or_else(|| {
+        let mut starting = options
+            .iter()
+            .filter(|o| key.len() >= 3 && o.to_lowercase().starts_with(&key));
+        match (starting.next(), starting.next()) {
+            (Some(o), None) => Some(*o),
+            _ => None,
+        }
+    })
+}
+
+/// Levenshtein distance between two short strings (keys), by characters.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diag = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let next = (diag + usize::from(ca != cb))
+                .min(row[j] + 1)
+                .min(row[j + 1] + 1);
+            diag = row[j + 1];
+            row[j + 1] = next;
         }
     }
+    row[b.len()]
 }
 
 /// A finite number from an integer or float value.
@@ -346,4 +410,29 @@ fn expected(what: &str, found: &Value) -> String {
         _ => format!("{} {found}", found.type_str()),
     };
     format!("expected {what}, found {shown}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn edit_distance_by_hand() {
+        assert_eq!(edit_distance("", ""), 0);
+        assert_eq!(edit_distance("rate_mmh", "rate_mm_h"), 1);
+        assert_eq!(edit_distance("kitten", "sitting"), 3);
+        assert_eq!(edit_distance("abc", ""), 3);
+        assert_eq!(edit_distance("flaw", "lawn"), 2);
+    }
+
+    #[test]
+    fn closest_option_by_distance_then_by_prefix() {
+        let o = ["rate_mm_h", "range_noise", "backscatter", "model"];
+        assert_eq!(closest("rate_mmh", &o), Some("rate_mm_h"));
+        assert_eq!(closest("BACKSCATER", &o), Some("backscatter"));
+        assert_eq!(closest("rate", &o), Some("rate_mm_h"));
+        // "ra" begins two options and is too short: no guess.
+        assert_eq!(closest("ra", &o), None);
+        assert_eq!(closest("zzzzzz", &o), None);
+    }
 }

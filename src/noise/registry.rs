@@ -60,13 +60,28 @@ pub const REGISTRY: &[StageKind] = &[
     world::snow::KIND,
 ];
 
+/// The option names of a stage type, as declared.
+fn option_names(k: &StageKind) -> Vec<&'static str> {
+    k.options.iter().map(|o| o.name).collect()
+}
+
 /// Builds the stage of one `[[noise]]` entry read through `entry`.
 pub fn build_stage(entry: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
     let Some(kind) = entry.str("type")? else {
         return Err(entry.missing("type"));
     };
     match REGISTRY.iter().find(|k| k.name == kind) {
-        Some(k) => (k.build)(entry),
+        Some(k) => (k.build)(entry).map_err(|e| {
+            // A misspelt key often fails first as a missing required one (`rate_mmh` for
+            // `rate_mm_h`): name the key the stage does not have instead.
+            let mut options = option_names(k);
+            options.insert(0, "type");
+            let unknown = entry.unknown_keys(|key| options.contains(&key));
+            match unknown.first() {
+                Some(key) => entry.unknown_key_error(key, &options),
+                None => e,
+            }
+        }),
         None => {
             let names: Vec<&str> = REGISTRY.iter().map(|k| k.name).collect();
             Err(entry.error(
@@ -89,7 +104,17 @@ pub fn build_spec(spec: &StageSpec) -> Result<(Arc<dyn NoiseStage>, Vec<String>)
     };
     let section = Section::new(&spec.options, spec.path.clone(), &ctx);
     let stage = build_stage(&section)?;
-    section.finish()?;
+    // Unknown keys are named with the stage's own options (not only those this entry
+    // set), as `lidar-noise stages` lists them.
+    let kind = section.raw().get("type").and_then(|v| v.as_str());
+    match REGISTRY.iter().find(|k| Some(k.name) == kind) {
+        Some(k) => {
+            let mut options = option_names(k);
+            options.insert(0, "type");
+            section.finish_listing(&options)?;
+        }
+        None => section.finish()?,
+    }
     drop(section);
     Ok((stage, ctx.warnings.into_inner()))
 }

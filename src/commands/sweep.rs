@@ -25,7 +25,8 @@ pub struct Args {
     /// Override a base configuration key, e.g. --set detection.min_power=0.002 (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub sets: Vec<String>,
-    /// Vary a key over values: rain.rate_mm_h=0,1,3 (first stage of that type),
+    /// Vary a key over values: rain.rate_mm_h=0,1,3 or a range rain.rate_mm_h=0..10:2.5
+    /// (A..B[:STEP], B included, step 1 by default) (first stage of that type),
     /// noise[1].rate_mm_h=..., any --set path, or occlusion=on,off (repeatable).
     #[arg(long = "vary", value_name = "KEY=V1,V2,...")]
     pub varies: Vec<String>,

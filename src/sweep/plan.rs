@@ -47,14 +47,25 @@ pub struct Vary {
 }
 
 impl Vary {
-    /// Parses `KEY=v1,v2,...`.
+    /// Parses `KEY=v1,v2,...`, where a value may be a range `A..B` or `A..B:STEP`
+    /// (numbers from A to B inclusive, step 1 by default).
     pub fn parse(arg: &str) -> Result<Vary> {
         let bad = |m: &str| Error::Invalid(format!("--vary {arg}: {m}"));
         let (key, values) = arg
             .split_once('=')
-            .ok_or_else(|| bad("expected KEY=v1,v2,..."))?;
+            .ok_or_else(|| bad("expected KEY=v1,v2,... or KEY=A..B[:STEP]"))?;
         let key = key.trim().to_string();
-        let values: Vec<String> = values.split(',').map(|v| v.trim().to_string()).collect();
+        let mut expanded: Vec<String> = Vec::new();
+        for v in values.split(',').map(str::trim) {
+            match v.split_once("..") {
+                // Only a number starts a range (a path such as ../a.xml is a value).
+                Some((a, rest)) if a.trim().parse::<f64>().is_ok() => {
+                    expand_range(a, rest, &mut expanded).map_err(|m| bad(&m))?
+                }
+                _ => expanded.push(v.to_string()),
+            }
+        }
+        let values = expanded;
         if key.is_empty() || values.iter().any(String::is_empty) {
             return Err(bad("empty key or value"));
         }
@@ -213,6 +224,56 @@ pub fn fnv1a64(text: &str) -> u64 {
         h = h.wrapping_mul(0x0100_0000_01b3);
     }
     h
+}
+
+/// Most values one `--vary` range may give.
+pub const MAX_RANGE_VALUES: usize = 10_000;
+
+/// Appends the values of the range `A..B[:STEP]` (given as `a` and `B[:STEP]`): A, A +
+/// STEP, ... up to B inclusive, written with no more decimals than A, B and STEP have
+/// (`0..1:0.25` gives 0, 0.25, 0.5, 0.75, 1).
+fn expand_range(a: &str, rest: &str, out: &mut Vec<String>) -> std::result::Result<(), String> {
+    let (b, step) = match rest.split_once(':') {
+        Some((b, step)) => (b, step),
+        None => (rest, "1"),
+    };
+    let num = |t: &str| -> std::result::Result<f64, String> {
+        t.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| format!("`{t}` in the range {a}..{rest} is not a finite number"))
+    };
+    let (lo, hi, d) = (num(a)?, num(b)?, num(step)?);
+    if d <= 0.0 {
+        return Err(format!("the step of {a}..{rest} must be above 0"));
+    }
+    if hi < lo {
+        return Err(format!("the range {a}..{rest} ends below its start"));
+    }
+    let count = ((hi - lo) / d + 1e-9).floor() + 1.0;
+    if count > MAX_RANGE_VALUES as f64 {
+        return Err(format!(
+            "the range {a}..{rest} gives {count} values, more than the {MAX_RANGE_VALUES} a sweep takes"
+        ));
+    }
+    let decimals = [a, b, step]
+        .iter()
+        .map(|t| t.trim().split_once('.').map_or(0, |(_, f)| f.len()))
+        .max()
+        .unwrap_or(0);
+    for k in 0..count as usize {
+        let x = lo + d * k as f64;
+        let text = format!("{x:.decimals$}");
+        // 1.50 -> 1.5, 2.0 -> 2, -0 -> 0: as a person writes the list.
+        let text = if text.contains('.') {
+            text.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            text
+        };
+        out.push(if text == "-0" { "0".to_string() } else { text });
+    }
+    Ok(())
 }
 
 /// Every combination: seeds outermost, then the `--vary` values, first key slowest.
@@ -433,6 +494,37 @@ pub fn parse_bands(text: &str) -> Result<Vec<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn vary_ranges_expand_as_written_by_hand() {
+        let v = |a: &str| Vary::parse(a).map(|v| v.values);
+        let s = |xs: &[&str]| xs.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+        assert_eq!(
+            v("rain.rate_mm_h=0..7").unwrap(),
+            s(&["0", "1", "2", "3", "4", "5", "6", "7"])
+        );
+        assert_eq!(
+            v("rain.rate_mm_h=0..1:0.25").unwrap(),
+            s(&["0", "0.25", "0.5", "0.75", "1"])
+        );
+        // The end is included when the steps reach it despite rounding (0.1 * 3).
+        assert_eq!(v("x=0..0.3:0.1").unwrap(), s(&["0", "0.1", "0.2", "0.3"]));
+        assert_eq!(v("x=-1..1").unwrap(), s(&["-1", "0", "1"]));
+        assert_eq!(v("x=1,3..5,9").unwrap(), s(&["1", "3", "4", "5", "9"]));
+        assert_eq!(v("x=0..10:4").unwrap(), s(&["0", "4", "8"]));
+        // A path with .. is a value, not a range.
+        assert_eq!(v("calibration=../a.xml").unwrap(), s(&["../a.xml"]));
+        for bad in [
+            "x=0..1:0",
+            "x=2..1",
+            "x=0..1e9:1e-9",
+            "x=0..b",
+            "x=0..1:-1",
+            "x=1,0..2",
+        ] {
+            assert!(v(bad).is_err(), "{bad} should be refused");
+        }
+    }
 
     #[test]
     fn seeds_and_cells() {

@@ -436,9 +436,24 @@ const GROUND: RGBColor = RGBColor(190, 190, 190);
 /// Colour of returns that are neither ground nor in a cluster.
 const UNCLUSTERED: RGBColor = RGBColor(90, 90, 90);
 
-/// Draws up to four panels in a 2 x 2 grid, each showing `-extent..extent` metres
-/// around the sensor, clusters coloured, ground grey, unclustered points dark grey, with
-/// a colour key under the panels.
+/// Width and height of one bird's-eye panel (px), and the title and key around them.
+const PANEL_PX: (u32, u32) = (700, 710);
+const BIRDSEYE_FRAME_PX: u32 = 100;
+
+/// Rows and columns of the bird's-eye grid for `n` panels: 2 columns up to four panels,
+/// 3 up to nine, then 4, as many rows as needed.
+pub fn birdseye_grid(n: usize) -> (usize, usize) {
+    let cols = match n {
+        0..=4 => 2,
+        5..=9 => 3,
+        _ => 4,
+    };
+    (n.div_ceil(cols).max(1), cols)
+}
+
+/// Draws every panel in a grid that grows with their number ([`birdseye_grid`]), each
+/// showing `-extent..extent` metres around the sensor, clusters coloured, ground grey,
+/// unclustered points dark grey, with a colour key under the panels.
 pub fn birdseye(
     title: &str,
     panels: &[BirdsEyePanel],
@@ -447,7 +462,11 @@ pub fn birdseye(
     protected: &[&Path],
 ) -> Result<()> {
     register_font()?;
-    let size = (1400u32, 1520u32);
+    let (rows, cols) = birdseye_grid(panels.len());
+    let size = (
+        cols as u32 * PANEL_PX.0,
+        rows as u32 * PANEL_PX.1 + BIRDSEYE_FRAME_PX,
+    );
     let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
     render_birdseye(title, panels, extent_m, &mut buf, size).map_err(|e| Error::io(path, e))?;
     // The panels' titles and stage lines, one panel per paragraph.
@@ -491,7 +510,11 @@ fn render_birdseye(
     };
     let d = axes.decimals;
     let fmt = move |v: &f64| format_number(*v, d);
-    for (area, panel) in grid.split_evenly((2, 2)).iter().zip(panels) {
+    for (area, panel) in grid
+        .split_evenly(birdseye_grid(panels.len()))
+        .iter()
+        .zip(panels)
+    {
         let (head, body) = area.split_vertically(header);
         let (w, _) = head.dim_in_pixel();
         head.draw(&Text::new(
@@ -603,6 +626,49 @@ fn draw_birdseye_key<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every panel gets a cell of the grid and is drawn (five and eleven panels were cut
+    /// to the first four); cells beyond the panels stay blank.
+    #[test]
+    fn every_birdseye_panel_is_drawn_whatever_their_number() {
+        register_font().unwrap();
+        for n in [1, 2, 4, 5, 11] {
+            let panels: Vec<BirdsEyePanel> = (0..n)
+                .map(|i| BirdsEyePanel {
+                    title: format!("panel {i}"),
+                    details: vec!["rain 3 mm/h".into()],
+                    points: vec![(1.0, 2.0, 0), (-3.0, 1.0, -2), (4.0, -4.0, -1)],
+                })
+                .collect();
+            let (rows, cols) = birdseye_grid(n);
+            assert!(
+                rows * cols >= n && (rows - 1) * cols < n,
+                "{n}: {rows} x {cols}"
+            );
+            let size = (
+                cols as u32 * PANEL_PX.0,
+                rows as u32 * PANEL_PX.1 + BIRDSEYE_FRAME_PX,
+            );
+            let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
+            render_birdseye("t", &panels, 10.0, &mut buf, size).unwrap();
+            // The grid lies between the title (at most 40 px) and the key (100 px).
+            let (top, bottom) = (40, size.1 - BIRDSEYE_FRAME_PX);
+            let h = (bottom - top) / rows as u32;
+            let inked = |k: usize| {
+                let (r, c) = ((k / cols) as u32, (k % cols) as u32);
+                let (x0, y0) = (c * PANEL_PX.0 + 20, top + r * h + 20);
+                (y0..y0 + h - 40).any(|y| {
+                    (x0..x0 + PANEL_PX.0 - 40).any(|x| {
+                        let i = ((y * size.0 + x) * 3) as usize;
+                        buf[i..i + 3] != [255, 255, 255]
+                    })
+                })
+            };
+            for k in 0..rows * cols {
+                assert_eq!(inked(k), k < n, "{n} panels: cell {k}");
+            }
+        }
+    }
 
     #[test]
     fn numbers_never_print_negative_zero() {

@@ -17,7 +17,8 @@ pub const POINT_BYTES: usize = 16;
 /// Parses a KITTI `.bin` (`path` is named in errors).
 ///
 /// One pass over the bytes with fixed-size chunks and `from_le_bytes`: no per-point
-/// allocation, so the conversion runs at memory speed (notes: about N GB/s).
+/// allocation, so the conversion runs at memory speed (about 6.5 GB/s of input on the
+/// 2-core build machine; read and checks included, 2.7 GB/s: notes/h-cloud.md).
 pub fn parse(bytes: &[u8], path: &Path) -> Result<(Vec<CloudPoint>, Fields)> {
     check_record_size(bytes, POINT_BYTES, Format::Kitti, path)?;
     let f = |b: &[u8]| f32::from_le_bytes([b[0], b[1], b[2], b[3]]);

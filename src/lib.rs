@@ -8,6 +8,7 @@
 pub mod calibration;
 pub mod capture;
 pub mod cli;
+pub mod cloud;
 pub mod cluster;
 pub mod commands;
 pub mod compare;

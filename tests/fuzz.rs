@@ -1,7 +1,8 @@
 //! Stable-Rust fuzzing: a seeded mutation loop over the checked-in corpus
 //! (`fuzz/corpus/<target>/`, plus the shared capture when present) for the capture reader
-//! and decoder, the configuration parser with `--set`, the calibration readers and the
-//! labels reader. Every input must give `Ok` or an `Err` whose message names the file;
+//! and decoder, the configuration parser with `--set`, the calibration readers, the
+//! labels reader and the point-cloud readers (`cloud-bin`: KITTI and nuScenes `.bin`,
+//! `cloud-pcd`, `cloud-csv`). Every input must give `Ok` or an `Err` whose message names the file;
 //! nothing may panic. A panicking input is saved under `target/fuzz-findings/` and the
 //! test fails naming it; findings become regression tests.
 //!
@@ -317,5 +318,60 @@ fn fuzz_labels_reader() {
             Ok(_) => Ok(()),
             Err(e) => names(&e, "fuzzed.labels.csv.gz"),
         }
+    });
+}
+
+/// Reads `bytes` as the point cloud `name`, by its name and by each `formats` forced, with
+/// a 32-laser sensor (so the ring check runs too): `Ok` with as many points as it says, or
+/// an error naming the file.
+fn check_cloud(
+    bytes: &[u8],
+    name: &str,
+    formats: &[lidar_noise::cloud::Format],
+) -> Result<(), String> {
+    use lidar_noise::cloud::{read_bytes, ReadOptions};
+    let options = std::iter::once(None).chain(formats.iter().copied().map(Some));
+    for format in options {
+        let o = ReadOptions {
+            format,
+            lasers: Some(32),
+        };
+        match read_bytes(bytes, Path::new(name), &o) {
+            Ok(c) if c.points.len() != c.info.points => {
+                return Err(format!(
+                    "{} points, info says {}",
+                    c.points.len(),
+                    c.info.points
+                ))
+            }
+            Ok(_) => {}
+            Err(e) => names(&e, name)?,
+        }
+    }
+    Ok(())
+}
+
+#[test]
+fn fuzz_cloud_bin_readers() {
+    use lidar_noise::cloud::Format;
+    fuzz("cloud-bin", &[], |bytes| {
+        check_cloud(bytes, "fuzzed.bin", &[Format::NuScenes])?;
+        check_cloud(bytes, "fuzzed.pcd.bin", &[])
+    });
+}
+
+#[test]
+fn fuzz_cloud_pcd_reader() {
+    use lidar_noise::cloud::Format;
+    fuzz("cloud-pcd", &[], |bytes| {
+        check_cloud(bytes, "fuzzed.pcd", &[Format::Pcd])
+    });
+}
+
+#[test]
+fn fuzz_cloud_csv_reader() {
+    use lidar_noise::cloud::Format;
+    fuzz("cloud-csv", &[], |bytes| {
+        check_cloud(bytes, "fuzzed.txt", &[Format::Csv])
     });
 }

@@ -271,5 +271,5 @@ fn real_vlp16_capture_matches_velodyne_decoder() {
         refs.len(), max_d, max_dt * 1e6, ref_count, ours_count
     );
     assert_eq!(ours_count, ref_count, "counts per ring");
-    assert!(max_d < 0.02, "max position difference {max_d} m");
+    assert!(max_d < 0.002, "max position difference {max_d} m");
 }

@@ -11,8 +11,13 @@
 //! [`MAX_STEP_CENTIDEG`] (a gap) interpolates nothing. For the HDL-32E this is
 //! `j / 40` of the step, as in `src/hdl32e/decode.rs`; for the VLP-16 it is the ROS
 //! driver's `gap * (2.304 k + 55.296 s) / 110.592`. Positions:
-//! `x = r cos(w) cos(a)`, `y = -r cos(w) sin(a)`, `z = r sin(w)`. The manual's per-laser
-//! vertical offsets (VLP-16 Table 9-1) are not applied, as in velodyne_decoder and ROS.
+//! `x = r cos(w) cos(a)`, `y = -r cos(w) sin(a)`, `z = r sin(w) + v`, where `v` is the
+//! laser's vertical correction of VLP-16 manual Table 9-1 ("After computing X,Y,Z, apply
+//! the vertical correction ... for greatest accuracy"; 0 for the HDL-32E, whose manual
+//! gives none). velodyne_decoder 3 applies the same offsets (measured on
+//! vlp16_mrpt.pcap: its z minus r sin(w) is 11.23 mm for laser 0 down to -11.23 mm for
+//! laser 15, the table's 11.2 to 0.03 mm); [`ModelDecoder::with_vertical_offsets`] turns
+//! them off (the ROS driver's VLP-16 path has none).
 //!
 //! `Return::block` is [`SensorModel::return_block`]: the firing sequence in firing order
 //! (0..23 for the VLP-16 in single mode), dual returns adjacent, so each (block, laser)
@@ -44,6 +49,8 @@ pub struct ModelDecoder {
     cos_elev: Vec<f64>,
     sin_elev: Vec<f64>,
     rings: Vec<u8>,
+    /// Vertical correction of each laser in metres (zeros when off).
+    z_offset: Vec<f64>,
     interpolate: bool,
     dual: DualSelect,
 }
@@ -57,9 +64,23 @@ impl ModelDecoder {
             cos_elev: rad.iter().map(|w| w.cos()).collect(),
             sin_elev: rad.iter().map(|w| w.sin()).collect(),
             rings: model.rings(),
+            z_offset: (0..model.lasers)
+                .map(|k| model.vertical_offset_mm.get(k).map_or(0.0, |mm| mm * 1e-3))
+                .collect(),
             interpolate,
             dual,
         }
+    }
+
+    /// Applies the manual's per-laser vertical corrections (the default) or not.
+    pub fn with_vertical_offsets(mut self, on: bool) -> Self {
+        self.z_offset = (0..self.model.lasers)
+            .map(|k| match self.model.vertical_offset_mm.get(k) {
+                Some(mm) if on => mm * 1e-3,
+                _ => 0.0,
+            })
+            .collect();
+        self
     }
 
     /// The model decoded.
@@ -162,7 +183,7 @@ impl ModelDecoder {
                 out.push(Return {
                     x: (xy * ca) as f32,
                     y: (-xy * sa) as f32,
-                    z: (range * self.sin_elev[laser]) as f32,
+                    z: (range * self.sin_elev[laser] + self.z_offset[laser]) as f32,
                     range: range as f32,
                     azimuth: (az as f32) % 360.0,
                     elevation: m.elevation_deg[laser] as f32,
@@ -245,6 +266,14 @@ mod tests {
         }
     }
 
+    /// Vertical correction of VLP-16 laser `k` in metres (manual Table 9-1).
+    fn manual_vertical_m(k: usize) -> f64 {
+        [
+            11.2, -0.7, 9.7, -2.2, 8.1, -3.7, 6.6, -5.1, 5.1, -6.6, 3.7, -8.1, 2.2, -9.7, 0.7,
+            -11.2,
+        ][k] * 1e-3
+    }
+
     fn close(a: f64, b: f64, tol: f64) -> bool {
         (a - b).abs() <= tol
     }
@@ -290,7 +319,7 @@ mod tests {
                 let (x, y, z) = (
                     r_m * w.cos() * a.cos(),
                     -r_m * w.cos() * a.sin(),
-                    r_m * w.sin(),
+                    r_m * w.sin() + manual_vertical_m(k),
                 );
                 assert!(
                     close(f64::from(r.x), x, 1e-4)
@@ -328,6 +357,26 @@ mod tests {
                     (ring, 5, ReturnKind::Strongest)
                 );
             }
+        }
+    }
+
+    #[test]
+    fn vertical_offsets_can_be_turned_off() {
+        let p = vlp_packet(&[0; 12], 0, 0x37, |_, _| (5000, 1));
+        let (mut on, mut off) = (Vec::new(), Vec::new());
+        let dec = ModelDecoder::new(&VLP16, true, DualSelect::Both);
+        dec.decode_packet(&p, 0, 0.0, &mut on).unwrap();
+        dec.with_vertical_offsets(false)
+            .decode_packet(&p, 0, 0.0, &mut off)
+            .unwrap();
+        for (a, b) in on.iter().zip(&off) {
+            let k = usize::from(a.laser);
+            assert!(close(
+                f64::from(b.z),
+                10.0 * manual_elevation(k).to_radians().sin(),
+                1e-5
+            ));
+            assert!(close(f64::from(a.z - b.z), manual_vertical_m(k), 1e-5));
         }
     }
 

@@ -113,8 +113,8 @@ pub struct SensorModel {
     /// Default azimuth offset of each laser id in degrees (0 for these models).
     pub azimuth_offset_deg: &'static [f64],
     /// Vertical offset of each laser's origin in millimetres (VLP-16 manual Table 9-1;
-    /// empty where the manual gives none). Not applied by [`decode`], as neither the
-    /// ROS driver nor velodyne_decoder applies it.
+    /// empty where the manual gives none); added to z by [`decode::ModelDecoder`] unless
+    /// turned off, as the manual and velodyne_decoder do.
     pub vertical_offset_mm: &'static [f64],
     /// Size of one raw distance unit in metres.
     pub distance_resolution_m: f64,

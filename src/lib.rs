@@ -23,6 +23,7 @@ pub mod noise;
 pub mod options;
 pub mod par;
 pub mod pipeline;
+pub mod sensor;
 pub mod signals;
 pub mod sweep;
 pub mod synth;

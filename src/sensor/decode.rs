@@ -1,0 +1,556 @@
+//! Data packet decoding for any [`SensorModel`]: payload to returns, strongest, last and
+//! dual, with the conventions of `src/hdl32e/decode.rs` (ROS velodyne axes: x forward,
+//! y left, z up; azimuth clockwise seen from above; ring 0 lowest).
+//!
+//! Per channel `c` of block `b`: firing sequence `s = c / lasers`, laser id
+//! `k = c % lasers` (VLP-16 manual 9.3.1.5 and 9.5). Azimuth interpolation (on by
+//! default, as velodyne_decoder, VeloView and the ROS VLP-16 path do): the laser fires
+//! `s * sequence_us + k * laser_us` into its block, so its azimuth is the block's plus
+//! that fraction of the block duration times the step to the next block's azimuth (next
+//! pair in dual mode); the last block uses the step before it, and a step over
+//! [`MAX_STEP_CENTIDEG`] (a gap) interpolates nothing. For the HDL-32E this is
+//! `j / 40` of the step, as in `src/hdl32e/decode.rs`; for the VLP-16 it is the ROS
+//! driver's `gap * (2.304 k + 55.296 s) / 110.592`. Positions:
+//! `x = r cos(w) cos(a)`, `y = -r cos(w) sin(a)`, `z = r sin(w) + v`, where `v` is the
+//! laser's vertical correction of VLP-16 manual Table 9-1 ("After computing X,Y,Z, apply
+//! the vertical correction ... for greatest accuracy"; 0 for the HDL-32E, whose manual
+//! gives none). velodyne_decoder 3 applies the same offsets (measured on
+//! vlp16_mrpt.pcap: its z minus r sin(w) is 11.23 mm for laser 0 down to -11.23 mm for
+//! laser 15, the table's 11.2 to 0.03 mm); [`ModelDecoder::with_vertical_offsets`] turns
+//! them off (the ROS driver's VLP-16 path has none).
+//!
+//! `Return::block` is [`SensorModel::return_block`]: the firing sequence in firing order
+//! (0..23 for the VLP-16 in single mode), dual returns adjacent, so each (block, laser)
+//! pair of a packet is one firing slot of the spurious-return rules.
+
+use super::{ReturnMode, SensorModel};
+use crate::frame::{Return, ReturnKind};
+pub use crate::hdl32e::decode::DualSelect;
+
+/// Largest azimuth step between blocks (hundredths of a degree) used for interpolation
+/// (the value of `src/hdl32e/decode.rs`).
+pub const MAX_STEP_CENTIDEG: u32 = crate::hdl32e::decode::MAX_STEP_CENTIDEG;
+
+/// Counters of one decoded packet.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PacketCounts {
+    /// Return mode read from the packet.
+    pub mode: Option<ReturnMode>,
+    /// Channels with distance 0 (no return), in the blocks decoded.
+    pub zero_distance: u64,
+    /// Returns emitted.
+    pub returns: u64,
+}
+
+/// Decodes the data packets of one sensor model.
+#[derive(Clone, Debug)]
+pub struct ModelDecoder {
+    model: SensorModel,
+    cos_elev: Vec<f64>,
+    sin_elev: Vec<f64>,
+    rings: Vec<u8>,
+    /// Vertical correction of each laser in metres (zeros when off).
+    z_offset: Vec<f64>,
+    interpolate: bool,
+    dual: DualSelect,
+}
+
+impl ModelDecoder {
+    /// A decoder with the model's default calibration.
+    pub fn new(model: &SensorModel, interpolate: bool, dual: DualSelect) -> Self {
+        let rad: Vec<f64> = model.elevation_deg.iter().map(|e| e.to_radians()).collect();
+        ModelDecoder {
+            model: *model,
+            cos_elev: rad.iter().map(|w| w.cos()).collect(),
+            sin_elev: rad.iter().map(|w| w.sin()).collect(),
+            rings: model.rings(),
+            z_offset: (0..model.lasers)
+                .map(|k| model.vertical_offset_mm.get(k).map_or(0.0, |mm| mm * 1e-3))
+                .collect(),
+            interpolate,
+            dual,
+        }
+    }
+
+    /// Applies the manual's per-laser vertical corrections (the default) or not.
+    pub fn with_vertical_offsets(mut self, on: bool) -> Self {
+        self.z_offset = (0..self.model.lasers)
+            .map(|k| match self.model.vertical_offset_mm.get(k) {
+                Some(mm) if on => mm * 1e-3,
+                _ => 0.0,
+            })
+            .collect();
+        self
+    }
+
+    /// The model decoded.
+    pub fn model(&self) -> &SensorModel {
+        &self.model
+    }
+
+    /// Decodes one data packet payload, appending its non-zero returns to `out`.
+    ///
+    /// `record` is the capture record (`Return::packet`); `hour_offset_us` is added to
+    /// the packet timestamp (whole hours the capture has run, kept by the caller). A
+    /// payload that is not a data packet of the model's layout, or carries a return mode
+    /// byte no firmware writes, is an error naming the byte offset.
+    pub fn decode_packet(
+        &self,
+        payload: &[u8],
+        record: u32,
+        hour_offset_us: f64,
+        out: &mut Vec<Return>,
+    ) -> Result<PacketCounts, String> {
+        let m = &self.model;
+        let lay = &m.layout;
+        if payload.len() != lay.payload_bytes {
+            return Err(format!(
+                "data packet of {} bytes where the {} sends {}",
+                payload.len(),
+                m.name,
+                lay.payload_bytes
+            ));
+        }
+        if let Some(b) = (0..lay.blocks).find(|&b| {
+            let at = b * lay.block_bytes;
+            u16::from_le_bytes([payload[at], payload[at + 1]]) != lay.block_flag
+        }) {
+            return Err(format!(
+                "block {b} has no 0xFFEE flag (payload byte offset {})",
+                b * lay.block_bytes
+            ));
+        }
+        let byte = payload[lay.return_mode_at];
+        let mode = ReturnMode::from_byte(byte).ok_or_else(|| {
+            format!(
+                "unknown return mode byte 0x{byte:02x} (payload byte offset {})",
+                lay.return_mode_at
+            )
+        })?;
+        let per = if mode == ReturnMode::Dual { 2 } else { 1 };
+        let n = lay.blocks / per;
+        let azimuth: Vec<u32> = (0..n)
+            .map(|f| u32::from(lay.block_azimuth(payload, f * per)) % 36000)
+            .collect();
+        let mut step: Vec<u32> = (0..n)
+            .map(|f| match azimuth.get(f + 1) {
+                Some(&next) => {
+                    let s = (next + 36000 - azimuth[f]) % 36000;
+                    if s > MAX_STEP_CENTIDEG {
+                        0
+                    } else {
+                        s
+                    }
+                }
+                None => 0,
+            })
+            .collect();
+        if n >= 2 {
+            step[n - 1] = step[n - 2];
+        }
+        let ts = f64::from(lay.timestamp_us(payload)) + hour_offset_us;
+        let block_us = m.block_us();
+        let mut counts = PacketCounts {
+            mode: Some(mode),
+            ..PacketCounts::default()
+        };
+        for block in 0..lay.blocks {
+            let Some(kind) = self.kind(mode, block) else {
+                continue;
+            };
+            let f = block / per;
+            let az0 = f64::from(azimuth[f]) * 0.01;
+            let gap = if self.interpolate {
+                f64::from(step[f]) * 0.01
+            } else {
+                0.0
+            };
+            for channel in 0..lay.channels {
+                let at = lay.channel_at(block, channel);
+                let raw = u16::from_le_bytes([payload[at], payload[at + 1]]);
+                if raw == 0 {
+                    counts.zero_distance += 1;
+                    continue;
+                }
+                let (sequence, laser) = m.channel_laser(channel);
+                let into_block = sequence as f64 * m.sequence_us + laser as f64 * m.laser_us;
+                let mut az = az0 + gap * into_block / block_us + m.azimuth_offset_deg[laser];
+                az = az.rem_euclid(360.0);
+                let range = f64::from(raw) * m.distance_resolution_m;
+                let (sa, ca) = az.to_radians().sin_cos();
+                let xy = range * self.cos_elev[laser];
+                let seq = m.sequence_index(mode, block, sequence);
+                out.push(Return {
+                    x: (xy * ca) as f32,
+                    y: (-xy * sa) as f32,
+                    z: (range * self.sin_elev[laser] + self.z_offset[laser]) as f32,
+                    range: range as f32,
+                    azimuth: (az as f32) % 360.0,
+                    elevation: m.elevation_deg[laser] as f32,
+                    time: (ts + m.firing_offset_us(mode, seq, laser)) * 1e-6,
+                    packet: record,
+                    raw_distance: raw,
+                    intensity: payload[at + 2],
+                    laser: laser as u8,
+                    ring: self.rings[laser],
+                    block: m.return_block(mode, block, sequence) as u8,
+                    kind,
+                });
+                counts.returns += 1;
+            }
+        }
+        Ok(counts)
+    }
+
+    /// Kind of the returns of a packet block, or `None` when the dual selection drops it.
+    fn kind(&self, mode: ReturnMode, block: usize) -> Option<ReturnKind> {
+        match mode {
+            ReturnMode::Dual => {
+                let last = block.is_multiple_of(2);
+                match (self.dual, last) {
+                    (DualSelect::Both, true) | (DualSelect::Last, true) => {
+                        Some(ReturnKind::DualLast)
+                    }
+                    (DualSelect::Both, false) | (DualSelect::Strongest, false) => {
+                        Some(ReturnKind::DualStrongest)
+                    }
+                    _ => None,
+                }
+            }
+            ReturnMode::Last => Some(ReturnKind::Last),
+            ReturnMode::Strongest | ReturnMode::Unknown => Some(ReturnKind::Strongest),
+        }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::needless_range_loop)] // packets are indexed by block and channel as in the manual
+mod tests {
+    use super::*;
+    use crate::sensor::{HDL32E, VLP16};
+
+    /// A VLP-16 packet: block azimuths `az[b]` (centidegrees), timestamp `ts`, and the
+    /// distance and intensity of each channel from `fill(block, channel)`.
+    fn vlp_packet(
+        az: &[u16; 12],
+        ts: u32,
+        mode: u8,
+        fill: impl Fn(usize, usize) -> (u16, u8),
+    ) -> Vec<u8> {
+        let mut p = vec![0u8; 1206];
+        for b in 0..12 {
+            let at = b * 100;
+            p[at] = 0xFF;
+            p[at + 1] = 0xEE;
+            p[at + 2..at + 4].copy_from_slice(&az[b].to_le_bytes());
+            for c in 0..32 {
+                let (d, i) = fill(b, c);
+                let o = at + 4 + 3 * c;
+                p[o..o + 2].copy_from_slice(&d.to_le_bytes());
+                p[o + 2] = i;
+            }
+        }
+        p[1200..1204].copy_from_slice(&ts.to_le_bytes());
+        p[1204] = mode;
+        p[1205] = 0x22;
+        p
+    }
+
+    /// Elevation of VLP-16 laser `k` (manual Table 9-1: even ids -15, -13, ..., -1; odd
+    /// ids 1, 3, ..., 15), written from the table, not from the model.
+    fn manual_elevation(k: usize) -> f64 {
+        if k.is_multiple_of(2) {
+            k as f64 - 15.0
+        } else {
+            k as f64
+        }
+    }
+
+    /// Vertical correction of VLP-16 laser `k` in metres (manual Table 9-1).
+    fn manual_vertical_m(k: usize) -> f64 {
+        [
+            11.2, -0.7, 9.7, -2.2, 8.1, -3.7, 6.6, -5.1, 5.1, -6.6, 3.7, -8.1, 2.2, -9.7, 0.7,
+            -11.2,
+        ][k] * 1e-3
+    }
+
+    fn close(a: f64, b: f64, tol: f64) -> bool {
+        (a - b).abs() <= tol
+    }
+
+    #[test]
+    fn vlp16_single_return_positions_and_times_follow_the_manual() {
+        // 10 Hz: 0.398 deg per 110.592 us block, written as 40 centidegrees; the packet
+        // crosses 360 degrees to check the wrap.
+        let az: [u16; 12] = std::array::from_fn(|b| ((35_800 + 40 * b) % 36_000) as u16);
+        let ts = 1_234_567u32;
+        let dist = |b: usize, c: usize| (1000 + 37 * b as u16 + 101 * c as u16, (b * 32 + c) as u8);
+        let p = vlp_packet(&az, ts, 0x37, |b, c| {
+            if (b + c) % 7 == 3 {
+                (0, 9)
+            } else {
+                dist(b, c)
+            }
+        });
+        let dec = ModelDecoder::new(&VLP16, true, DualSelect::Both);
+        let mut out = Vec::new();
+        let counts = dec.decode_packet(&p, 5, 3.6e9, &mut out).unwrap();
+        let zeros = (0..12)
+            .flat_map(|b| (0..32).map(move |c| (b, c)))
+            .filter(|(b, c)| (b + c) % 7 == 3)
+            .count();
+        assert_eq!(counts.zero_distance as usize, zeros);
+        assert_eq!(out.len(), 384 - zeros);
+        let mut it = out.iter();
+        for b in 0..12 {
+            for c in 0..32 {
+                if (b + c) % 7 == 3 {
+                    continue;
+                }
+                let r = it.next().unwrap();
+                let (s, k) = (c / 16, c % 16);
+                let (raw, intensity) = dist(b, c);
+                let r_m = f64::from(raw) * 0.002;
+                // Manual 9.5 and ROS: azimuth + 40 * (2.304 k + 55.296 s) / 110.592.
+                let a_deg = (f64::from(az[b])
+                    + 40.0 * (2.304 * k as f64 + 55.296 * s as f64) / 110.592)
+                    / 100.0;
+                let (a, w) = (a_deg.to_radians(), manual_elevation(k).to_radians());
+                let (x, y, z) = (
+                    r_m * w.cos() * a.cos(),
+                    -r_m * w.cos() * a.sin(),
+                    r_m * w.sin() + manual_vertical_m(k),
+                );
+                assert!(
+                    close(f64::from(r.x), x, 1e-4)
+                        && close(f64::from(r.y), y, 1e-4)
+                        && close(f64::from(r.z), z, 1e-4),
+                    "block {b} channel {c}: ({}, {}, {}) vs ({x}, {y}, {z})",
+                    r.x,
+                    r.y,
+                    r.z
+                );
+                assert!(
+                    close(f64::from(r.azimuth), a_deg % 360.0, 1e-4),
+                    "{} {a_deg}",
+                    r.azimuth
+                );
+                let t =
+                    (3.6e9 + f64::from(ts) + 55.296 * (2 * b + s) as f64 + 2.304 * k as f64) * 1e-6;
+                assert!(close(r.time, t, 1e-9), "time {} vs {t}", r.time);
+                assert_eq!(
+                    (
+                        r.laser as usize,
+                        r.block as usize,
+                        r.raw_distance,
+                        r.intensity
+                    ),
+                    (k, 2 * b + s, raw, intensity)
+                );
+                let ring = if k.is_multiple_of(2) {
+                    k / 2
+                } else {
+                    8 + k / 2
+                };
+                assert_eq!(
+                    (r.ring as usize, r.packet, r.kind),
+                    (ring, 5, ReturnKind::Strongest)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn vertical_offsets_can_be_turned_off() {
+        let p = vlp_packet(&[0; 12], 0, 0x37, |_, _| (5000, 1));
+        let (mut on, mut off) = (Vec::new(), Vec::new());
+        let dec = ModelDecoder::new(&VLP16, true, DualSelect::Both);
+        dec.decode_packet(&p, 0, 0.0, &mut on).unwrap();
+        dec.with_vertical_offsets(false)
+            .decode_packet(&p, 0, 0.0, &mut off)
+            .unwrap();
+        for (a, b) in on.iter().zip(&off) {
+            let k = usize::from(a.laser);
+            assert!(close(
+                f64::from(b.z),
+                10.0 * manual_elevation(k).to_radians().sin(),
+                1e-5
+            ));
+            assert!(close(f64::from(a.z - b.z), manual_vertical_m(k), 1e-5));
+        }
+    }
+
+    #[test]
+    fn vlp16_dual_return_pairs_share_sequences() {
+        // Blocks 2p (last) and 2p+1 (strongest) share azimuth and firing times.
+        let az: [u16; 12] = std::array::from_fn(|b| (1000 + 40 * (b / 2)) as u16);
+        let p = vlp_packet(&az, 0, 0x39, |b, c| {
+            (2000 + (b % 2) as u16 * 500 + c as u16, 7)
+        });
+        let mut out = Vec::new();
+        ModelDecoder::new(&VLP16, true, DualSelect::Both)
+            .decode_packet(&p, 0, 0.0, &mut out)
+            .unwrap();
+        assert_eq!(out.len(), 384);
+        for (i, r) in out.iter().enumerate() {
+            let (b, c) = (i / 32, i % 32);
+            let (s, k) = (c / 16, c % 16);
+            let seq = (b - b % 2) + s;
+            let kind = if b % 2 == 0 {
+                ReturnKind::DualLast
+            } else {
+                ReturnKind::DualStrongest
+            };
+            assert_eq!(
+                (r.kind, r.block as usize, r.laser as usize),
+                (kind, 2 * seq + b % 2, k),
+                "block {b} channel {c}"
+            );
+            assert!(close(
+                r.time,
+                (55.296 * seq as f64 + 2.304 * k as f64) * 1e-6,
+                1e-12
+            ));
+            let a_deg = (f64::from(az[b])
+                + 40.0 * (2.304 * k as f64 + 55.296 * s as f64) / 110.592)
+                / 100.0;
+            assert!(
+                close(f64::from(r.azimuth), a_deg, 1e-4),
+                "{} {a_deg}",
+                r.azimuth
+            );
+        }
+        for (select, kind) in [
+            (DualSelect::Last, ReturnKind::DualLast),
+            (DualSelect::Strongest, ReturnKind::DualStrongest),
+        ] {
+            let mut one = Vec::new();
+            ModelDecoder::new(&VLP16, true, select)
+                .decode_packet(&p, 0, 0.0, &mut one)
+                .unwrap();
+            assert_eq!(one.len(), 192);
+            assert!(one.iter().all(|r| r.kind == kind));
+        }
+        let mut p_last = p.clone();
+        p_last[1204] = 0x38;
+        let mut last = Vec::new();
+        ModelDecoder::new(&VLP16, true, DualSelect::Both)
+            .decode_packet(&p_last, 0, 0.0, &mut last)
+            .unwrap();
+        assert!(last.iter().all(|r| r.kind == ReturnKind::Last) && last.len() == 384);
+    }
+
+    #[test]
+    fn bad_packets_are_refused_with_the_place() {
+        let dec = ModelDecoder::new(&VLP16, true, DualSelect::Both);
+        let mut p = vlp_packet(&[0; 12], 0, 0x37, |_, _| (1, 1));
+        p[1204] = 0x41;
+        let e = dec.decode_packet(&p, 0, 0.0, &mut Vec::new()).unwrap_err();
+        assert!(e.contains("0x41") && e.contains("1204"), "{e}");
+        p[1204] = 0x37;
+        p[500] = 0;
+        let e = dec.decode_packet(&p, 0, 0.0, &mut Vec::new()).unwrap_err();
+        assert!(e.contains("block 5") && e.contains("500"), "{e}");
+        let e = dec
+            .decode_packet(&p[..1000], 0, 0.0, &mut Vec::new())
+            .unwrap_err();
+        assert!(e.contains("1000 bytes"), "{e}");
+    }
+
+    /// Item 4 of issue 31's first step: the generic decoder on the HDL-32E description
+    /// gives the returns of `src/hdl32e/decode.rs` (built-in calibration), in single and
+    /// dual mode, so the description cannot drift from the decoder in use.
+    #[test]
+    fn hdl32e_description_decodes_as_the_hdl32e_decoder() {
+        use crate::calibration::Calibration;
+        use crate::hdl32e::decode::{first_firing_us, DecodeCounts, PacketDecoder, ReturnTally};
+        for (mode_byte, dual) in [
+            (0x37u8, DualSelect::Both),
+            (0x38, DualSelect::Both),
+            (0x39, DualSelect::Both),
+            (0x39, DualSelect::Strongest),
+        ] {
+            let mut p = vec![0u8; 1206];
+            for b in 0..12 {
+                let a = if mode_byte == 0x39 {
+                    35_950 + 17 * (b / 2)
+                } else {
+                    35_950 + 17 * b
+                };
+                p[b * 100] = 0xFF;
+                p[b * 100 + 1] = 0xEE;
+                p[b * 100 + 2..b * 100 + 4].copy_from_slice(&((a % 36_000) as u16).to_le_bytes());
+                for c in 0..32 {
+                    let d = if (b * 32 + c) % 11 == 0 {
+                        0
+                    } else {
+                        500 + (b * 32 + c) as u16 * 13
+                    };
+                    p[b * 100 + 4 + 3 * c..b * 100 + 6 + 3 * c].copy_from_slice(&d.to_le_bytes());
+                    p[b * 100 + 6 + 3 * c] = c as u8;
+                }
+            }
+            p[1200..1204].copy_from_slice(&2_000_000u32.to_le_bytes());
+            p[1204] = mode_byte;
+            p[1205] = 0x21;
+            let mode = ReturnMode::from_byte(mode_byte).unwrap();
+            let old = PacketDecoder::new(&Calibration::builtin(), true, dual);
+            let (firings, n) = old.firings(&p, mode);
+            let time0 = first_firing_us(&p, n);
+            let (mut per_laser, mut intensity) = ([0u64; 32], [0u64; 256]);
+            let mut tally = ReturnTally {
+                per_laser: &mut per_laser,
+                intensity: &mut intensity,
+            };
+            let mut want = Vec::new();
+            let mut dc = DecodeCounts::default();
+            for firing in firings.iter().take(n) {
+                let (blocks, k) = old.blocks_of(mode, firing.index);
+                for &(block, kind) in blocks.iter().take(k) {
+                    old.decode_block(
+                        &p, block, kind, firing, time0, 3, &mut dc, &mut tally, &mut want,
+                    );
+                }
+            }
+            let mut got = Vec::new();
+            ModelDecoder::new(&HDL32E, true, dual)
+                .decode_packet(&p, 3, 0.0, &mut got)
+                .unwrap();
+            assert_eq!(got.len(), want.len(), "mode 0x{mode_byte:02x}");
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!(
+                    (
+                        g.laser,
+                        g.ring,
+                        g.block,
+                        g.kind,
+                        g.raw_distance,
+                        g.intensity,
+                        g.packet
+                    ),
+                    (
+                        w.laser,
+                        w.ring,
+                        w.block,
+                        w.kind,
+                        w.raw_distance,
+                        w.intensity,
+                        w.packet
+                    )
+                );
+                assert!(close(g.time, w.time, 1e-9), "time {} vs {}", g.time, w.time);
+                for (a, b) in [
+                    (g.x, w.x),
+                    (g.y, w.y),
+                    (g.z, w.z),
+                    (g.range, w.range),
+                    (g.elevation, w.elevation),
+                ] {
+                    assert!(close(f64::from(a), f64::from(b), 2e-4), "{g:?} vs {w:?}");
+                }
+                let da = (f64::from(g.azimuth) - f64::from(w.azimuth)).rem_euclid(360.0);
+                assert!(da.min(360.0 - da) < 1e-4, "{g:?} vs {w:?}");
+            }
+        }
+    }
+}

@@ -1,0 +1,169 @@
+//! Tells which described sensor a capture comes from by its structure, not by its
+//! product byte alone: real VLP-16 captures exist whose product byte says 0x21.
+//!
+//! Three measures of the first data packets: the product byte (byte 1205), the packet
+//! period (median spacing of the sensor timestamps, or of the capture timestamps when
+//! the sensor clock does not move: 552.96 us for the HDL-32E and 1327.104 us for the
+//! VLP-16 in single return mode, half in dual mode, from [`SensorModel::packet_period_us`])
+//! and the azimuth step per block, which must give a rotation rate within the model's
+//! range (5 to 20 Hz for these models; an HDL-32E reading of VLP-16 packets would turn
+//! at 24 Hz and more). The period decides the timing family; the product byte then picks
+//! the model within it (the VLP-16 and Puck Hi-Res share their timing); a product byte
+//! that names no model of the measured family is reported as contradicted.
+
+use super::{ReturnMode, SensorModel, MODELS};
+
+/// Relative tolerance on the packet period.
+pub const PERIOD_TOLERANCE: f64 = 0.05;
+
+/// What identification found.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Identified {
+    /// The model.
+    pub model: &'static SensorModel,
+    /// Return mode of the first data packet.
+    pub mode: ReturnMode,
+    /// Product byte the packets carry.
+    pub product_byte: u8,
+    /// False when the product byte names another model (or 0x00, old firmware).
+    pub product_byte_agrees: bool,
+    /// Median time between data packets in microseconds.
+    pub packet_period_us: f64,
+    /// Median azimuth step between consecutive firings' blocks, in degrees.
+    pub azimuth_step_deg: f64,
+    /// Rotation rate implied by the step and the model's block duration, in Hz.
+    pub rotation_hz: f64,
+    /// A note for the user (why the product byte was overruled), empty when none.
+    pub note: String,
+}
+
+fn median(mut values: Vec<f64>) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    values.sort_by(f64::total_cmp);
+    Some(values[values.len() / 2])
+}
+
+/// Median positive spacing below 5 ms of a series of microsecond times.
+fn spacing_us(times: impl Iterator<Item = f64>) -> Option<f64> {
+    let t: Vec<f64> = times.collect();
+    median(
+        t.windows(2)
+            .map(|w| w[1] - w[0])
+            .filter(|d| *d > 0.0 && *d < 5_000.0)
+            .collect(),
+    )
+}
+
+/// Identifies the sensor from the first data packets of a capture: each entry is a UDP
+/// payload and its capture timestamp in nanoseconds. Payloads that are not 1206-byte
+/// data packets with block flags are skipped. The error says what was measured and why
+/// no described sensor fits.
+pub fn identify(packets: &[(&[u8], u64)]) -> Result<Identified, String> {
+    let layout = super::LAYOUT_1206;
+    let data: Vec<(&[u8], u64)> = packets
+        .iter()
+        .copied()
+        .filter(|(p, _)| layout.is_data_packet(p))
+        .collect();
+    if data.len() < 3 {
+        return Err(format!(
+            "{} Velodyne data packets (1206-byte UDP payloads with 0xFFEE block flags) \
+             among {} packets: at least 3 are needed to tell the sensor by its packet timing",
+            data.len(),
+            packets.len()
+        ));
+    }
+    let product = data[0].0[layout.product_at];
+    if let Some(k) = data
+        .iter()
+        .position(|(p, _)| p[layout.product_at] != product)
+    {
+        return Err(format!(
+            "data packets disagree on the product id: data packet {k} has 0x{:02x} where \
+             data packet 0 has 0x{product:02x}: the capture mixes sensors",
+            data[k].0[layout.product_at]
+        ));
+    }
+    let byte = data[0].0[layout.return_mode_at];
+    let mode = ReturnMode::from_byte(byte)
+        .ok_or_else(|| format!("unknown return mode byte 0x{byte:02x} in the first data packet"))?;
+    let device = spacing_us(data.iter().map(|(p, _)| f64::from(layout.timestamp_us(p))));
+    let period = device
+        .or_else(|| spacing_us(data.iter().map(|(_, ns)| *ns as f64 / 1000.0)))
+        .ok_or("no two data packets with increasing timestamps: the packet timing is unknown")?;
+    // Azimuth step between consecutive firings' blocks inside each packet.
+    let per = if mode == ReturnMode::Dual { 2 } else { 1 };
+    let steps: Vec<f64> = data
+        .iter()
+        .flat_map(|(p, _)| {
+            (0..layout.blocks / per - 1).map(move |f| {
+                let a = u32::from(layout.block_azimuth(p, f * per)) % 36000;
+                let b = u32::from(layout.block_azimuth(p, (f + 1) * per)) % 36000;
+                f64::from((b + 36000 - a) % 36000) * 0.01
+            })
+        })
+        .filter(|s| *s > 0.0 && *s < 5.0)
+        .collect();
+    let step =
+        median(steps).ok_or("the block azimuths do not advance: the sensor is not turning")?;
+    let fits = |m: &SensorModel| {
+        let want = m.packet_period_us(mode);
+        let hz = step / 360.0 / (m.block_us() * 1e-6);
+        (period - want).abs() <= PERIOD_TOLERANCE * want
+            && hz >= m.rotation_hz.0 * 0.9
+            && hz <= m.rotation_hz.1 * 1.1
+    };
+    let candidates: Vec<&'static SensorModel> =
+        MODELS.iter().copied().filter(|m| fits(m)).collect();
+    let named = super::by_product(product);
+    let product_name = match named {
+        Some(m) => m.name,
+        None => crate::hdl32e::packet::product_name(product),
+    };
+    let Some(&first) = candidates.first() else {
+        let expected: Vec<String> = MODELS
+            .iter()
+            .map(|m| {
+                format!(
+                    "{} {:.0} us and {:.2} to {:.2} deg per block",
+                    m.name,
+                    m.packet_period_us(mode),
+                    m.rotation_hz.0 * 360.0 * m.block_us() * 1e-6,
+                    m.rotation_hz.1 * 360.0 * m.block_us() * 1e-6
+                )
+            })
+            .collect();
+        return Err(format!(
+            "unknown sensor: product byte 0x{product:02x} ({product_name}), data packets \
+             {period:.0} us apart, azimuth step {step:.3} deg per block in {mode:?} return \
+             mode; no described sensor fits (expected: {})",
+            expected.join("; ")
+        ));
+    };
+    let (model, agrees) = match candidates.iter().find(|m| m.product_id == product) {
+        Some(&m) => (m, true),
+        None => (first, false),
+    };
+    let note = if agrees {
+        String::new()
+    } else {
+        format!(
+            "the product byte says 0x{product:02x} ({product_name}) but the packet timing \
+             ({period:.0} us between data packets, {step:.3} deg per block) is that of the {}; \
+             decoded as the {}",
+            model.name, model.name
+        )
+    };
+    Ok(Identified {
+        model,
+        mode,
+        product_byte: product,
+        product_byte_agrees: agrees,
+        packet_period_us: period,
+        azimuth_step_deg: step,
+        rotation_hz: step / 360.0 / (model.block_us() * 1e-6),
+        note,
+    })
+}

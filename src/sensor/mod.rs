@@ -1,0 +1,413 @@
+//! One description of a spinning Velodyne sensor (issue 31): lasers, firing timing,
+//! packet layout, return modes and rotation, with the HDL-32E, VLP-16, Puck LITE and
+//! Puck Hi-Res as instances.
+//!
+//! Sources:
+//! - HDL-32E: the constants of `src/hdl32e/packet.rs` and the built-in table of
+//!   `src/calibration/mod.rs` (HDL-32E user manual, appendices B and E; notes in
+//!   `../shared/docs/hdl32e.md`). A test holds this description to those constants.
+//! - VLP-16, Puck LITE, Puck Hi-Res: VLP-16 user manual 63-9243 Rev D, section 9.2
+//!   (Table 9-1, laser id to vertical angle and vertical correction for the VLP-16, Puck
+//!   LITE and Puck Hi-Res), 9.3.1 (firing sequence: "It takes 55.296 us to fire all 16
+//!   lasers"; data point: 2 mm granularity; data block: two firing sequences of 16
+//!   lasers, 24 firing sequences in 12 blocks), 9.3.1.7 (Table 9-2 factory bytes: return
+//!   mode 0x37/0x38/0x39 at 0x04DE, product id at 0x04DF: HDL-32E 0x21, VLP-16 and Puck
+//!   LITE 0x22, Puck Hi-Res 0x24), 9.5 (firing sequence timing: 16 firings 2.304 us apart
+//!   then an 18.43 us recharge; "the timestamp in the packet indicates the time of the
+//!   first data point in the packet"; TimeOffset = 55.296 us * SequenceIndex + 2.304 us *
+//!   DataPointIndex, with SequenceIndex = 2 * block + channel / 16 in single return mode
+//!   and (block - block % 2) + channel / 16 in dual return mode, from the manual's
+//!   `make_table`). The 110.592 us block duration and the azimuth interpolation across
+//!   both sequences of a block (azimuth + gap * (2.304 * k + 55.296 * s) / 110.592) are
+//!   those of the ROS velodyne driver (`rawdata.cc`, `VLP16_BLOCK_TDURATION`,
+//!   `VLP16_DSR_TOFFSET`, `VLP16_FIRING_TOFFSET`) and Tier IV's nebula (`vlp16.hpp`).
+
+pub mod decode;
+pub mod identify;
+
+pub use crate::hdl32e::packet::ReturnMode;
+
+/// The data packet layout shared by the HDL-32E and the VLP-16 family (1206-byte UDP
+/// payload: 12 blocks of flag, azimuth and 32 channels; timestamp; two factory bytes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PacketLayout {
+    /// UDP payload size of a data packet.
+    pub payload_bytes: usize,
+    /// Data blocks per packet.
+    pub blocks: usize,
+    /// Bytes per data block.
+    pub block_bytes: usize,
+    /// Block flag read as a little-endian u16 (bytes FF EE).
+    pub block_flag: u16,
+    /// Channels (distance u16 + intensity u8) per block.
+    pub channels: usize,
+    /// Byte offset of the little-endian u32 timestamp (us past the hour).
+    pub timestamp_at: usize,
+    /// Byte offset of the return mode byte.
+    pub return_mode_at: usize,
+    /// Byte offset of the product id byte.
+    pub product_at: usize,
+}
+
+/// The 1206-byte layout of the HDL-32E and VLP-16 data packets.
+pub const LAYOUT_1206: PacketLayout = PacketLayout {
+    payload_bytes: 1206,
+    blocks: 12,
+    block_bytes: 100,
+    block_flag: 0xEEFF,
+    channels: 32,
+    timestamp_at: 1200,
+    return_mode_at: 1204,
+    product_at: 1205,
+};
+
+impl PacketLayout {
+    /// True when a payload has the size and every block flag of this layout.
+    pub fn is_data_packet(&self, payload: &[u8]) -> bool {
+        payload.len() == self.payload_bytes
+            && (0..self.blocks).all(|b| {
+                let at = b * self.block_bytes;
+                u16::from_le_bytes([payload[at], payload[at + 1]]) == self.block_flag
+            })
+    }
+
+    /// Azimuth of a block in hundredths of a degree, as written (may be 36000 or more).
+    pub fn block_azimuth(&self, payload: &[u8], block: usize) -> u16 {
+        let at = block * self.block_bytes + 2;
+        u16::from_le_bytes([payload[at], payload[at + 1]])
+    }
+
+    /// Byte offset of one channel's distance in the payload.
+    pub fn channel_at(&self, block: usize, channel: usize) -> usize {
+        block * self.block_bytes + 4 + 3 * channel
+    }
+
+    /// Packet timestamp in microseconds past the hour.
+    pub fn timestamp_us(&self, payload: &[u8]) -> u32 {
+        let t = self.timestamp_at;
+        u32::from_le_bytes([payload[t], payload[t + 1], payload[t + 2], payload[t + 3]])
+    }
+}
+
+/// What instant of the packet the packet timestamp marks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TimestampMark {
+    /// The last laser of the last firing (HDL-32E manual: fire time = timestamp -
+    /// 542.592 us + block * 46.08 us + laser * 1.152 us).
+    LastFiring,
+    /// The first data point of the packet (VLP-16 manual 9.5).
+    FirstFiring,
+}
+
+/// Description of one spinning Velodyne sensor model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SensorModel {
+    /// Model name as users write it ("HDL-32E", "VLP-16").
+    pub name: &'static str,
+    /// Product id byte the sensor writes (byte 1205).
+    pub product_id: u8,
+    /// Number of lasers (16 or 32).
+    pub lasers: usize,
+    /// Default elevation of each laser id in degrees (the manual's table).
+    pub elevation_deg: &'static [f64],
+    /// Default azimuth offset of each laser id in degrees (0 for these models).
+    pub azimuth_offset_deg: &'static [f64],
+    /// Vertical offset of each laser's origin in millimetres (VLP-16 manual Table 9-1;
+    /// empty where the manual gives none); added to z by [`decode::ModelDecoder`] unless
+    /// turned off, as the manual and velodyne_decoder do.
+    pub vertical_offset_mm: &'static [f64],
+    /// Size of one raw distance unit in metres.
+    pub distance_resolution_m: f64,
+    /// Time between two consecutive lasers of a firing sequence in microseconds.
+    pub laser_us: f64,
+    /// Duration of one firing sequence (all lasers fired and recharged) in microseconds.
+    pub sequence_us: f64,
+    /// Firing sequences per block in single return mode (1 for the HDL-32E, 2 for the
+    /// VLP-16, whose block carries two 16-laser sequences in its 32 channels).
+    pub sequences_per_block: usize,
+    /// What the packet timestamp marks.
+    pub timestamp_mark: TimestampMark,
+    /// Packet layout.
+    pub layout: PacketLayout,
+    /// Return modes the sensor writes (byte 1204).
+    pub return_modes: &'static [ReturnMode],
+    /// Slowest and fastest rotation rate in Hz.
+    pub rotation_hz: (f64, f64),
+}
+
+/// Return modes of the 1206-byte sensors (manual Table 9-2).
+const MODES: [ReturnMode; 3] = [ReturnMode::Strongest, ReturnMode::Last, ReturnMode::Dual];
+
+/// Elevations of the HDL-32E by laser id (the built-in calibration table).
+const HDL32E_ELEVATION_DEG: [f64; 32] = crate::calibration::BUILTIN_ELEVATION_DEG;
+
+/// Elevations of the VLP-16 and Puck LITE by laser id (VLP-16 manual, Table 9-1).
+const VLP16_ELEVATION_DEG: [f64; 16] = [
+    -15.0, 1.0, -13.0, 3.0, -11.0, 5.0, -9.0, 7.0, -7.0, 9.0, -5.0, 11.0, -3.0, 13.0, -1.0, 15.0,
+];
+
+/// Vertical corrections of the VLP-16 and Puck LITE in mm (VLP-16 manual, Table 9-1).
+const VLP16_VERTICAL_MM: [f64; 16] = [
+    11.2, -0.7, 9.7, -2.2, 8.1, -3.7, 6.6, -5.1, 5.1, -6.6, 3.7, -8.1, 2.2, -9.7, 0.7, -11.2,
+];
+
+/// Elevations of the Puck Hi-Res by laser id (VLP-16 manual, Table 9-1).
+const HIRES_ELEVATION_DEG: [f64; 16] = [
+    -10.0, 0.67, -8.67, 2.0, -7.33, 3.33, -6.0, 4.67, -4.67, 6.0, -3.33, 7.33, -2.0, 8.67, -0.67,
+    10.0,
+];
+
+/// Vertical corrections of the Puck Hi-Res in mm (VLP-16 manual, Table 9-1).
+const HIRES_VERTICAL_MM: [f64; 16] = [
+    7.4, -0.9, 6.5, -1.8, 5.5, -2.7, 4.6, -3.7, 3.7, -4.6, 2.7, -5.5, 1.8, -6.5, 0.9, -7.4,
+];
+
+const ZERO_32: [f64; 32] = [0.0; 32];
+
+/// Velodyne HDL-32E: 32 lasers fired one every 1.152 us, one 46.08 us firing per block.
+pub const HDL32E: SensorModel = SensorModel {
+    name: "HDL-32E",
+    product_id: 0x21,
+    lasers: 32,
+    elevation_deg: &HDL32E_ELEVATION_DEG,
+    azimuth_offset_deg: &ZERO_32,
+    vertical_offset_mm: &[],
+    distance_resolution_m: 0.002,
+    laser_us: 1.152,
+    sequence_us: 46.08,
+    sequences_per_block: 1,
+    timestamp_mark: TimestampMark::LastFiring,
+    layout: LAYOUT_1206,
+    return_modes: &MODES,
+    rotation_hz: (5.0, 20.0),
+};
+
+/// Velodyne VLP-16: 16 lasers 2.304 us apart, two 55.296 us sequences per block.
+pub const VLP16: SensorModel = SensorModel {
+    name: "VLP-16",
+    product_id: 0x22,
+    lasers: 16,
+    elevation_deg: &VLP16_ELEVATION_DEG,
+    azimuth_offset_deg: &[0.0; 16],
+    vertical_offset_mm: &VLP16_VERTICAL_MM,
+    distance_resolution_m: 0.002,
+    laser_us: 2.304,
+    sequence_us: 55.296,
+    sequences_per_block: 2,
+    timestamp_mark: TimestampMark::FirstFiring,
+    layout: LAYOUT_1206,
+    return_modes: &MODES,
+    rotation_hz: (5.0, 20.0),
+};
+
+/// Velodyne Puck Hi-Res: the VLP-16's packets and timing, elevations within +-10 deg.
+pub const PUCK_HI_RES: SensorModel = SensorModel {
+    name: "Puck Hi-Res",
+    product_id: 0x24,
+    elevation_deg: &HIRES_ELEVATION_DEG,
+    vertical_offset_mm: &HIRES_VERTICAL_MM,
+    ..VLP16
+};
+
+/// Every described sensor; the Puck LITE is the VLP-16 (same product id, same angles:
+/// manual 9.3.1.7).
+pub const MODELS: [&SensorModel; 3] = [&HDL32E, &VLP16, &PUCK_HI_RES];
+
+impl SensorModel {
+    /// Duration of one block in microseconds (all its firing sequences).
+    pub fn block_us(&self) -> f64 {
+        self.sequence_us * self.sequences_per_block as f64
+    }
+
+    /// Firing sequences per packet in a return mode (dual mode repeats each block).
+    pub fn sequences_per_packet(&self, mode: ReturnMode) -> usize {
+        let blocks = if mode == ReturnMode::Dual {
+            self.layout.blocks / 2
+        } else {
+            self.layout.blocks
+        };
+        blocks * self.sequences_per_block
+    }
+
+    /// Nominal time between data packets in microseconds (553 us for the HDL-32E and
+    /// 1327 us for the VLP-16 in single return mode, half in dual mode).
+    pub fn packet_period_us(&self, mode: ReturnMode) -> f64 {
+        self.sequences_per_packet(mode) as f64 * self.sequence_us
+    }
+
+    /// Firing sequence and laser id of channel `channel` of a block.
+    pub fn channel_laser(&self, channel: usize) -> (usize, usize) {
+        (channel / self.lasers, channel % self.lasers)
+    }
+
+    /// Firing sequence index within the packet of sequence `sequence` of block `block`
+    /// (VLP-16 manual 9.5: dual-return block pairs share their sequences).
+    pub fn sequence_index(&self, mode: ReturnMode, block: usize, sequence: usize) -> usize {
+        let firing_block = if mode == ReturnMode::Dual {
+            block / 2
+        } else {
+            block
+        };
+        firing_block * self.sequences_per_block + sequence
+    }
+
+    /// Time of one laser's firing relative to the packet timestamp, in microseconds.
+    pub fn firing_offset_us(&self, mode: ReturnMode, sequence_index: usize, laser: usize) -> f64 {
+        let from_first = sequence_index as f64 * self.sequence_us + laser as f64 * self.laser_us;
+        match self.timestamp_mark {
+            TimestampMark::FirstFiring => from_first,
+            TimestampMark::LastFiring => {
+                let last = (self.sequences_per_packet(mode) - 1) as f64 * self.sequence_us
+                    + (self.lasers - 1) as f64 * self.laser_us;
+                from_first - last
+            }
+        }
+    }
+
+    /// The `Return::block` value of a return: the index of its 1-sequence half block in
+    /// firing order, with dual returns adjacent. Single mode: `sequence_index` (0..11 on
+    /// the HDL-32E, 0..23 on the VLP-16). Dual mode: `2 * sequence_index + (block & 1)`,
+    /// so `block & !1` names the firing as the spurious-return slots expect and the even
+    /// value is the last return. For the HDL-32E this is the packet block, as before.
+    pub fn return_block(&self, mode: ReturnMode, block: usize, sequence: usize) -> usize {
+        let s = self.sequence_index(mode, block, sequence);
+        if mode == ReturnMode::Dual {
+            2 * s + (block & 1)
+        } else {
+            s
+        }
+    }
+
+    /// Packet block and channel of a return from its `Return::block` and laser id (the
+    /// inverse of [`SensorModel::return_block`]), for encoders.
+    pub fn packet_position(
+        &self,
+        mode: ReturnMode,
+        return_block: usize,
+        laser: usize,
+    ) -> (usize, usize) {
+        let per = self.sequences_per_block;
+        let (block, sequence) = if mode == ReturnMode::Dual {
+            let s = return_block / 2;
+            (2 * (s / per) + (return_block & 1), s % per)
+        } else {
+            (return_block / per, return_block % per)
+        };
+        (block, sequence * self.lasers + laser)
+    }
+
+    /// Ring of each laser id: ids sorted by elevation, 0 lowest (ties in id order).
+    pub fn rings(&self) -> Vec<u8> {
+        let mut ids: Vec<usize> = (0..self.lasers).collect();
+        ids.sort_by(|&a, &b| self.elevation_deg[a].total_cmp(&self.elevation_deg[b]));
+        let mut rings = vec![0u8; self.lasers];
+        for (ring, &id) in ids.iter().enumerate() {
+            rings[id] = ring as u8;
+        }
+        rings
+    }
+}
+
+/// The described model writing a product id byte, if any.
+pub fn by_product(product: u8) -> Option<&'static SensorModel> {
+    MODELS.iter().copied().find(|m| m.product_id == product)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vlp16_timing_matches_the_manual() {
+        // Manual 9.5: 16 x 2.304 us + 18.43 us recharge = 55.296 us; 24 sequences per
+        // packet; the last point of a packet fires 23 * 55.296 + 15 * 2.304 us in.
+        assert!((16.0 * VLP16.laser_us + 18.432 - VLP16.sequence_us).abs() < 1e-9);
+        assert!((VLP16.packet_period_us(ReturnMode::Strongest) - 1327.104).abs() < 1e-9);
+        assert!((VLP16.packet_period_us(ReturnMode::Dual) - 663.552).abs() < 1e-9);
+        assert!((HDL32E.packet_period_us(ReturnMode::Strongest) - 552.96).abs() < 1e-9);
+        let last = VLP16.firing_offset_us(ReturnMode::Strongest, 23, 15);
+        assert!((last - (23.0 * 55.296 + 15.0 * 2.304)).abs() < 1e-9);
+        // Manual's dual-mode table: block 3, channel 20 is sequence (3 - 1) + 1 = 3.
+        assert_eq!(VLP16.sequence_index(ReturnMode::Dual, 3, 1), 3);
+        assert_eq!(VLP16.sequence_index(ReturnMode::Strongest, 3, 1), 7);
+    }
+
+    #[test]
+    fn vlp16_rings_interleave_as_in_the_manual() {
+        let rings = VLP16.rings();
+        for (id, &ring) in rings.iter().enumerate() {
+            let want = if id % 2 == 0 { id / 2 } else { 8 + id / 2 };
+            assert_eq!(usize::from(ring), want, "laser {id}");
+        }
+        assert_eq!(PUCK_HI_RES.rings(), rings);
+    }
+
+    #[test]
+    fn return_block_and_packet_position_are_inverse() {
+        for model in MODELS {
+            for mode in MODES {
+                let mut seen = std::collections::HashSet::new();
+                for block in 0..12 {
+                    for channel in 0..32 {
+                        let (sequence, laser) = model.channel_laser(channel);
+                        let rb = model.return_block(mode, block, sequence);
+                        assert!(seen.insert((rb, laser)), "{} {mode:?}", model.name);
+                        assert_eq!(model.packet_position(mode, rb, laser), (block, channel));
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Item 4 of issue 31's first step: the HDL-32E description holds the constants the
+/// HDL-32E decoder uses (its packet layout, timing, product byte, built-in calibration).
+#[cfg(test)]
+mod hdl32e_constants {
+    use super::*;
+    use crate::calibration::Calibration;
+    use crate::hdl32e::packet as p;
+
+    #[test]
+    fn hdl32e_description_holds_the_decoder_constants() {
+        let m = &HDL32E;
+        let l = &m.layout;
+        assert_eq!(l.payload_bytes, p::DATA_PACKET_BYTES);
+        assert_eq!(l.blocks, p::BLOCKS);
+        assert_eq!(l.block_bytes, p::BLOCK_BYTES);
+        assert_eq!(l.block_flag, p::BLOCK_FLAG);
+        assert_eq!(l.channels, p::LASERS);
+        assert_eq!(m.lasers, p::LASERS);
+        assert_eq!(m.product_id, p::PRODUCT_HDL32E);
+        assert_eq!(m.laser_us, p::LASER_US);
+        assert_eq!(m.sequence_us, p::FIRING_US);
+        assert_eq!(m.sequences_per_block, 1);
+        let first = m.firing_offset_us(ReturnMode::Strongest, 0, 0);
+        assert!((first - p::FIRST_FIRING_OFFSET_US).abs() < 1e-9, "{first}");
+        let cal = Calibration::builtin();
+        assert_eq!(m.distance_resolution_m, cal.distance_resolution_m);
+        for (k, laser) in cal.lasers.iter().enumerate() {
+            assert_eq!(m.elevation_deg[k], laser.elevation_deg, "laser {k}");
+            assert_eq!(
+                m.azimuth_offset_deg[k], laser.azimuth_offset_deg,
+                "laser {k}"
+            );
+        }
+        assert_eq!(m.rings(), cal.rings().to_vec());
+        // The accessors read the bytes the HDL-32E packet functions read.
+        let mut payload = vec![0u8; 1206];
+        for (i, b) in payload.iter_mut().enumerate() {
+            *b = (i * 7 % 251) as u8;
+        }
+        assert_eq!(l.timestamp_us(&payload), p::timestamp_us(&payload));
+        assert_eq!(payload[l.return_mode_at], p::return_mode_byte(&payload));
+        assert_eq!(payload[l.product_at], p::product_byte(&payload));
+        for b in 0..12 {
+            assert_eq!(l.block_azimuth(&payload, b), p::block_azimuth(&payload, b));
+        }
+        for (id, name) in [(0x21, "HDL-32E"), (0x22, "VLP-16"), (0x24, "Puck Hi-Res")] {
+            assert_eq!(by_product(id).map(|m| m.name), Some(name));
+            assert_eq!(p::product_name(id), name);
+        }
+    }
+}

@@ -519,36 +519,23 @@ fn csv_round_trip_with_aliases_and_delimiters() {
 #[test]
 fn csv_bad_rows_name_line_and_column() {
     let dir = tempfile::tempdir().unwrap();
-    let e = err(
-        &write(dir.path(), "m.csv", b"x,y,z,intensity\n1,2,3,4\n5,,7,8\n"),
-        ReadOptions::default(),
-    );
+    let bad =
+        |name: &str, bytes: &[u8]| err(&write(dir.path(), name, bytes), ReadOptions::default());
+    let e = bad("m.csv", b"x,y,z,intensity\n1,2,3,4\n5,,7,8\n");
     assert!(
         e.contains("line 3, column 2 (y)") && e.contains("missing"),
         "{e}"
     );
-    let e = err(
-        &write(dir.path(), "s.csv", b"x,y,z,intensity\n1,2,3,4\n5,6,7\n"),
-        ReadOptions::default(),
-    );
+    let e = bad("s.csv", b"x,y,z,intensity\n1,2,3,4\n5,6,7\n");
     assert!(e.contains("line 3, column 4 (intensity)"), "{e}");
-    let e = err(
-        &write(dir.path(), "u.csv", b"x,y,z\n1,2,3\n4,5,6\n7,8,abc\n"),
-        ReadOptions::default(),
-    );
+    let e = bad("u.csv", b"x,y,z\n1,2,3\n4,5,6\n7,8,abc\n");
     assert!(
         e.contains("line 4, column 3 (z)") && e.contains("\"abc\""),
         "{e}"
     );
-    let e = err(
-        &write(dir.path(), "h.csv", b"x,y,height\n1,2,3\n"),
-        ReadOptions::default(),
-    );
+    let e = bad("h.csv", b"x,y,height\n1,2,3\n");
     assert!(e.contains("no z column"), "{e}");
-    let e = err(
-        &write(dir.path(), "i.csv", b"x,y,z\n1,2,3\n1,inf,3\n"),
-        ReadOptions::default(),
-    );
+    let e = bad("i.csv", b"x,y,z\n1,2,3\n1,inf,3\n");
     assert!(e.contains("point 1 ") && e.contains("y is inf"), "{e}");
 }
 

@@ -6,22 +6,10 @@
 
 mod common;
 
-use assert_cmd::Command;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-/// Exit code of a refused output folder (README, exit codes).
-const EXIT_REFUSED: i32 = 3;
-
-fn bin() -> Command {
-    let mut c = Command::cargo_bin("lidar-noise").unwrap();
-    c.env("RAYON_NUM_THREADS", "2");
-    c
-}
-
-fn crossroad() -> PathBuf {
-    common::fixtures().join("crossroad.pcap")
-}
+use common::{bin2 as bin, crossroad, EXIT_REFUSED};
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()

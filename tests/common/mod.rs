@@ -193,3 +193,18 @@ pub fn same_returns(a: &[lidar_noise::frame::Return], b: &[lidar_noise::frame::R
                 && x.intensity == y.intensity
         })
 }
+
+/// Exit code of a refused output folder (README, exit codes).
+pub const EXIT_REFUSED: i32 = 3;
+
+/// The `lidar-noise` binary on two worker threads.
+pub fn bin2() -> assert_cmd::Command {
+    let mut c = assert_cmd::Command::cargo_bin("lidar-noise").unwrap();
+    c.env("RAYON_NUM_THREADS", "2");
+    c
+}
+
+/// The crossroad fixture capture.
+pub fn crossroad() -> PathBuf {
+    fixtures().join("crossroad.pcap")
+}

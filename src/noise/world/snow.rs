@@ -160,9 +160,19 @@ impl NoiseStage for Snow {
             Some(p) => format!(" (Hahner's {p} preset)"),
             None => String::new(),
         };
+        // A preset's rate is converted (2.2383844962893775 mm/h): three decimals are
+        // what a reader needs; the settings keep the exact value.
+        let rate = if self.preset.is_some() {
+            format!("{:.3}", self.rate_mm_h)
+                .trim_end_matches('0')
+                .trim_end_matches('.')
+                .to_string()
+        } else {
+            self.rate_mm_h.to_string()
+        };
         format!(
-            "snowfall {} mm/h water equivalent{preset}: alpha = {:.5} 1/m, {:.0} flakes/m^3 above 0.05 mm, echoes in a {} mrad beam",
-            self.rate_mm_h, self.alpha, self.population.per_m3, self.divergence_mrad
+            "snowfall {rate} mm/h water equivalent{preset}: alpha = {:.5} 1/m, {:.0} flakes/m^3 above 0.05 mm, echoes in a {} mrad beam",
+            self.alpha, self.population.per_m3, self.divergence_mrad
         )
     }
 
@@ -338,5 +348,18 @@ mod tests {
         let want = sum * 1e-6;
         assert!((extinction_per_m(rate) / want - 1.0).abs() < 1e-6);
         assert_eq!(extinction_per_m(0.0), 0.0);
+    }
+
+    #[test]
+    fn a_preset_is_described_with_its_rate_rounded() {
+        let text = "[[noise]]\ntype = \"snow\"\npreset = \"light\"\n";
+        let (cfg, _) =
+            crate::config::Config::from_toml_str(text, std::path::Path::new("t"), &[], None)
+                .unwrap();
+        let d = &cfg.noise[0].description;
+        assert!(
+            d.starts_with("snowfall 2.238 mm/h water equivalent (Hahner's light preset)"),
+            "{d}"
+        );
     }
 }

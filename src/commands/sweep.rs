@@ -88,6 +88,8 @@ struct Bars {
     _multi: MultiProgress,
     global: Global,
     chunked: bool,
+    /// Cells still to compute in the current capture.
+    pending_here: std::sync::atomic::AtomicU64,
 }
 
 impl Bars {
@@ -113,6 +115,7 @@ impl Bars {
             _multi: multi,
             global,
             chunked,
+            pending_here: std::sync::atomic::AtomicU64::new(0),
         }
     }
 }
@@ -126,12 +129,20 @@ impl Observer for Bars {
         self.cells.set_message(name.to_string());
         self.frames.set_position(0);
         self.frames.set_length(0);
+        self.pending_here
+            .store(cells, std::sync::atomic::Ordering::Relaxed);
     }
     fn frames_total(&self, n: u64) {
-        // Known after the first chunk: n frames per cell, pending cells of this capture.
-        let cells_left = self.cells.length().unwrap_or(0) - self.cells.position();
-        self.frames
-            .set_length(self.frames.position() + n * cells_left);
+        if self.chunked {
+            // Known after the first chunk: n frames per unit, units still to run.
+            let cells_left = self.cells.length().unwrap_or(0) - self.cells.position();
+            self.frames
+                .set_length(self.frames.position() + n * cells_left);
+        } else {
+            // Known before work starts: n frames for each pending cell of this capture.
+            let here = self.pending_here.load(std::sync::atomic::Ordering::Relaxed);
+            self.frames.set_length(self.frames.position() + n * here);
+        }
     }
     fn frame_done(&self) {
         self.frames.inc(1);

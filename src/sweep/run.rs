@@ -63,7 +63,8 @@ pub struct SweepSettings {
 pub trait Observer: Sync {
     /// A capture starts with `cells` cells to compute.
     fn capture(&self, _name: &str, _cells: u64) {}
-    /// The number of frame pipelines still to run in this capture is now known.
+    /// The number of frames each pending cell of this capture runs is now known (before
+    /// any of them starts, except with chunks, where after the first).
     fn frames_total(&self, _n: u64) {}
     /// One frame of one cell is done.
     fn frame_done(&self) {}
@@ -345,6 +346,19 @@ pub fn run_mode(
             };
             let chunk = (4 * rayon::current_num_threads()).max(8);
             let mut first = true;
+            if ranges.is_none() {
+                // The frames every pending cell will run are counted from the frame index
+                // (no decoding) before any work, so a progress bar knows its total from
+                // the start instead of after the first batch of cells.
+                let n = match expected_frames {
+                    Some(n) => n,
+                    None => count_frames(s, capture)?,
+                };
+                if n > 0 {
+                    observer.frames_total(n as u64);
+                    first = false;
+                }
+            }
             for (j, units) in &pending {
                 // A chunk's units read only the chunk's frames, from where the chunk starts.
                 let mut range = s.clone();

@@ -66,7 +66,10 @@ fn frames_total_is_known_before_the_first_frame() {
     assert_eq!(total(Event::CellDone), 6);
     // Given once: the bar's length does not move under the user's eyes.
     assert_eq!(
-        events.iter().filter(|e| matches!(e, Event::FramesTotal(_))).count(),
+        events
+            .iter()
+            .filter(|e| matches!(e, Event::FramesTotal(_)))
+            .count(),
         1
     );
 }

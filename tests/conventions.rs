@@ -11,23 +11,13 @@ use common::{run, stage};
 use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::noise::Fate;
 
-const FIRING_S: f64 = 46.08e-6;
-const LASER_S: f64 = 1.152e-6;
 const AZ_STEP: f32 = 0.18;
 
 /// kappa of the default power model, p_th z_ref^2 / rho_ref = 1e-3 * 100^2 / 0.1 (m^2).
 const KAPPA: f64 = 100.0;
 
 fn ret(laser: u8, range: f32, intensity: u8, firing: u32, kind: ReturnKind) -> Return {
-    common::beam_return(
-        laser,
-        range,
-        firing as f32 * AZ_STEP,
-        intensity,
-        firing,
-        100.0 + f64::from(firing) * FIRING_S + f64::from(laser) * LASER_S,
-        kind,
-    )
+    common::firing_return(laser, range, intensity, firing, AZ_STEP, kind)
 }
 
 /// A 10 Hz rotation (2000 firings x 32 lasers) in `kind` mode: ranges 20..60 m,
@@ -157,9 +147,7 @@ fn direct_crosstalk_power_follows_the_interferer_s_spot_and_distance() {
                 continue;
             }
             seen += 1;
-            let q = f64::from(out.range[i]) / 100.0;
-            let rho = (want / 1e-3 * 0.1 * q * q).clamp(0.0, 1.0);
-            let expect = (rho * 100.0).round() as u8;
+            let expect = common::echo_byte(want, out.range[i]);
             assert_eq!(out.noisy_return(i).intensity, expect, "d {d} m, echo {i}");
         }
         assert!(seen > 0 || want < 1e-3, "d {d}: no echo");

@@ -16,15 +16,7 @@ use lidar_noise::noise::{Fate, NoisyFrame};
 const KAPPA: f64 = 100.0;
 
 fn ret(laser: u8, range: f32, intensity: u8, firing: u32) -> Return {
-    common::beam_return(
-        laser,
-        range,
-        firing as f32 * 0.18,
-        intensity,
-        firing,
-        100.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6,
-        ReturnKind::Strongest,
-    )
+    common::firing_return(laser, range, intensity, firing, 0.18, ReturnKind::Strongest)
 }
 
 /// A 10 Hz rotation: ranges 1..70 m, intensities 0..120 (some retro-reflectors, some
@@ -213,12 +205,10 @@ fn spurious_echoes_keep_the_intensity_of_their_own_power() {
             continue;
         }
         seen += 1;
-        // intensity_of(1, R): rho = P / p_th * rho_ref * (R / z_ref)^2, clamped to 1.
-        let q = f64::from(out.range[i]) / 100.0;
-        let rho = (1.0 / 1e-3 * 0.1 * q * q).min(1.0);
+        // intensity_of(1, R), as the default power model gives it.
         assert_eq!(
             out.noisy_return(i).intensity,
-            (rho * 100.0).round() as u8,
+            common::echo_byte(1.0, out.range[i]),
             "{i}"
         );
     }

@@ -188,16 +188,7 @@ fn mie_backscatter_coefficient_matches_a_direct_integral() {
 
 /// A return of `laser` at `range` m, firing `firing`, reflectivity `intensity` %.
 fn ret(laser: u8, range: f32, intensity: u8, firing: u32) -> Return {
-    let time = 100.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6;
-    common::beam_return(
-        laser,
-        range,
-        (firing as f32 * 0.2) % 360.0,
-        intensity,
-        firing,
-        time,
-        ReturnKind::Strongest,
-    )
+    common::firing_return(laser, range, intensity, firing, 0.2, ReturnKind::Strongest)
 }
 
 /// 1800 firings of 32 lasers, ranges 2..60 m, varied reflectivities.

@@ -17,9 +17,7 @@ const C: f64 = 299_792_458.0;
 /// A return of `laser` at `range` m in firing `firing` (0.2 deg per firing, 12 firings
 /// per packet) with `intensity` (reflectivity, %).
 fn ret(laser: u8, range: f32, intensity: u8, firing: u32, kind: ReturnKind) -> Return {
-    let azimuth = (firing as f32 * 0.2) % 360.0;
-    let time = 100.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6;
-    common::beam_return(laser, range, azimuth, intensity, firing, time, kind)
+    common::firing_return(laser, range, intensity, firing, 0.2, kind)
 }
 
 /// 1800 firings of 32 lasers, ranges 2..60 m, varied intensities; every 7th slot is

@@ -13,16 +13,7 @@ use std::path::Path;
 
 /// A return of `laser` at `range` m in firing `firing` (0.18 degree per firing).
 fn ret(laser: u8, range: f32, intensity: u8, firing: u32, kind: ReturnKind) -> Return {
-    let time = 100.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6;
-    common::beam_return(
-        laser,
-        range,
-        firing as f32 * 0.18,
-        intensity,
-        firing,
-        time,
-        kind,
-    )
+    common::firing_return(laser, range, intensity, firing, 0.18, kind)
 }
 
 /// Bands of 10 firings alternately on a foreground at `near` m and a background at `far`

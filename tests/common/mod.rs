@@ -208,3 +208,28 @@ pub fn bin2() -> assert_cmd::Command {
 pub fn crossroad() -> PathBuf {
     fixtures().join("crossroad.pcap")
 }
+
+/// A return of `laser` in firing `firing` of a 10 Hz rotation: azimuth `firing` x
+/// `az_step_deg` (wrapped to a turn), firing time 100 s + 46.08 us per firing + 1.152 us
+/// per laser (the HDL-32E's firing timing), as [`beam_return`] builds it.
+pub fn firing_return(
+    laser: u8,
+    range: f32,
+    intensity: u8,
+    firing: u32,
+    az_step_deg: f32,
+    kind: lidar_noise::frame::ReturnKind,
+) -> lidar_noise::frame::Return {
+    let time = 100.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6;
+    let azimuth = (firing as f32 * az_step_deg) % 360.0;
+    beam_return(laser, range, azimuth, intensity, firing, time, kind)
+}
+
+/// The intensity byte the default power model reports for an echo of `power` at `range`
+/// m: reflectivity rho = P / p_th x rho_ref x (R / z_ref)^2 (p_th 1e-3, rho_ref 0.1,
+/// z_ref 100 m), clamped to [0, 1], on the 0-100 scale.
+pub fn echo_byte(power: f64, range: f32) -> u8 {
+    let q = f64::from(range) / 100.0;
+    let rho = (power / 1e-3 * 0.1 * q * q).clamp(0.0, 1.0);
+    (rho * 100.0).round() as u8
+}

@@ -13,16 +13,8 @@ cargo build --quiet --release --bin lidar-noise
 bin=target/release/lidar-noise
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
-for seed in 7001 7002 7003 7004 7005; do
-  "$bin" --quiet synth --random "$seed" --rotations 2 -o "$out/scenes/random-$seed"
-done
-random=("$out"/scenes/random-*/*.pcap)
-real=()
-if [ -e ../shared/data/hdl32e/monterey.pcap ]; then
-  real=(../shared/data/hdl32e/monterey.pcap)
-else
-  echo "SKIPPED: ../shared/data is absent; the tables have no real-capture rows" >&2
-fi
+. scripts/lib/scenes.sh
+make_scenes
 run() {
   local dir=$1 config=$2
   shift 2

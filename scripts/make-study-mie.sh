@@ -36,16 +36,8 @@ else
   mie_error=$(tail -n 1 "$out/mie.err" | sed 's|^.*paper-mie.toml: ||')
   echo "mie rain not available in this build: $mie_error" >&2
 fi
-for seed in 7001 7002 7003 7004 7005; do
-  "$bin" --quiet synth --random "$seed" --rotations 2 -o "$out/scenes/random-$seed"
-done
-random=("$out"/scenes/random-*/*.pcap)
-real=()
-if [ -e ../shared/data/hdl32e/monterey.pcap ]; then
-  real=(../shared/data/hdl32e/monterey.pcap)
-else
-  echo "SKIPPED: ../shared/data is absent; the tables have no real-capture rows" >&2
-fi
+. scripts/lib/scenes.sh
+make_scenes
 timing=()
 for model in "${models[@]}"; do
   cfg=$goodin_cfg

@@ -22,8 +22,9 @@ sweep "$out/crossroad" fixtures/crossroad.pcap
 args+=("crossroad=$out/crossroad")
 sweep "$out/parking" fixtures/parking.pcap
 args+=("parking=$out/parking")
-for seed in 7001 7002 7003 7004 7005; do
-  "$bin" --quiet synth --random "$seed" --rotations 2 -o "$out/scenes/random-$seed"
+. scripts/lib/scenes.sh
+for seed in "${random_seeds[@]}"; do
+  make_random_scene "$seed"
   sweep "$out/random-$seed" "$out/scenes/random-$seed"/*.pcap
   args+=("random (5 scenes)=$out/random-$seed")
 done

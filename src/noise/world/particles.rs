@@ -387,8 +387,18 @@ impl Population {
             Some(o) => 2.0 * o.beam_radius(r),
             None => r * self.tan_divergence,
         };
+        self.power_in(r, d_mm, alpha, kappa_m2, db)
+    }
+
+    /// [`Population::power`] in a beam of diameter `db` m at the particle.
+    #[inline]
+    fn power_in(&self, r: f64, d_mm: f64, alpha: f64, kappa_m2: f64, db: f64) -> f64 {
         let share = ((d_mm * 1e-3) / db).powi(2).min(1.0);
-        kappa_m2 * self.reflectance.at(d_mm) * (-2.0 * alpha * r).exp() * share / (r * r)
+        kappa_m2
+            * self.reflectance.at(d_mm)
+            * crate::noise::transmission::exp_nonpositive(-2.0 * alpha * r)
+            * share
+            / (r * r)
     }
 
     /// The bounds of every bin for `kappa_m2`, `threshold` and `min_range` (m).
@@ -520,13 +530,7 @@ impl Population {
             };
             // `power` with the beam's radius a + r t of `prepare` (the tangent once a
             // frame, not per particle).
-            let db = 2.0 * (p.a + r * p.t);
-            let share = ((d * 1e-3) / db).powi(2).min(1.0);
-            let pw = p.kappa
-                * self.reflectance.at(d)
-                * crate::noise::transmission::exp_nonpositive(-2.0 * alpha * r)
-                * share
-                / (r * r);
+            let pw = self.power_in(r, d, alpha, p.kappa, 2.0 * (p.a + r * p.t));
             if pw < p.threshold {
                 continue;
             }

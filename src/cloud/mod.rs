@@ -20,6 +20,7 @@
 
 pub mod csv;
 pub mod kitti;
+pub mod labels;
 pub mod nuscenes;
 pub mod pcd;
 

@@ -23,6 +23,7 @@ pub mod kitti;
 pub mod labels;
 pub mod nuscenes;
 pub mod pcd;
+pub mod returns;
 
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};

@@ -62,6 +62,20 @@ pub struct Frame {
     pub returns: Vec<Return>,
 }
 
+/// A source of frames in capture order: a decoded capture or a point-cloud file.
+pub trait FrameSource {
+    /// Up to `max` next frames whose index lies in `frames`; empty once the source (or the
+    /// range) is exhausted.
+    fn next_batch(
+        &mut self,
+        max: usize,
+        frames: &std::ops::RangeInclusive<u32>,
+    ) -> crate::error::Result<Vec<Frame>>;
+
+    /// Hands a finished frame's buffer back for reuse.
+    fn recycle(&mut self, frame: Frame);
+}
+
 impl Frame {
     /// Time of the first return in the frame, in seconds past the hour.
     pub fn start_time(&self) -> f64 {

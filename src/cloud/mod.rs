@@ -19,6 +19,7 @@
 //! and column), and no input makes a reader panic (tests/fuzz.rs, targets `cloud-*`).
 
 pub mod csv;
+pub mod frames;
 pub mod kitti;
 pub mod labels;
 pub mod nuscenes;

@@ -189,6 +189,11 @@ pub fn output_names(paths: &[std::path::PathBuf]) -> Vec<String> {
                 || "capture".to_string(),
                 |s| s.to_string_lossy().into_owned(),
             );
+            // A nuScenes scan `X.pcd.bin` is named X, as its token.
+            let stem = match stem.strip_suffix(".pcd") {
+                Some(s) if path.extension().is_some_and(|e| e == "bin") => s.to_string(),
+                _ => stem,
+            };
             let stem = if stem.is_empty() || stem.starts_with('.') {
                 format!("capture{stem}")
             } else {

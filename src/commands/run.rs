@@ -1,8 +1,9 @@
 //! `lidar-noise run`: the whole pipeline on one or more captures.
 
 use crate::cli::Global;
+use crate::cloud::frames::{CloudOptions, CloudReader, CloudSummary};
 use crate::config::Config;
-use crate::frame::Frame;
+use crate::frame::{Frame, FrameSource};
 use crate::hdl32e::frames::{CaptureSummary, DecoderOptions, FrameReader};
 use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
 use crate::pipeline::report::{
@@ -29,10 +30,20 @@ pub const DEFAULT_OUTPUT: &str = "lidar-noise-out";
 /// Arguments of `run`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Capture files (pcap or pcapng), `-` for standard input; none runs the built-in
+    /// Capture files (pcap or pcapng), `-` for standard input, or point-cloud scans
+    /// (nuScenes .pcd.bin, KITTI .bin, PCD, CSV: one frame each); none runs the built-in
     /// crossroad fixture.
     #[arg(value_name = "CAPTURE")]
     pub captures: Vec<PathBuf>,
+    /// Sensor that recorded the point-cloud scans given (captures name their sensor
+    /// themselves). Point clouds are placed on the HDL-32E's firings (`hdl32e`, the default
+    /// except for KITTI scans, which come from an HDL-64E and need it said).
+    #[arg(long, value_name = "NAME")]
+    pub sensor: Option<String>,
+    /// Rotation rate of the point-cloud scans in Hz: the firing grid their points are
+    /// placed on (default 20 for nuScenes .pcd.bin, 10 otherwise).
+    #[arg(long, value_name = "HZ")]
+    pub rotation_hz: Option<f64>,
     /// Experiment configuration (default: the built-in configs/paper.toml).
     #[arg(short, long, value_name = "FILE")]
     pub config: Option<PathBuf>,
@@ -116,9 +127,85 @@ pub(super) struct Summary<'a> {
     power_constants: &'a crate::noise::PowerConstants,
     decoder: DecoderSettings,
     fate_codes: [&'static str; 6],
-    capture_summary: &'a CaptureSummary,
+    capture_summary: SourceSummary<'a>,
     pub(super) totals: Totals,
     frames: &'a [FrameReport],
+}
+
+/// What the source held: a capture's packets and frames, or a point-cloud file's points.
+#[derive(Serialize)]
+#[serde(untagged)]
+pub(super) enum SourceSummary<'a> {
+    /// A decoded capture.
+    Capture(&'a CaptureSummary),
+    /// A point-cloud scan.
+    Cloud(&'a CloudSummary),
+}
+
+/// Where a run's frames come from.
+enum Source {
+    /// A capture, decoded (boxed: its reader is large, and jobs are moved around).
+    Capture(Box<FrameReader>),
+    /// A point-cloud scan, placed on the sensor's firings.
+    Cloud(CloudReader),
+}
+
+/// The point-cloud format of `path`, or `None` for a capture: files that start like a
+/// pcap or pcapng file, standard input and streams (read only once, never probed) are
+/// captures; so is anything no point-cloud reader recognises (the capture reader then
+/// says what is wrong).
+fn cloud_format(path: &Path) -> Option<crate::cloud::Format> {
+    use std::io::Read;
+    if super::is_stdin(path) || crate::capture::is_stream(path) {
+        return None;
+    }
+    let mut head = Vec::with_capacity(4096);
+    let file = std::fs::File::open(path).ok()?;
+    file.take(4096).read_to_end(&mut head).ok()?;
+    const CAPTURE_MAGIC: [[u8; 4]; 5] = [
+        [0xd4, 0xc3, 0xb2, 0xa1],
+        [0xa1, 0xb2, 0xc3, 0xd4],
+        [0x4d, 0x3c, 0xb2, 0xa1],
+        [0xa1, 0xb2, 0x3c, 0x4d],
+        [0x0a, 0x0d, 0x0d, 0x0a],
+    ];
+    if head.len() >= 4 && CAPTURE_MAGIC.iter().any(|m| head[..4] == m[..]) {
+        return None;
+    }
+    crate::cloud::detect(path, &head).ok()
+}
+
+/// How a point-cloud file of `format` is read, from `--sensor` and `--rotation-hz`.
+fn cloud_options(args: &Args, path: &Path, format: crate::cloud::Format) -> Result<CloudOptions> {
+    use crate::cloud::Format;
+    let sensor = match args.sensor.as_deref() {
+        None if format == Format::Kitti => anyhow::bail!(
+            "{}: a KITTI scan comes from an HDL-64E, which lidar-noise does not model yet \
+             (point clouds run as an HDL-32E: --sensor hdl32e); pass --sensor hdl32e only if \
+             this scan was recorded by an HDL-32E",
+            path.display()
+        ),
+        None => &crate::sensor::HDL32E,
+        Some(name)
+            if name.eq_ignore_ascii_case("hdl32e") || name.eq_ignore_ascii_case("hdl-32e") =>
+        {
+            &crate::sensor::HDL32E
+        }
+        Some(name) => anyhow::bail!(
+            "--sensor {name}: point clouds run as an HDL-32E only so far (--sensor hdl32e): \
+             the noise stages' firing slots are those of its 32 lasers"
+        ),
+    };
+    let rotation_hz = args.rotation_hz.unwrap_or(if format == Format::NuScenes {
+        20.0
+    } else {
+        10.0
+    });
+    Ok(CloudOptions {
+        sensor,
+        format: Some(format),
+        rotation_hz,
+    })
 }
 
 /// The cluster report written as clusters.json.
@@ -186,11 +273,29 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     }
     // A calibration file inside the output folder would be replaced by a report.
     inputs.extend(args.decoder.calibration.as_deref());
+    let clouds: Vec<Option<crate::cloud::Format>> =
+        args.captures.iter().map(|p| cloud_format(p)).collect();
+    if let Some((p, _)) = args.captures.iter().zip(&clouds).find(|(_, c)| c.is_some()) {
+        if args.chunk_frames.is_some() {
+            anyhow::bail!(
+                "--chunk-frames splits captures into frame ranges: {} is a point-cloud scan, \
+                 one frame; share many scans among nodes with --shard alone",
+                p.display()
+            );
+        }
+        if plan.pcap_out {
+            anyhow::bail!(
+                "--pcap-out re-encodes a capture's packets: {} is a point-cloud scan, which has \
+                 none; leave --pcap-out out (the noisy points are in the point clouds written)",
+                p.display()
+            );
+        }
+    }
     if let Some(m) = args.chunk_frames {
         return super::run_chunks::run(&args, &plan, m, &inputs, global);
     }
     // Every input and target is checked before anything is written.
-    let mut jobs: Vec<(FrameReader, String, String, Option<&Path>)> = Vec::new();
+    let mut jobs: Vec<(Source, String, String, Option<&Path>)> = Vec::new();
     if args.captures.is_empty() {
         let reader = FrameReader::from_bytes(
             Arc::from(DEFAULT_CAPTURE),
@@ -198,18 +303,25 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             &plan.decoder,
         )?;
         jobs.push((
-            reader,
+            Source::Capture(Box::new(reader)),
             DEFAULT_CAPTURE_NAME.into(),
             "crossroad".into(),
             None,
         ));
     }
-    for (path, name) in args
+    for ((path, name), cloud) in args
         .captures
         .iter()
         .zip(super::output_names(&args.captures))
+        .zip(&clouds)
     {
-        let reader = super::open_capture(path, &plan.decoder)?;
+        let reader = match cloud {
+            Some(format) => Source::Cloud(CloudReader::open(
+                path,
+                &cloud_options(&args, path, *format)?,
+            )?),
+            None => Source::Capture(Box::new(super::open_capture(path, &plan.decoder)?)),
+        };
         jobs.push((reader, super::capture_label(path), name, Some(path)));
     }
     if let Some(shard) = args.shard {
@@ -233,7 +345,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     }
     let check = || -> Result<()> {
         for (reader, source, name, capture) in &jobs {
-            if plan.pcap_out {
+            if let (true, Source::Capture(reader)) = (plan.pcap_out, reader) {
                 let mode = reader.summary().return_mode;
                 // Named by the path as given, as in every message of `run`.
                 let shown = capture.map_or_else(|| source.clone(), super::capture_shown);
@@ -394,7 +506,7 @@ pub(super) fn check_target(dir: &Path, inputs: &[&Path]) -> Result<()> {
 /// Runs one capture into `dir` (its staging folder); returns the line to print.
 fn run_capture(
     plan: &Plan,
-    mut reader: FrameReader,
+    mut reader: Source,
     (source, capture): (&str, Option<&Path>),
     dir: &Path,
     inputs: &[&Path],
@@ -430,26 +542,52 @@ fn run_capture(
         }
         frame_outputs(plan, result, source, dir, inputs)
     };
-    stream_frames(
-        &mut reader,
-        &plan.frames,
-        crate::memory::worker_warmup_bytes(),
-        work,
-        |(entry, returns), reader| {
-            // Frames arrive here in order: the noisy capture can be written up to this one.
-            if let Some(p) = &pcap {
-                p.frame_done(entry.report.index)?;
-            }
-            reader.recycle(Frame {
-                returns,
-                ..Frame::default()
-            });
-            spool.add(entry)?;
-            progress.inc(1);
-            Ok(())
-        },
-    )?;
+    // Frames arrive here in order: the noisy capture can be written up to this one.
+    let mut done = |entry: SpoolEntry| -> Result<()> {
+        if let Some(p) = &pcap {
+            p.frame_done(entry.report.index)?;
+        }
+        spool.add(entry)?;
+        progress.inc(1);
+        Ok(())
+    };
+    let warmup = crate::memory::worker_warmup_bytes();
+    match &mut reader {
+        Source::Capture(r) => {
+            stream_frames(&mut **r, &plan.frames, warmup, work, |(e, returns), r| {
+                r.recycle(Frame {
+                    returns,
+                    ..Frame::default()
+                });
+                done(e)
+            })?
+        }
+        Source::Cloud(r) => {
+            stream_frames(r, &plan.frames, warmup, work, |(e, _), _| done(e))?;
+        }
+    }
     progress.finish_and_clear();
+    let mut reader = match reader {
+        Source::Capture(r) => *r,
+        Source::Cloud(r) => {
+            let shown = capture.map_or_else(|| source.to_string(), super::capture_shown);
+            if spool.frames == 0 {
+                anyhow::bail!(
+                    "{shown}: no frame to process in {}: a point-cloud scan is one frame, 0",
+                    crate::options::frames_phrase(&plan.frames)
+                );
+            }
+            let (summary, _) = documents(
+                plan,
+                source,
+                SourceSummary::Cloud(r.summary()),
+                spool.totals.clone(),
+            );
+            let frames = spool.frames;
+            spool.finish(&summary, dir, inputs)?;
+            return Ok(report_line(&shown, frames, &summary.totals));
+        }
+    };
     let capture_summary = reader.summary();
     // Messages name the capture by the path as given, as `convert`'s do; the outputs name
     // it by `source`, its file name, so that they do not depend on the working folder.
@@ -464,7 +602,12 @@ fn run_capture(
     if spool.frames == 0 {
         return Err(no_frame_error(&shown, &plan.frames, &mut reader));
     }
-    let (summary, _) = documents(plan, source, &capture_summary, spool.totals.clone());
+    let (summary, _) = documents(
+        plan,
+        source,
+        SourceSummary::Capture(&capture_summary),
+        spool.totals.clone(),
+    );
     let frames = spool.frames;
     if let Some(p) = pcap {
         let name = p.file_name();
@@ -485,7 +628,7 @@ fn run_capture(
 pub(super) fn documents<'a>(
     plan: &'a Plan,
     source: &str,
-    capture_summary: &'a CaptureSummary,
+    capture_summary: SourceSummary<'a>,
     totals: Totals,
 ) -> (Summary<'a>, ClusterReport<'a>) {
     let summary = Summary {
@@ -636,12 +779,12 @@ pub(super) fn frame_outputs(
 /// The workers are the threads of one rayon pool, one frame loop each, so that `work`'s
 /// forks ([`crate::par::join`]) can be taken by a worker that has no frame left: at the
 /// end of a capture the last frames then use every core, not one frame per core.
-pub(crate) fn stream_frames<T: Send>(
-    reader: &mut FrameReader,
+pub(crate) fn stream_frames<T: Send, R: FrameSource>(
+    reader: &mut R,
     frames: &RangeInclusive<u32>,
     warmup: usize,
     work: impl Fn(Frame) -> Result<T> + Sync,
-    mut done: impl FnMut(T, &mut FrameReader) -> Result<()>,
+    mut done: impl FnMut(T, &mut R) -> Result<()>,
 ) -> Result<()> {
     use std::collections::BTreeMap;
     use std::panic::AssertUnwindSafe;
@@ -703,19 +846,18 @@ pub(crate) fn stream_frames<T: Send>(
         let (mut sent, mut finished) = (0usize, 0usize);
         let mut decode_error: Option<anyhow::Error> = None;
         // Hands over every result whose predecessors are all in.
-        let mut drain = |pending: &mut BTreeMap<usize, Outcome<T>>,
-                         finished: &mut usize,
-                         reader: &mut FrameReader| {
-            while let Some(outcome) = pending.remove(finished) {
-                *finished += 1;
-                let result = outcome.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-                if let Err(e) = result.and_then(|r| done(r, reader)) {
-                    stop.store(true, Ordering::Relaxed);
-                    return Err(e);
+        let mut drain =
+            |pending: &mut BTreeMap<usize, Outcome<T>>, finished: &mut usize, reader: &mut R| {
+                while let Some(outcome) = pending.remove(finished) {
+                    *finished += 1;
+                    let result = outcome.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+                    if let Err(e) = result.and_then(|r| done(r, reader)) {
+                        stop.store(true, Ordering::Relaxed);
+                        return Err(e);
+                    }
                 }
-            }
-            Ok::<(), anyhow::Error>(())
-        };
+                Ok::<(), anyhow::Error>(())
+            };
         loop {
             // Decode ahead while the window has room.
             while frame_tx.is_some() && sent - finished < window {

@@ -634,7 +634,12 @@ fn join_capture(
         noise,
         stages,
     };
-    let (summary, clusters) = single::documents(plan, &job.source, &capture_summary, totals);
+    let (summary, clusters) = single::documents(
+        plan,
+        &job.source,
+        single::SourceSummary::Capture(&capture_summary),
+        totals,
+    );
     let pieces = |field: fn(&Part) -> &str, out: &mut dyn std::io::Write| -> std::io::Result<()> {
         for (j, name) in names.iter().enumerate() {
             let p = read(name).map_err(std::io::Error::other)?;

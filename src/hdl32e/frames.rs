@@ -681,6 +681,16 @@ impl FrameReader {
     }
 }
 
+impl crate::frame::FrameSource for FrameReader {
+    fn next_batch(&mut self, max: usize, frames: &RangeInclusive<u32>) -> Result<Vec<Frame>> {
+        FrameReader::next_batch(self, max, frames)
+    }
+
+    fn recycle(&mut self, frame: Frame) {
+        FrameReader::recycle(self, frame)
+    }
+}
+
 impl Iterator for FrameReader {
     type Item = Result<Frame>;
 

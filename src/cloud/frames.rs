@@ -1,0 +1,152 @@
+//! A point-cloud file as a source of frames: one scan, one frame (index 0), its points
+//! turned into returns of a sensor model by [`super::returns`], for `run` to process as it
+//! processes a capture's frames (issue 31, "Every stage works on these sources").
+//!
+//! The file is read and checked when the reader is opened, so a bad file is refused before
+//! anything is written; the points are then dropped and read again when the frame is
+//! needed, so a run over many files holds one scan at a time, not all of them.
+
+use super::returns::{to_returns, ReturnsOptions};
+use super::{read_file, Format, IntensityScale, ReadOptions};
+use crate::error::{Error, Result};
+use crate::frame::{Frame, FrameSource};
+use crate::sensor::SensorModel;
+use serde::Serialize;
+use std::ops::RangeInclusive;
+use std::path::{Path, PathBuf};
+
+/// How a point-cloud file is read.
+#[derive(Clone, Copy, Debug)]
+pub struct CloudOptions {
+    /// The sensor that recorded the scan.
+    pub sensor: &'static SensorModel,
+    /// The format, when not detected from the file.
+    pub format: Option<Format>,
+    /// Rotation rate in Hz (the firing grid's size).
+    pub rotation_hz: f64,
+}
+
+/// What a point-cloud source held, for the run's summary.json.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct CloudSummary {
+    /// The file's format.
+    pub format: &'static str,
+    /// The sensor model the points were placed on.
+    pub sensor: &'static str,
+    /// Points in the file.
+    pub points: usize,
+    /// True when the lasers come from the file's ring field, false when from the elevation.
+    pub ring_field: bool,
+    /// How the stored intensity was scaled to the sensor's byte.
+    pub intensity_scale: &'static str,
+    /// Rotation rate of the firing grid, Hz.
+    pub rotation_hz: f64,
+    /// Firings in the turn.
+    pub firings: u32,
+    /// Points moved to a neighbouring firing because their own slot was taken.
+    pub moved_to_neighbour_firing: usize,
+    /// Points left sharing a firing slot with another (no free slot within reach).
+    pub sharing_a_slot: usize,
+}
+
+/// One point-cloud file as a frame source.
+pub struct CloudReader {
+    path: PathBuf,
+    options: CloudOptions,
+    format: Format,
+    summary: CloudSummary,
+    done: bool,
+}
+
+impl CloudReader {
+    /// Reads and checks `path` (every point must become a return of the sensor).
+    pub fn open(path: &Path, options: &CloudOptions) -> Result<Self> {
+        let (frame, format, summary) = load(path, options)?;
+        drop(frame);
+        Ok(CloudReader {
+            path: path.to_path_buf(),
+            options: *options,
+            format,
+            summary,
+            done: false,
+        })
+    }
+
+    /// What the file held.
+    pub fn summary(&self) -> &CloudSummary {
+        &self.summary
+    }
+
+    /// The file's format.
+    pub fn format(&self) -> Format {
+        self.format
+    }
+}
+
+/// The file's frame, format and summary.
+fn load(path: &Path, options: &CloudOptions) -> Result<(Frame, Format, CloudSummary)> {
+    let cloud = read_file(
+        path,
+        &ReadOptions {
+            format: options.format,
+            lasers: Some(options.sensor.lasers as u16),
+        },
+    )?;
+    let shown = path.display().to_string();
+    let placed = to_returns(
+        &cloud.points,
+        options.sensor,
+        &ReturnsOptions {
+            rotation_hz: options.rotation_hz,
+            intensity_scale: cloud.info.intensity_scale,
+            start_time: 0.0,
+        },
+        &shown,
+    )?;
+    let summary = CloudSummary {
+        format: cloud.info.format.name(),
+        sensor: options.sensor.name,
+        points: cloud.points.len(),
+        ring_field: cloud.info.fields.ring,
+        intensity_scale: match cloud.info.intensity_scale {
+            IntensityScale::Unit => "0-1, times 255",
+            IntensityScale::Byte => "0-255, as stored",
+            IntensityScale::Unstated => "unstated, as stored (clamped to 0-255)",
+        },
+        rotation_hz: options.rotation_hz,
+        firings: placed.firings,
+        moved_to_neighbour_firing: placed.moved,
+        sharing_a_slot: placed.shared,
+    };
+    if placed.returns.is_empty() {
+        return Err(Error::Invalid(format!("{shown}: the file holds no point")));
+    }
+    let frame = Frame {
+        index: 0,
+        partial: false,
+        returns: placed.returns,
+    };
+    Ok((frame, cloud.info.format, summary))
+}
+
+impl FrameSource for CloudReader {
+    fn next_batch(&mut self, max: usize, frames: &RangeInclusive<u32>) -> Result<Vec<Frame>> {
+        if self.done || max == 0 {
+            return Ok(Vec::new());
+        }
+        self.done = true;
+        if !frames.contains(&0) {
+            return Ok(Vec::new());
+        }
+        let (frame, _, summary) = load(&self.path, &self.options)?;
+        if summary != self.summary {
+            return Err(Error::Invalid(format!(
+                "{}: the file changed while it was being processed",
+                self.path.display()
+            )));
+        }
+        Ok(vec![frame])
+    }
+
+    fn recycle(&mut self, _frame: Frame) {}
+}

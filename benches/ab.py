@@ -8,7 +8,7 @@ only same-load, interleaved runs are comparable.
 PAUSE=SECONDS sleeps before each run: on a VM that hands freed memory back to its host
 (free page reporting, about every 2 s), a run started after a pause gets memory the host
 must supply again, as a single run from a script does; back-to-back runs mostly reuse
-memory the last run freed (README, "Benchmarks": transparent huge pages).
+memory the last run freed (manual, "Benchmark history": huge pages).
 """
 import subprocess, time, os, sys, resource
 bins = sys.argv[1].split(',')

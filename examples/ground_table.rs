@@ -1,5 +1,5 @@
 //! Prints ground precision and recall of every ground method on the preset scenes and
-//! randomized scenes under clean, rain, occlusion and paper noise (the README's table).
+//! randomized scenes under clean, rain, occlusion and paper noise (the manual's table, "Ground removal").
 //!
 //! `cargo run --release --example ground_table [SEED...]`; without seeds, the test seeds
 //! of `tests/ground_targets.rs`.

@@ -41,7 +41,7 @@ def main(args):
         if config == "paper":
             out.append("### Occlusion (five lasers) and rain (7 mm/h), configs/paper.toml\n")
             out.append("Shares of objects detected relative to the run without noise, "
-                       "mean over noise seeds 1..3; verdict rule in the README.\n")
+                       "mean over noise seeds 1..3; verdict rule on the manual's page Interactions between noise stages.\n")
             out.append("| scenes | ground | band | object-frames | occlusion alone | rain alone "
                        "| both | product | both - product [95 % CI] | verdict |")
             out.append("|---|---|---|---:|---:|---:|---:|---:|---|---|")

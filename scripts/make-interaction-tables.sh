@@ -5,7 +5,7 @@
 # scenes pooled (seeds 7001-7005, as in make-study-tables.sh) and the shared real capture;
 # then the p-diagram sensor stages (configs/pdiagram-sensor.toml) on the same scenes with
 # the default ground method. Noise seeds 1..3.
-# Writes docs/figures/interactions_by_band.md (the README's tables). Run by hand; review
+# Writes docs/figures/interactions_by_band.md (included in the manual's "Interactions between noise stages"). Run by hand; review
 # the diff.
 set -euo pipefail
 cd "$(dirname "$0")/.."

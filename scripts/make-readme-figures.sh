@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Regenerates the README's reference-study figures and tables (docs/figures/) from the
+# Regenerates the manual's reference-study figures and tables (docs/figures/) from the
 # crossroad fixture and the shared capture. Run by hand; review the diff before committing.
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Regenerates the README's sensor-factor figures (docs/figures/sensor_*.png): one sweep
+# Regenerates the manual's sensor-factor figures (docs/figures/sensor_*.png): one sweep
 # per p-diagram part 1 stage over one of its magnitudes, on the crossroad fixture with
 # configs/clear.toml as the base (the stage is added by the --vary shorthand, its other
 # options at their defaults), seeds 1..3. Run by hand; review the diff before committing.

@@ -3,7 +3,7 @@
 # the object metrics by distance band, for every ground method, on the crossroad and parking
 # fixtures, five randomized street scenes (seeds 7001-7005: neither the ground method's
 # tuning seeds 1-6 nor its test seeds) and the shared real capture. Seeds 1..3 of the noise.
-# Writes docs/figures/study_by_band.md (the README's table). Run by hand; review the diff.
+# Writes docs/figures/study_by_band.md (included in the manual's "The reference study, reproduced"). Run by hand; review the diff.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --quiet --release --bin lidar-noise

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Regenerates the README's weather figures and table (issue 12, p-diagram 11):
+# Regenerates the manual's weather figures and table (p-diagram 11):
 # - docs/figures/weather_fog_visibility_m_detected_share.png: fog at MOR 50-1000 m;
 # - docs/figures/weather_rain_rate_mm_h_detected_share.png: rain (the default model, mie) at 0.5-30 mm/h;
 # - docs/figures/fog_sensitivity.md: how the fog results move with the overlap model

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Formats the reference-study tables of the README from sweep aggregate.csv files.
+"""Formats the reference-study tables of the manual from sweep aggregate.csv files.
 
 Usage: study_table.py NAME=DIR [NAME=DIR ...]
 Each DIR is a sweep over --vary ground.method=... --vary occlusion=on,off

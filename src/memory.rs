@@ -8,7 +8,7 @@
 /// fault also waits for the host: `run` on the shared capture, started after two idle
 /// seconds, took 122-137 ms (median) instead of 72-78 ms with 4 KB pages. Started back
 /// to back, huge pages were faster by up to 6 %; the opt-out trades that for run times
-/// that do not depend on the host's memory (README, "Benchmarks"). mimalloc is built
+/// that do not depend on the host's memory (manual, "Benchmarks"). mimalloc is built
 /// without its own request for them (its `no_thp` feature: it used to `madvise` its
 /// whole arena); this covers kernels whose policy gives them to every process.
 pub fn no_transparent_huge_pages() {
@@ -89,7 +89,7 @@ pub fn worker_warmup_bytes() -> usize {
 /// `MADV_POPULATE_WRITE` (about 0.8 us a page), they cost the run little time: `run` on
 /// the shared capture, 2 threads, 41 interleaved runs each, median 66.9 -> 66.3 ms and
 /// 68.4 -> 67.9 ms with 12 MB (8 MB: 66.6, 15 MB: 66.7), page faults about 7,000 ->
-/// 2,800-5,300 (README, "Warm worker heaps"). The block stays below mimalloc's largest
+/// 2,800-5,300 (manual, "Benchmark history": "Warm worker heaps"). The block stays below mimalloc's largest
 /// in-segment block (16 MiB): a larger one would be mapped apart and unmapped when freed.
 pub struct HeapWarmer {
     block: Vec<u8>,

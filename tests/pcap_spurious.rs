@@ -106,7 +106,7 @@ fn reported(frames: &[NoisyFrame]) -> BTreeMap<Slot, (u16, u8, f32, Fate)> {
             }
             let slot = (r.packet, r.block, r.laser, r.kind as u8);
             let Some(raw) = wire_distance(f.range[i]) else {
-                continue; // written as no return (README: ranges the wire cannot hold)
+                continue; // written as no return (manual, "Noisy capture out": ranges the wire cannot hold)
             };
             let intensity = f.moved.intensity.as_ref().map_or(r.intensity, |v| v[i]);
             let before = out.insert(slot, (raw, intensity, f.range[i], f.fate[i]));

@@ -11,7 +11,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-/// Exit code of a refused output folder (README, exit codes).
+/// Exit code of a refused output folder (README and manual, exit codes).
 const EXIT_REFUSED: i32 = 3;
 
 fn bin() -> Command {

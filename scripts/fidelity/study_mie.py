@@ -131,7 +131,7 @@ def main():
     p("## Occlusion x rain interaction")
     p()
     p("Shares of objects detected relative to the run without noise, mean over noise seeds "
-      "1..3 (`sweep --interactions`); verdict rule in the README.")
+      "1..3 (`sweep --interactions`); verdict rule on the manual's page Interactions between noise stages.")
     p()
     cols = ["scenes", "ground", "band", "object-frames", "occlusion alone"]
     for what in ("rain alone", "both", "verdict"):

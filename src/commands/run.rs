@@ -95,7 +95,7 @@ pub struct Args {
     #[arg(long, requires = "chunk_frames", conflicts_with = "shard")]
     pub merge: bool,
     /// Also write the capture re-encoded from the noisy returns as DIR/<name>/noisy.pcap
-    /// (see README "Noisy capture out").
+    /// (see the manual, "Noisy capture out").
     #[arg(long)]
     pub pcap_out: bool,
     /// Decoder settings shared by the commands that read captures.

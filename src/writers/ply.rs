@@ -101,7 +101,7 @@ pub enum PlyEncoding {
 /// Property naming of the PLY header.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum PlyStyle {
-    /// The plain names (x, y, z, intensity, ring, ..., as in the README's "Outputs").
+    /// The plain names (x, y, z, intensity, ring, ..., as in the manual's "Outputs").
     #[default]
     Plain,
     /// Every property but `x y z` named `scalar_<name>`: CloudCompare (2.11 at least)

@@ -194,7 +194,7 @@ pub fn same_returns(a: &[lidar_noise::frame::Return], b: &[lidar_noise::frame::R
         })
 }
 
-/// Exit code of a refused output folder (README, exit codes).
+/// Exit code of a refused output folder (README and manual, exit codes).
 pub const EXIT_REFUSED: i32 = 3;
 
 /// The `lidar-noise` binary on two worker threads.

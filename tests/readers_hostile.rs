@@ -445,3 +445,85 @@ fn a_las_header_claiming_more_points_than_the_file_holds_is_named() {
         "{text}"
     );
 }
+
+/// The data records of `pcap` reordered: those whose first block's azimuth lies in
+/// [0, 60) degrees alternate with those in [270, 360), each payload's timestamp rewritten
+/// to rise in record order (an in-order clock, as a capture of interleaved packets merged
+/// by arrival time has).
+fn alternating(pcap: &[u8]) -> Vec<u8> {
+    let (header, recs) = records(pcap);
+    let data: Vec<&[u8]> = recs
+        .iter()
+        .map(|(_, r)| *r)
+        .filter(|r| r.len() == 16 + 42 + 1206)
+        .collect();
+    let azimuth = |r: &[u8]| u16::from_le_bytes([r[16 + 42 + 2], r[16 + 42 + 3]]);
+    let a: Vec<&[u8]> = data.iter().copied().filter(|r| azimuth(r) < 6000).collect();
+    let b: Vec<&[u8]> = data
+        .iter()
+        .copied()
+        .filter(|r| azimuth(r) >= 27000)
+        .collect();
+    let mut out = header.to_vec();
+    let mut ts = 1_000_000u32;
+    for (x, y) in a.iter().zip(&b) {
+        for r in [x, y] {
+            let mut r = r.to_vec();
+            r[16 + 42 + 1200..16 + 42 + 1204].copy_from_slice(&ts.to_le_bytes());
+            ts += 553;
+            out.extend_from_slice(&r);
+        }
+    }
+    out
+}
+
+#[test]
+fn alternating_azimuths_are_reported_as_short_frames() {
+    // Issue 30, defect 6: alternating azimuths gave 1,201 frames without a word.
+    let original = std::fs::read(fixture("crossroad.pcap")).unwrap();
+    let summary = |bytes: Vec<u8>| {
+        let mut reader = FrameReader::from_bytes(
+            Arc::from(bytes),
+            Path::new("c.pcap"),
+            &DecoderOptions::default(),
+        )
+        .unwrap();
+        for f in reader.by_ref() {
+            f.unwrap();
+        }
+        reader.summary()
+    };
+    let clean = summary(original.clone());
+    assert_eq!(clean.short_frames, 0);
+    let mixed = alternating(&original);
+    let s = summary(mixed.clone());
+    assert_eq!(
+        s.clock_backward_steps, 0,
+        "the clock was meant to run forward"
+    );
+    // One frame a jump, most far shorter than a turn (the fixture holds about 30 pairs).
+    assert!(
+        s.short_frames > 10 && 2 * s.short_frames >= u64::from(s.full_frames),
+        "{} short frames of {}",
+        s.short_frames,
+        s.full_frames
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("alt.pcap");
+    std::fs::write(&path, &mixed).unwrap();
+    let o = bin()
+        .args(["run", "--no-ply", "-o"])
+        .arg(dir.path().join("out"))
+        .arg(&path)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains(&format!(
+            "{} frames between the first and the last",
+            s.short_frames
+        )) && err.contains("azimuths jump back"),
+        "{err}"
+    );
+}

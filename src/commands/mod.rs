@@ -63,6 +63,17 @@ pub fn warn_capture(global: Global, path: &Path, s: &CaptureSummary, check_inten
             if s.clock_backward_steps == 1 { "" } else { "s" }
         ));
     }
+    if s.short_frames > 0 {
+        global.warn(&format!(
+            "{}: {} frame{} between the first and the last cover less than nine tenths of a \
+             turn: the azimuths jump back within the capture (interleaved or reordered \
+             packets, or two sensors in one capture), and every jump cuts a frame; sort the \
+             packets by time, or split the capture by sensor, if that was not intended",
+            path.display(),
+            s.short_frames,
+            if s.short_frames == 1 { "" } else { "s" }
+        ));
+    }
     let dead = s.dead_lasers();
     if !dead.is_empty() {
         global.warn(&format!(

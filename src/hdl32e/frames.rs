@@ -100,6 +100,11 @@ pub struct CaptureSummary {
     /// reports when 0.
     #[serde(skip_serializing_if = "is_zero")]
     pub duplicate_packets: u64,
+    /// Frames between the first and the last that cover less than nine tenths of a turn:
+    /// the azimuths jumped back within the capture (interleaved or reordered packets, two
+    /// sensors in one capture), so each jump cut a frame. Left out of reports when 0.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub short_frames: u64,
     /// Decoder counters.
     pub decode: DecodeCounts,
     /// Container-level counters (records, fragments, truncation).
@@ -392,6 +397,7 @@ impl FrameReader {
                 duration_s: 0.0,
                 clock_backward_steps: 0,
                 duplicate_packets: 0,
+                short_frames: 0,
                 decode: DecodeCounts::default(),
                 capture: CaptureStats::default(),
                 returns_per_laser: vec![0; packet::LASERS],
@@ -519,6 +525,12 @@ impl FrameReader {
         let first_ok = b.frame.index > 0 || b.first_rel <= b.first_step.max(1);
         let last_ok = !last || b.last_rel + b.last_step.max(1) >= 36000;
         b.frame.partial = !(first_ok && last_ok);
+        // A middle frame (its start came from a wrap, its end from the next) covers about a
+        // turn; far less means the azimuths jumped back (see `short_frames`).
+        let covered = (b.last_rel + b.last_step.max(1)).saturating_sub(b.first_rel);
+        if b.frame.index > 0 && !last && covered < 36000 * 9 / 10 {
+            self.summary.short_frames += 1;
+        }
         if b.frame.partial {
             self.summary.partial_frames += 1;
         } else {

@@ -34,6 +34,20 @@ fn write_pcd_bin(frame: &Frame, path: &Path) {
     std::fs::write(path, bytes).unwrap();
 }
 
+/// The frame as a KITTI `.bin`: x y z reflectance 0-1, float32 little-endian.
+fn write_kitti_bin(frame: &Frame, path: &Path) {
+    let bytes: Vec<u8> = frame
+        .returns
+        .iter()
+        .flat_map(|r| {
+            [r.x, r.y, r.z, f32::from(r.intensity) / 255.0]
+                .into_iter()
+                .flat_map(f32::to_le_bytes)
+        })
+        .collect();
+    std::fs::write(path, bytes).unwrap();
+}
+
 fn totals(summary: &Path) -> serde_json::Value {
     let v: serde_json::Value = serde_json::from_slice(&std::fs::read(summary).unwrap()).unwrap();
     v["totals"]["noise"].clone()
@@ -140,16 +154,7 @@ fn what_a_scan_cannot_do_is_refused_before_anything_is_written() {
     refused(&scan, &["--frames", "3"], "a point-cloud scan is one frame");
     // KITTI scans come from an HDL-64E: said, not guessed.
     let kitti = dir.path().join("000000.bin");
-    let bytes: Vec<u8> = frame
-        .returns
-        .iter()
-        .flat_map(|r| {
-            [r.x, r.y, r.z, f32::from(r.intensity) / 255.0]
-                .into_iter()
-                .flat_map(f32::to_le_bytes)
-        })
-        .collect();
-    std::fs::write(&kitti, &bytes).unwrap();
+    write_kitti_bin(&frame, &kitti);
     refused(&kitti, &[], "HDL-64E");
     // A damaged file and a ring the sensor does not have: the file and the place.
     let cut = dir.path().join("cut.pcd.bin");
@@ -167,16 +172,7 @@ fn a_kitti_scan_said_to_be_from_an_hdl32e_runs() {
     let dir = tempfile::tempdir().unwrap();
     let frame = fixture_frame(1);
     let kitti = dir.path().join("000001.bin");
-    let bytes: Vec<u8> = frame
-        .returns
-        .iter()
-        .flat_map(|r| {
-            [r.x, r.y, r.z, f32::from(r.intensity) / 255.0]
-                .into_iter()
-                .flat_map(f32::to_le_bytes)
-        })
-        .collect();
-    std::fs::write(&kitti, &bytes).unwrap();
+    write_kitti_bin(&frame, &kitti);
     let out = dir.path().join("out");
     bin2()
         .args(["--quiet", "run"])

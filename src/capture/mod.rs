@@ -79,6 +79,11 @@ const MAGICS: [[u8; 4]; 5] = [
     [0x0a, 0x0d, 0x0d, 0x0a],
 ];
 
+/// True when `head` starts like a pcap or pcapng file.
+pub fn starts_like_capture(head: &[u8]) -> bool {
+    head.get(..4).is_some_and(|h| MAGICS.iter().any(|m| h == m))
+}
+
 /// The message for a stream that does not start like a capture.
 const NOT_A_CAPTURE: &str = "not a pcap or pcapng capture (unknown file header); \
                              record the sensor with tcpdump, Wireshark or VeloView";

@@ -162,14 +162,7 @@ fn cloud_format(path: &Path) -> Option<crate::cloud::Format> {
     let mut head = Vec::with_capacity(4096);
     let file = std::fs::File::open(path).ok()?;
     file.take(4096).read_to_end(&mut head).ok()?;
-    const CAPTURE_MAGIC: [[u8; 4]; 5] = [
-        [0xd4, 0xc3, 0xb2, 0xa1],
-        [0xa1, 0xb2, 0xc3, 0xd4],
-        [0x4d, 0x3c, 0xb2, 0xa1],
-        [0xa1, 0xb2, 0x3c, 0x4d],
-        [0x0a, 0x0d, 0x0d, 0x0a],
-    ];
-    if head.len() >= 4 && CAPTURE_MAGIC.iter().any(|m| head[..4] == m[..]) {
+    if crate::capture::starts_like_capture(&head) {
         return None;
     }
     crate::cloud::detect(path, &head).ok()

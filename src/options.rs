@@ -60,9 +60,10 @@ impl DecoderArgs {
 /// Point-cloud output settings shared by `run` and `convert`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct FrameOutputArgs {
-    /// Point-cloud file format of each frame.
-    #[arg(long, value_enum, default_value_t = FrameFormat::Ply)]
-    pub format: FrameFormat,
+    /// Point-cloud file format of each frame [default: ply; `run` writes a point-cloud
+    /// scan back in its own format unless this is given].
+    #[arg(long, value_enum)]
+    pub format: Option<FrameFormat>,
     /// Write ASCII PLY instead of binary little-endian (PLY only).
     #[arg(long)]
     pub ascii: bool,
@@ -75,7 +76,8 @@ pub struct FrameOutputArgs {
 impl FrameOutputArgs {
     /// Checks the combination and returns the writer settings.
     pub fn to_output(&self) -> Result<FrameOutput> {
-        if self.format != FrameFormat::Ply {
+        let format = self.format.unwrap_or(FrameFormat::Ply);
+        if format != FrameFormat::Ply {
             if self.ascii {
                 return Err(Error::Invalid(
                     "--ascii applies to --format ply only".to_string(),
@@ -88,7 +90,7 @@ impl FrameOutputArgs {
             }
         }
         Ok(FrameOutput {
-            format: self.format,
+            format,
             encoding: if self.ascii {
                 PlyEncoding::Ascii
             } else {

@@ -117,7 +117,8 @@ fn the_summary_says_how_the_scan_was_placed_on_the_sensor() {
     // nuScenes spins at 20 Hz: half the HDL-32E's 2,170 firings a turn at 10 Hz.
     assert_eq!(s["rotation_hz"], 20.0);
     assert_eq!(s["firings"], 1085);
-    assert!(out.join("t/frame_00000.ply").exists());
+    // Written back in its own format by default.
+    assert!(out.join("t/frame_00000.pcd.bin").exists());
 }
 
 /// Runs `args` on `scan`, expects exit 1 with `what` in the message and no output folder.
@@ -187,4 +188,151 @@ fn a_kitti_scan_said_to_be_from_an_hdl32e_runs() {
     assert_eq!(v["capture_summary"]["ring_field"], false);
     assert_eq!(v["capture_summary"]["intensity_scale"], "0-1, times 255");
     assert_eq!(v["totals"]["noise"]["returns_in"], frame.returns.len());
+}
+
+/// The float32 records of a scan file (`fields` floats a point).
+fn floats(path: &Path, fields: usize) -> Vec<Vec<f32>> {
+    let bytes = std::fs::read(path).unwrap();
+    assert_eq!(bytes.len() % (4 * fields), 0);
+    bytes
+        .chunks_exact(4 * fields)
+        .map(|c| {
+            c.chunks_exact(4)
+                .map(|v| f32::from_le_bytes(v.try_into().unwrap()))
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn a_scan_is_written_back_in_its_own_format_in_input_order_with_its_fates() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("s.pcd.bin");
+    write_pcd_bin(&fixture_frame(1), &scan);
+    let input = floats(&scan, 5);
+    let out = dir.path().join("out");
+    bin2()
+        .args(["--quiet", "run"])
+        .arg(&scan)
+        .args(["-c", "configs/clear.toml", "-o"])
+        .arg(&out)
+        .assert()
+        .success();
+    let written = floats(&out.join("s/frame_00000.pcd.bin"), 5);
+    assert!(!out.join("s/frame_00000.ply").exists());
+    let fates = std::fs::read_to_string(out.join("s/frame_00000.fate.csv")).unwrap();
+    let mut lines = fates.lines();
+    assert_eq!(
+        lines.next(),
+        Some("point,fate,cause,range_clean,ground,cluster")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), written.len());
+    let kept = totals(&out.join("s/summary.json"))["returns_out"]
+        .as_u64()
+        .unwrap();
+    assert_eq!(written.len() as u64, kept);
+    assert!(
+        written.len() < input.len(),
+        "clear.toml drops the weakest returns"
+    );
+    // No noise in clear.toml: every kept point is its input point, bit for bit, and the
+    // points keep the input's order.
+    let mut last = -1i64;
+    for (row, p) in rows.iter().zip(&written) {
+        let i: i64 = row[0].parse().unwrap();
+        assert!(i > last, "input order: {i} after {last}");
+        last = i;
+        assert_eq!(row[1], "0", "fate kept");
+        assert_eq!(p, &input[i as usize], "point {i}");
+    }
+    // --format ply writes the usual frame file instead.
+    let ply = dir.path().join("ply");
+    bin2()
+        .args(["--quiet", "run"])
+        .arg(&scan)
+        .args(["--format", "ply", "-o"])
+        .arg(&ply)
+        .assert()
+        .success();
+    assert!(ply.join("s/frame_00000.ply").exists());
+    assert!(!ply.join("s/frame_00000.pcd.bin").exists());
+}
+
+#[test]
+fn a_kitti_scan_comes_back_as_kitti_with_reflectance_from_0_to_1() {
+    let dir = tempfile::tempdir().unwrap();
+    let frame = fixture_frame(1);
+    let kitti = dir.path().join("000002.bin");
+    write_kitti_bin(&frame, &kitti);
+    let input = floats(&kitti, 4);
+    let out = dir.path().join("out");
+    bin2()
+        .args(["--quiet", "run"])
+        .arg(&kitti)
+        .args(["--sensor", "hdl32e", "-c", "configs/clear.toml", "-o"])
+        .arg(&out)
+        .assert()
+        .success();
+    let written = floats(&out.join("000002/frame_00000.bin"), 4);
+    let fates = std::fs::read_to_string(out.join("000002/frame_00000.fate.csv")).unwrap();
+    for (line, p) in fates.lines().skip(1).zip(&written) {
+        let i: usize = line.split(',').next().unwrap().parse().unwrap();
+        assert_eq!(p, &input[i], "point {i}");
+        assert!((0.0..=1.0).contains(&p[3]));
+    }
+}
+
+#[test]
+fn every_format_written_reads_back_as_written() {
+    use lidar_noise::cloud::{read_bytes, Format, ReadOptions};
+    use lidar_noise::writers::scan::{Scan, ScanPoint};
+    use lidar_noise::writers::Output;
+    let points: Vec<ScanPoint> = (0..5u16)
+        .map(|k| ScanPoint {
+            x: 1.5 + f32::from(k),
+            y: -2.25,
+            z: 0.125 * f32::from(k),
+            intensity: (40 * k) as u8,
+            ring: 31 - k,
+            point: Some(u32::from(k)),
+            fate: 0,
+            cause: 255,
+            range_clean: 1.0,
+            ground: 0,
+            cluster: -1,
+        })
+        .collect();
+    for (format, name) in [
+        (Format::Kitti, "a.bin"),
+        (Format::NuScenes, "a.pcd.bin"),
+        (Format::Pcd, "a.pcd"),
+        (Format::Csv, "a.csv"),
+    ] {
+        let mut bytes = Vec::new();
+        Scan {
+            format,
+            points: &points,
+        }
+        .write_to(&mut bytes)
+        .unwrap();
+        let cloud = read_bytes(&bytes, Path::new(name), &ReadOptions::default()).unwrap();
+        assert_eq!(cloud.info.format, format);
+        assert_eq!(cloud.points.len(), points.len());
+        for (got, want) in cloud.points.iter().zip(&points) {
+            assert_eq!((got.x, got.y, got.z), (want.x, want.y, want.z), "{name}");
+            let intensity = if format == Format::Kitti {
+                got.intensity * 255.0
+            } else {
+                got.intensity
+            };
+            assert!(
+                (intensity - f32::from(want.intensity)).abs() < 1e-3,
+                "{name}"
+            );
+            if format != Format::Kitti {
+                assert_eq!(got.ring, Some(want.ring), "{name}");
+            }
+        }
+    }
 }

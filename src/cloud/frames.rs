@@ -56,12 +56,14 @@ pub struct CloudReader {
     format: Format,
     summary: CloudSummary,
     done: bool,
+    /// Input index of each return of the frame handed out (empty before).
+    order: Vec<u32>,
 }
 
 impl CloudReader {
     /// Reads and checks `path` (every point must become a return of the sensor).
     pub fn open(path: &Path, options: &CloudOptions) -> Result<Self> {
-        let (frame, format, summary) = load(path, options)?;
+        let (frame, format, summary, _) = load(path, options)?;
         drop(frame);
         Ok(CloudReader {
             path: path.to_path_buf(),
@@ -69,6 +71,7 @@ impl CloudReader {
             format,
             summary,
             done: false,
+            order: Vec::new(),
         })
     }
 
@@ -81,10 +84,15 @@ impl CloudReader {
     pub fn format(&self) -> Format {
         self.format
     }
+
+    /// The input point index of each return of the frame handed out, in return order.
+    pub fn order(&self) -> &[u32] {
+        &self.order
+    }
 }
 
 /// The file's frame, format and summary.
-fn load(path: &Path, options: &CloudOptions) -> Result<(Frame, Format, CloudSummary)> {
+fn load(path: &Path, options: &CloudOptions) -> Result<(Frame, Format, CloudSummary, Vec<u32>)> {
     let cloud = read_file(
         path,
         &ReadOptions {
@@ -126,7 +134,7 @@ fn load(path: &Path, options: &CloudOptions) -> Result<(Frame, Format, CloudSumm
         partial: false,
         returns: placed.returns,
     };
-    Ok((frame, cloud.info.format, summary))
+    Ok((frame, cloud.info.format, summary, placed.order))
 }
 
 impl FrameSource for CloudReader {
@@ -138,13 +146,14 @@ impl FrameSource for CloudReader {
         if !frames.contains(&0) {
             return Ok(Vec::new());
         }
-        let (frame, _, summary) = load(&self.path, &self.options)?;
+        let (frame, _, summary, order) = load(&self.path, &self.options)?;
         if summary != self.summary {
             return Err(Error::Invalid(format!(
                 "{}: the file changed while it was being processed",
                 self.path.display()
             )));
         }
+        self.order = order;
         Ok(vec![frame])
     }
 

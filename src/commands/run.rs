@@ -12,6 +12,7 @@ use crate::pipeline::report::{
 };
 use crate::pipeline::{FrameResult, Pipeline};
 use crate::writers::ply::{PlyColumns, PlyFrame};
+use crate::writers::scan::ScanPoint;
 use crate::writers::staging::{self, OutputFolder};
 use crate::writers::{write_file, FrameOutput};
 use anyhow::{Context, Result};
@@ -114,6 +115,8 @@ pub(super) struct Plan {
     pub(super) output: FrameOutput,
     pub(super) linkage: bool,
     pub(super) pcap_out: bool,
+    /// Point-cloud scans are written back in their own format (no `--format` given).
+    pub(super) native: bool,
 }
 
 /// The per-capture summary written as summary.json.
@@ -244,6 +247,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         output: args.output_format.to_output()?,
         linkage: args.linkage_out,
         pcap_out: args.pcap_out,
+        native: args.output_format.format.is_none(),
     };
     super::check_stdin_once(&args.captures)?;
     if plan.pcap_out {
@@ -448,7 +452,20 @@ pub(super) fn run_settings(plan: &Plan, source: &str) -> serde_json::Value {
 /// True for the names `run` writes in a capture folder (for folders without a manifest).
 pub(super) fn is_run_output(name: &str) -> bool {
     matches!(name, "summary.json" | "clusters.json" | "clusters.csv")
-        || numbered(name, "frame_", &[".ply", ".las", ".laz"])
+        || numbered(
+            name,
+            "frame_",
+            &[
+                ".ply",
+                ".las",
+                ".laz",
+                ".pcd.bin",
+                ".bin",
+                ".pcd",
+                ".csv",
+                ".fate.csv",
+            ],
+        )
         || numbered(name, "linkage_", &[".csv"])
 }
 
@@ -528,12 +545,20 @@ fn run_capture(
     } else {
         None
     };
-    let work = |f: Frame| -> Result<(SpoolEntry, Vec<crate::frame::Return>)> {
+    // A scan written back in its own format replaces the frame file.
+    let native = plan.native && plan.ply && matches!(reader, Source::Cloud(_));
+    let work = |f: Frame| -> Result<(SpoolEntry, Vec<crate::frame::Return>, Vec<ScanPoint>)> {
         let result = plan.pipeline.process(f)?;
         if let Some(p) = &pcap {
             p.encode_frame(&result.noisy);
         }
-        frame_outputs(plan, result, source, dir, inputs)
+        let rows = if native {
+            scan_points(&result)
+        } else {
+            Vec::new()
+        };
+        let (entry, returns) = frame_outputs(plan, result, source, dir, inputs, !native)?;
+        Ok((entry, returns, rows))
     };
     // Frames arrive here in order: the noisy capture can be written up to this one.
     let mut done = |entry: SpoolEntry| -> Result<()> {
@@ -546,17 +571,26 @@ fn run_capture(
     };
     let warmup = crate::memory::worker_warmup_bytes();
     match &mut reader {
-        Source::Capture(r) => {
-            stream_frames(&mut **r, &plan.frames, warmup, work, |(e, returns), r| {
+        Source::Capture(r) => stream_frames(
+            &mut **r,
+            &plan.frames,
+            warmup,
+            work,
+            |(e, returns, _), r| {
                 r.recycle(Frame {
                     returns,
                     ..Frame::default()
                 });
                 done(e)
-            })?
-        }
+            },
+        )?,
         Source::Cloud(r) => {
-            stream_frames(r, &plan.frames, warmup, work, |(e, _), _| done(e))?;
+            stream_frames(r, &plan.frames, warmup, work, |(e, _, rows), r| {
+                if native {
+                    write_scan(r, rows, e.report.index, dir, inputs)?;
+                }
+                done(e)
+            })?;
         }
     }
     progress.finish_and_clear();
@@ -730,6 +764,7 @@ pub(super) fn frame_outputs(
     source: &str,
     dir: &Path,
     inputs: &[&Path],
+    frame_file: bool,
 ) -> Result<(SpoolEntry, Vec<crate::frame::Return>)> {
     let clusters = FrameClusters {
         index: result.noisy.index,
@@ -740,7 +775,7 @@ pub(super) fn frame_outputs(
     // `crate::par::join`); the frame file's error comes first, as when they run in turn.
     let (ply, reports) = crate::par::join(
         || {
-            if plan.ply {
+            if plan.ply && frame_file {
                 write_ply(plan, r, source, dir, inputs)?;
             }
             Ok::<(), anyhow::Error>(())
@@ -1206,6 +1241,67 @@ fn write_ply(
 }
 
 /// Range of return `i` before noise: 0 for a return a stage added (it has no clean origin).
+/// The kept returns of a processed scan as points to write back (`point` is the return's
+/// index in the frame until [`write_scan`] maps it to the input's).
+fn scan_points(r: &FrameResult) -> Vec<ScanPoint> {
+    r.kept
+        .iter()
+        .zip(&r.survivors)
+        .zip(r.ground.iter().zip(&r.labels))
+        .map(|((&k, s), (&g, &cluster))| {
+            let k = k as usize;
+            ScanPoint {
+                x: s.x,
+                y: s.y,
+                z: s.z,
+                intensity: s.intensity,
+                ring: u16::from(s.ring),
+                point: (k < r.noisy.clean_len).then_some(k as u32),
+                fate: r.noisy.fate[k] as u8,
+                cause: r.noisy.cause[k],
+                range_clean: clean_range(r, k),
+                ground: u8::from(g),
+                cluster,
+            }
+        })
+        .collect()
+}
+
+/// Writes frame `index` of a scan back in the scan's own format, in the input's point
+/// order (echoes the noise added after the recorded points), with its sidecar of fates.
+fn write_scan(
+    reader: &CloudReader,
+    mut rows: Vec<ScanPoint>,
+    index: u32,
+    dir: &Path,
+    inputs: &[&Path],
+) -> Result<()> {
+    use crate::writers::scan::{extension, Fates, Scan};
+    let order = reader.order();
+    for p in &mut rows {
+        p.point = p.point.and_then(|k| order.get(k as usize).copied());
+    }
+    // Recorded points in input order, then added echoes in return order (stable).
+    rows.sort_by_key(|p| p.point.map_or((1, 0), |i| (0, i)));
+    let format = reader.format();
+    let stem = format!("frame_{index:05}");
+    let scan = Scan {
+        format,
+        points: &rows,
+    };
+    write_file(
+        &scan,
+        &dir.join(format!("{stem}.{}", extension(format))),
+        inputs,
+    )?;
+    write_file(
+        &Fates { points: &rows },
+        &dir.join(format!("{stem}.fate.csv")),
+        inputs,
+    )?;
+    Ok(())
+}
+
 fn clean_range(r: &FrameResult, i: usize) -> f32 {
     if i < r.noisy.clean_len {
         r.noisy.clean[i].range

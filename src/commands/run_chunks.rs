@@ -426,7 +426,7 @@ fn compute_unit(
     let (mut summary, mut clusters, mut csv) = (Vec::new(), Vec::new(), Vec::new());
     let work = |f: crate::frame::Frame| {
         let result = plan.pipeline.process(f)?;
-        single::frame_outputs(plan, result, &job.source, dir, inputs)
+        single::frame_outputs(plan, result, &job.source, dir, inputs, true)
     };
     let warmup = crate::memory::worker_warmup_bytes();
     single::stream_frames(

@@ -13,6 +13,7 @@ pub mod las;
 pub mod pcap;
 pub mod ply;
 pub mod png;
+pub mod scan;
 pub mod staging;
 
 use crate::error::Result;

@@ -1,0 +1,133 @@
+//! A noisy point-cloud scan written back in the format it was read from (KITTI `.bin`,
+//! nuScenes `.pcd.bin`, PCD, CSV), with a per-point sidecar CSV saying what became of each
+//! point (issue 31, "Outputs in the input's own format and layout"): a detector trained on
+//! the dataset reads the noisy scan as it reads the clean one.
+//!
+//! Layouts, as the readers of `crate::cloud` read them: KITTI x y z reflectance (float32
+//! LE, reflectance = byte / 255), nuScenes x y z intensity ring (float32 LE), PCD 0.7
+//! `DATA binary` with fields x y z intensity ring (F4, F4, F4, F4, U2), CSV with the
+//! header `x,y,z,intensity,ring`.
+
+use super::Output;
+use crate::cloud::Format;
+use std::io::Write;
+
+/// One point of a noisy scan and what became of it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScanPoint {
+    /// Position after noise, metres.
+    pub x: f32,
+    /// y, metres.
+    pub y: f32,
+    /// z, metres.
+    pub z: f32,
+    /// The intensity byte after noise.
+    pub intensity: u8,
+    /// Ring (0 = lowest beam).
+    pub ring: u16,
+    /// Index of the point in the input scan (`None` for an echo the noise added).
+    pub point: Option<u32>,
+    /// Fate code (see summary.json's `fate_codes`).
+    pub fate: u8,
+    /// Stage index that decided the fate (255: none).
+    pub cause: u8,
+    /// Range before noise, metres (0 for an added echo).
+    pub range_clean: f32,
+    /// 1 when ground removal labelled it ground.
+    pub ground: u8,
+    /// Cluster id (-1: ground or noise).
+    pub cluster: i32,
+}
+
+/// The noisy scan in `format`.
+pub struct Scan<'a> {
+    /// The format written.
+    pub format: Format,
+    /// The points, in the order written.
+    pub points: &'a [ScanPoint],
+}
+
+/// File name extension of a scan written in `format`.
+pub fn extension(format: Format) -> &'static str {
+    match format {
+        Format::Kitti => "bin",
+        Format::NuScenes => "pcd.bin",
+        Format::Pcd => "pcd",
+        Format::Csv => "csv",
+    }
+}
+
+impl Output for Scan<'_> {
+    fn extension(&self) -> &'static str {
+        extension(self.format)
+    }
+
+    fn write_to(&self, out: &mut dyn Write) -> std::io::Result<()> {
+        match self.format {
+            Format::Kitti => {
+                for p in self.points {
+                    for v in [p.x, p.y, p.z, f32::from(p.intensity) / 255.0] {
+                        out.write_all(&v.to_le_bytes())?;
+                    }
+                }
+            }
+            Format::NuScenes => {
+                for p in self.points {
+                    for v in [p.x, p.y, p.z, f32::from(p.intensity), f32::from(p.ring)] {
+                        out.write_all(&v.to_le_bytes())?;
+                    }
+                }
+            }
+            Format::Pcd => {
+                let n = self.points.len();
+                write!(
+                    out,
+                    "# .PCD v0.7 - lidar-noise\nVERSION 0.7\nFIELDS x y z intensity ring\n\
+                     SIZE 4 4 4 4 2\nTYPE F F F F U\nCOUNT 1 1 1 1 1\nWIDTH {n}\nHEIGHT 1\n\
+                     VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA binary\n"
+                )?;
+                for p in self.points {
+                    for v in [p.x, p.y, p.z, f32::from(p.intensity)] {
+                        out.write_all(&v.to_le_bytes())?;
+                    }
+                    out.write_all(&p.ring.to_le_bytes())?;
+                }
+            }
+            Format::Csv => {
+                writeln!(out, "x,y,z,intensity,ring")?;
+                for p in self.points {
+                    writeln!(out, "{},{},{},{},{}", p.x, p.y, p.z, p.intensity, p.ring)?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The sidecar CSV: one row per point of the scan written, in the same order.
+pub struct Fates<'a> {
+    /// The points, in the order of the scan written.
+    pub points: &'a [ScanPoint],
+}
+
+/// Header of the sidecar CSV.
+pub const FATES_HEADER: &str = "point,fate,cause,range_clean,ground,cluster";
+
+impl Output for Fates<'_> {
+    fn extension(&self) -> &'static str {
+        "fate.csv"
+    }
+
+    fn write_to(&self, out: &mut dyn Write) -> std::io::Result<()> {
+        writeln!(out, "{FATES_HEADER}")?;
+        for p in self.points {
+            let point = p.point.map_or(-1, i64::from);
+            writeln!(
+                out,
+                "{point},{},{},{},{},{}",
+                p.fate, p.cause, p.range_clean, p.ground, p.cluster
+            )?;
+        }
+        Ok(())
+    }
+}

@@ -401,6 +401,7 @@ pub fn write_outputs(
     captures: &[String],
     rows: &[Row],
     protected: &[&std::path::Path],
+    format: crate::writers::png::FigureFormat,
 ) -> crate::error::Result<Option<(Vec<std::path::PathBuf>, crate::writers::html::Section)>> {
     use crate::writers::heatmap::{heatmap, HeatCell, Heatmap};
     use crate::writers::html::{Figure, Section};
@@ -512,9 +513,13 @@ pub fn write_outputs(
             ],
         };
         std::fs::create_dir_all(dir.join("plots")).map_err(|e| crate::error::Error::io(dir, e))?;
-        let rel = format!("plots/interactions_{}.png", safe(capture));
+        let rel = format!(
+            "plots/interactions_{}.{}",
+            safe(capture),
+            format.extension()
+        );
         let path = dir.join(&rel);
-        heatmap(&map, &path, protected)?;
+        heatmap(&map, &path, protected, format)?;
         written.push(path);
         section.figures.push(Figure {
             src: rel,

@@ -6,7 +6,7 @@ use super::run::{Panel, Row};
 use super::tables::{self, Group};
 use crate::error::{Error, Result};
 use crate::writers::html::{Figure, Link, LinkGroup, Page, Section};
-use crate::writers::png::{self, BirdsEyePanel, LinePlot, Series};
+use crate::writers::png::{self, BirdsEyePanel, FigureFormat, LinePlot, Series};
 use std::path::{Path, PathBuf};
 
 /// The bird's-eye figure to draw.
@@ -431,6 +431,7 @@ fn plot_sections(
     protected: &[&Path],
     written: &mut Vec<PathBuf>,
     titles: &mut Vec<(String, String)>,
+    format: FigureFormat,
 ) -> Result<Vec<Section>> {
     let Some(xi) = x_axis(varies) else {
         return Ok(Vec::new());
@@ -552,9 +553,9 @@ fn plot_sections(
                     continue;
                 }
                 std::fs::create_dir_all(dir.join(&sub)).map_err(|e| Error::io(dir, e))?;
-                let rel = format!("{sub}/{}.png", p.name);
+                let rel = format!("{sub}/{}.{}", p.name, format.extension());
                 let path = dir.join(&rel);
-                png::line_plot(&p.plot, &path, protected)?;
+                png::line_plot(&p.plot, &path, protected, format)?;
                 written.push(path);
                 titles.push((rel.clone(), p.plot.title.clone()));
                 figures[slot].push(Figure {
@@ -625,6 +626,7 @@ fn plot_sections(
 /// Writes every output file into `dir` (a staging folder: it holds only what this call
 /// writes) and returns the paths written; `cells` are the cell files of the sweep
 /// (relative paths, in the final folder), which the page lists too.
+#[allow(clippy::too_many_arguments)]
 pub fn write_outputs(
     dir: &Path,
     varies: &[Vary],
@@ -633,6 +635,7 @@ pub fn write_outputs(
     figure: Option<&BirdsEye>,
     protected: &[&Path],
     cells: &[String],
+    format: FigureFormat,
 ) -> Result<Vec<PathBuf>> {
     let keys: Vec<String> = varies.iter().map(|v| v.key.clone()).collect();
     let mut written = Vec::new();
@@ -715,7 +718,14 @@ pub fn write_outputs(
             f.capture, f.frame, f.seed
         );
         let path = dir.join(&rel);
-        png::birdseye(&title, &panels, f.extent_m, &path, protected)?;
+        png::birdseye(
+            &title,
+            &panels,
+            f.extent_m,
+            &path,
+            protected,
+            FigureFormat::Png,
+        )?;
         written.push(path);
         titles.push((rel.clone(), title.clone()));
         let varied: Vec<&str> = varies.iter().map(|v| v.key.as_str()).collect();
@@ -751,6 +761,7 @@ pub fn write_outputs(
         protected,
         &mut written,
         &mut titles,
+        format,
     )?);
 
     let table = |names: &[String]| {
@@ -841,7 +852,7 @@ pub fn write_outputs(
     }
     if let [vary] = varies {
         if let Some((files, section)) =
-            super::interactions::write_outputs(dir, vary, captures, rows, protected)?
+            super::interactions::write_outputs(dir, vary, captures, rows, protected, format)?
         {
             written.extend(files);
             page.sections.insert(1, section);

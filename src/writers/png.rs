@@ -1189,7 +1189,9 @@ mod tests {
     #[test]
     fn long_text_is_wrapped_not_cut() {
         register_font().unwrap();
-        let detail = "occlusion: lasers 1, 2, 3, 4, 5, 6, 7, 8 from azimuth 10 to 350 degrees,                       overlap 0.9..1.0 of the beam, transmission 0.05, scattering 0.3                       (a dirty lens with a long list of settings)";
+        let detail = "occlusion: lasers 1, 2, 3, 4, 5, 6, 7, 8 from azimuth 10 to 350 degrees, \
+            overlap 0.9..1.0 of the beam, transmission 0.05, scattering 0.3 \
+            (a dirty lens with a long list of settings)";
         let panels: Vec<BirdsEyePanel> = (0..3)
             .map(|i| BirdsEyePanel {
                 title: format!(
@@ -1208,9 +1210,11 @@ mod tests {
             SVGBackend::with_string(&mut svg, layout.size).into_drawing_area(),
         )
         .unwrap();
-        let label = "a legend label naming every other varied value: rain.rate_mm_h=10,                      occlusion on, fog.visibility_m=200";
+        let label = "a legend label naming every other varied value: rain.rate_mm_h=10, \
+            occlusion on, fog.visibility_m=200";
         let plot = LinePlot {
-            title: "Objects detected by distance band (share) - a capture with a very long                     name, so long that the title cannot fit the width of the plot"
+            title: "Objects detected by distance band (share) - a capture with a very long \
+                name, so long that the title cannot fit the width of the plot"
                 .into(),
             series: vec![
                 Series {

@@ -440,11 +440,14 @@ fn x_at(x: &Vary, v: f64) -> String {
     }
 }
 
+/// A point of a line: x, mean, lower and upper bound.
+type Point = (f64, f64, f64, f64);
+
 /// True when two intervals (lo, hi) overlap; `None` when either has no width (one seed
 /// or every seed equal): nothing can be said about the spread.
-fn overlap(a: (f64, f64, f64, f64), b: (f64, f64, f64, f64)) -> Option<bool> {
-    let width = |p: (f64, f64, f64, f64)| p.3 > p.2;
-    (width(a) || width(b)).then(|| a.3 >= b.2 && b.3 >= a.2)
+fn overlap(a: Point, b: Point) -> Option<bool> {
+    let width = |p: Point| p.3 > p.2;
+    (width(a) || width(b)).then_some(a.3 >= b.2 && b.3 >= a.2)
 }
 
 /// One sentence on what to conclude from line plot `plot`, from the values it draws:
@@ -502,7 +505,7 @@ fn conclusion(plot: &LinePlot, kind: Kind, x: &Vary, better: Option<bool>) -> St
         .iter()
         .map(|(_, (_, l))| l.0)
         .fold(f64::NEG_INFINITY, f64::max);
-    let mut at_end: Vec<(&str, (f64, f64, f64, f64))> = lines
+    let mut at_end: Vec<(&str, Point)> = lines
         .iter()
         .filter(|(_, (_, l))| l.0 == xmax)
         .map(|(s, (_, l))| (s.label.as_str(), *l))

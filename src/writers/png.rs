@@ -767,8 +767,9 @@ struct BirdsEyeLayout {
     title: Vec<String>,
     /// Per panel: its title's lines and its detail lines, wrapped.
     heads: Vec<(Vec<String>, Vec<String>)>,
-    /// Height of every panel's head (the tallest one's).
-    head_h: u32,
+    /// Height of the panels' heads, per grid row (the row's tallest head): a row of
+    /// short titles does not leave room for another row's long stage lists.
+    head_h: Vec<u32>,
     size: (u32, u32),
 }
 
@@ -776,8 +777,13 @@ impl BirdsEyeLayout {
     fn title_h(&self) -> u32 {
         12 + BIRDSEYE_TITLE_PX.1 * self.title.len() as u32
     }
-    fn panel_h(&self) -> u32 {
-        self.head_h + PANEL_PLOT_H
+    /// Height of grid row `row`.
+    fn panel_h(&self, row: usize) -> u32 {
+        self.head_h[row] + PANEL_PLOT_H
+    }
+    /// Top of grid row `row`, below the figure's title.
+    fn row_top(&self, row: usize) -> u32 {
+        self.title_h() + (0..row).map(|r| self.panel_h(r)).sum::<u32>()
     }
 }
 
@@ -796,12 +802,20 @@ fn birdseye_layout(title: &str, panels: &[BirdsEyePanel]) -> BirdsEyeLayout {
             (t, d)
         })
         .collect();
-    let head_h = heads
-        .iter()
-        .map(|(t, d)| 8 + PANEL_TITLE_PX.1 * t.len() as u32 + PANEL_DETAIL_PX.1 * d.len() as u32)
-        .max()
-        .unwrap_or(0)
-        + 6;
+    let head_h = (0..rows)
+        .map(|r| {
+            heads
+                .iter()
+                .skip(r * cols)
+                .take(cols)
+                .map(|(t, d)| {
+                    8 + PANEL_TITLE_PX.1 * t.len() as u32 + PANEL_DETAIL_PX.1 * d.len() as u32
+                })
+                .max()
+                .unwrap_or(0)
+                + 6
+        })
+        .collect();
     let mut l = BirdsEyeLayout {
         rows,
         cols,
@@ -810,7 +824,7 @@ fn birdseye_layout(title: &str, panels: &[BirdsEyePanel]) -> BirdsEyeLayout {
         head_h,
         size: (w, 0),
     };
-    l.size.1 = l.title_h() + rows as u32 * l.panel_h() + BIRDSEYE_KEY_H;
+    l.size.1 = l.row_top(rows) + BIRDSEYE_KEY_H;
     l
 }
 
@@ -868,7 +882,7 @@ fn render_birdseye<DB: DrawingBackend>(
         .map_err(draw_err)?;
     }
     let (_, rest) = root.split_vertically(layout.title_h());
-    let (grid, key) = rest.split_vertically(layout.rows as u32 * layout.panel_h());
+    let (grid, key) = rest.split_vertically(layout.row_top(layout.rows) - layout.title_h());
     let axes = Axis {
         lo: -e,
         hi: e,
@@ -881,13 +895,18 @@ fn render_birdseye<DB: DrawingBackend>(
     let small = text_style(PANEL_DETAIL_PX.0)
         .color(&RGBColor(70, 70, 70))
         .pos(Pos::new(HPos::Center, VPos::Top));
-    for ((area, panel), (t, details)) in grid
-        .split_evenly((layout.rows, layout.cols))
+    let xs: Vec<u32> = (1..layout.cols as u32).map(|c| c * PANEL_W).collect();
+    let ys: Vec<u32> = (1..layout.rows)
+        .map(|r| layout.row_top(r) - layout.title_h())
+        .collect();
+    for (k, ((area, panel), (t, details))) in grid
+        .split_by_breakpoints(xs, ys)
         .iter()
         .zip(panels)
         .zip(&layout.heads)
+        .enumerate()
     {
-        let (head, body) = area.split_vertically(layout.head_h);
+        let (head, body) = area.split_vertically(layout.head_h[k / layout.cols]);
         let cx = PANEL_W as i32 / 2;
         let mut y = 6;
         for line in t {
@@ -1024,11 +1043,10 @@ mod tests {
             )
             .unwrap();
             // The grid lies between the title and the key.
-            let top = layout.title_h();
-            let h = layout.panel_h();
             let inked = |k: usize| {
-                let (r, c) = ((k / cols) as u32, (k % cols) as u32);
-                let (x0, y0) = (c * PANEL_W + 20, top + r * h + 20);
+                let (r, c) = (k / cols, (k % cols) as u32);
+                let h = layout.panel_h(r);
+                let (x0, y0) = (c * PANEL_W + 20, layout.row_top(r) + 20);
                 (y0..y0 + h - 40).any(|y| {
                     (x0..x0 + PANEL_W - 40).any(|x| {
                         let i = ((y * size.0 + x) * 3) as usize;

@@ -52,6 +52,7 @@ fn bench(c: &mut Criterion) {
                     None,
                     &[],
                     &[],
+                    lidar_noise::writers::png::FigureFormat::Png,
                 )
                 .unwrap();
                 dir

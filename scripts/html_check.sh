@@ -155,8 +155,15 @@ for width in ("1400", "480"):
             bad.append("image is not a relative path: %s" % ref)
             continue
         try:
-            png_pixels(path)
-        except (OSError, ValueError, zlib.error, KeyError) as e:
+            if path.endswith(".svg"):
+                # --figure-format svg: a well-formed SVG document with a size.
+                import xml.etree.ElementTree as ET
+                svg = ET.parse(path).getroot()
+                if not svg.tag.endswith("svg") or not svg.get("width"):
+                    raise ValueError("not an SVG document with a width")
+            else:
+                png_pixels(path)
+        except (OSError, ValueError, zlib.error, KeyError, SyntaxError) as e:
             bad.append("image %s: %s" % (ref, e))
     for ref in r["hrefs"]:
         path = local(ref)

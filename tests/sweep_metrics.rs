@@ -5,7 +5,7 @@ use lidar_noise::sweep::metrics::{
     ObjectResult, Outcome, ReturnState, Tally,
 };
 use lidar_noise::sweep::run::Row;
-use lidar_noise::sweep::tables::{aggregate, interval, metrics, per_seed, t_quantile};
+use lidar_noise::sweep::tables::{self, aggregate, interval, metrics, per_seed, t_quantile};
 
 fn rule() -> MatchRule {
     MatchRule::default()
@@ -376,6 +376,66 @@ fn aggregation_reduces_each_seed_first() {
     let g = aggregate(&single, &ms);
     let i = g[0].metrics[0].unwrap();
     assert_eq!((i.n, i.lo, i.hi), (1, None, None));
+}
+
+/// A share of 0.984 over three seeds (1, 1, 0.952): the Student t interval reached past 1
+/// ("0.984 [0.943, 1.024]"); the aggregate's percentile bootstrap stays in [0, 1], and
+/// the column dictionary says which method each bound comes from.
+#[test]
+fn share_intervals_stay_in_zero_one_and_the_columns_say_how() {
+    let rows = vec![
+        row(1, 0, 21, 21, 10),
+        row(2, 0, 21, 21, 20),
+        row(3, 0, 21, 20, 60),
+        row(4, 0, 21, 0, 10),
+    ];
+    let ms = metrics(&rows);
+    let at = |name: &str| ms.iter().position(|m| m.name == name).unwrap();
+    let high = aggregate(&rows[..3], &ms);
+    let i = high[0].metrics[at("detected_share")].unwrap();
+    assert!((i.mean - 0.984).abs() < 1e-3, "{i:?}");
+    let (lo, hi) = (i.lo.unwrap(), i.hi.unwrap());
+    assert!(hi <= 1.0 && lo >= 0.0 && lo < i.mean, "{i:?}");
+    // The t interval of the same values is the defect.
+    assert!(interval(&[1.0, 1.0, 20.0 / 21.0]).unwrap().hi.unwrap() > 1.0);
+    // Near 0: two seeds detect none of 21 objects, one 1 of 1000 ("0.001 [-0.001, ...]").
+    let low: Vec<Row> = vec![
+        row(1, 0, 21, 0, 1),
+        row(2, 0, 21, 0, 1),
+        row(3, 0, 1000, 1, 1),
+    ];
+    let g = aggregate(&low, &metrics(&low));
+    let i = g[0].metrics[at("detected_share")].unwrap();
+    assert!(i.lo.unwrap() >= 0.0 && i.hi.unwrap() <= 1.0, "{i:?}");
+    assert!(interval(&[0.0, 0.0, 0.001]).unwrap().lo.unwrap() < 0.0);
+    // Counts keep the Student t interval.
+    let k = high[0].metrics[at("kept")].unwrap();
+    let t = interval(&[10.0, 20.0, 60.0]).unwrap();
+    assert_eq!((k.lo, k.hi), (t.lo, t.hi));
+    // The dictionary: one row per aggregate column, saying what it holds.
+    let keys = vec!["rain.rate_mm_h".to_string()];
+    let dict = String::from_utf8(tables::aggregate_columns_csv(&keys, &ms)).unwrap();
+    let agg = String::from_utf8(tables::aggregate_csv(&keys, &high, &ms)).unwrap();
+    let header = agg.lines().next().unwrap();
+    let mut r = csv::Reader::from_reader(dict.as_bytes());
+    let described: Vec<(String, String)> = r
+        .records()
+        .map(|rec| {
+            let rec = rec.unwrap();
+            (rec[0].to_string(), rec[2].to_string())
+        })
+        .collect();
+    let names: Vec<&str> = described.iter().map(|(c, _)| c.as_str()).collect();
+    assert_eq!(
+        names.join(","),
+        header,
+        "one description per column, in order"
+    );
+    let holds = |c: &str| &described.iter().find(|(n, _)| n == c).unwrap().1;
+    assert!(holds("detected_share_lo").contains("percentile bootstrap over seeds"));
+    assert!(holds("detected_share_hi").contains("percentile bootstrap over seeds"));
+    assert!(holds("kept_hi").contains("Student t"));
+    assert!(holds("ground_recall_lo").contains("bootstrap"));
 }
 
 #[test]

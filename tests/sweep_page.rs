@@ -23,6 +23,10 @@ struct Sweep {
 }
 
 fn sweep() -> Sweep {
+    sweep_with(&[])
+}
+
+fn sweep_with(extra: &[&str]) -> Sweep {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("sweep");
     let o = Command::cargo_bin("lidar-noise")
@@ -41,8 +45,9 @@ fn sweep() -> Sweep {
             "--frames",
             "0..1",
             "--quiet",
-            "-o",
         ])
+        .args(extra)
+        .arg("-o")
         .arg(&dir)
         .output()
         .unwrap();
@@ -364,4 +369,76 @@ fn plots_with_several_lines_are_wider_for_the_legend() {
     let info = decoder.read_info().unwrap();
     let (w, h) = (info.info().width, info.info().height);
     assert!(w > 900 && h == 560, "{w}x{h}");
+}
+
+/// `--figure-format svg` writes the plots and heatmaps as SVG (vector, with their title),
+/// and the page shows those files; the bird's-eye figure stays PNG.
+#[test]
+fn svg_figure_format_writes_svgs_the_page_links() {
+    let s = sweep_with(&["--figure-format", "svg"]);
+    let html = page(&s);
+    let srcs = attributes(&html, "src");
+    let svgs: Vec<&String> = srcs.iter().filter(|p| p.ends_with(".svg")).collect();
+    assert!(svgs.len() >= 10, "{srcs:?}");
+    assert!(
+        srcs.iter()
+            .all(|p| p.ends_with(".svg") || p.contains("birdseye")),
+        "{srcs:?}"
+    );
+    for f in &svgs {
+        let text = std::fs::read_to_string(s.dir.join(f)).unwrap();
+        let doc = roxmltree::Document::parse(&text).unwrap();
+        assert!(doc.root_element().has_tag_name("svg"), "{f}");
+        let title = doc
+            .descendants()
+            .find(|n| n.has_tag_name("title"))
+            .and_then(|n| n.text())
+            .unwrap_or_default();
+        assert!(title.contains("crossroad"), "{f}: title {title:?}");
+    }
+    // No PNG line plots are left behind.
+    let plots = files(&s.dir.join("plots"));
+    assert!(
+        plots
+            .iter()
+            .all(|p| p.ends_with(".svg") || p.contains("birdseye")),
+        "{plots:?}"
+    );
+    // The default stays PNG.
+    let png = sweep();
+    assert!(png.dir.join("plots/crossroad/detected_share.png").is_file());
+}
+
+/// Every figure on the page says in one sentence what to conclude, from its values; the
+/// detected-share plot explains the masking (occlusion on detects more than off at 7
+/// mm/h with paper.toml's range-image ground removal).
+#[test]
+fn every_figure_says_what_to_conclude_and_explains_masking() {
+    let s = sweep();
+    let html = page(&s);
+    let figures: Vec<&str> = html.split("<figure").skip(1).collect();
+    assert!(figures.len() >= 10, "{} figures", figures.len());
+    for f in &figures {
+        let f = &f[..f.find("</figure>").unwrap()];
+        assert!(
+            f.contains("<p class=\"conclusion\">Conclusion: "),
+            "a figure without a conclusion: {f}"
+        );
+    }
+    let detected = figures
+        .iter()
+        .find(|f| f.contains("plots/crossroad/detected_share.png"))
+        .unwrap();
+    assert!(detected.contains("at 7 mm/h"), "{detected}");
+    assert!(detected.contains("Masking:"), "{detected}");
+    assert!(
+        detected.contains("noisiest near-ground rings") && detected.contains("clutter"),
+        "{detected}"
+    );
+    // Where occlusion on does not detect more, no masking is claimed.
+    let merged = figures
+        .iter()
+        .find(|f| f.contains("plots/crossroad/merged_share.png"))
+        .unwrap();
+    assert!(!merged.contains("Masking:"), "{merged}");
 }

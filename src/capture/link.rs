@@ -1,4 +1,23 @@
 //! Link-layer, IPv4 and UDP header parsing: from a captured frame to a UDP payload.
+//!
+//! Hand-written rather than with `etherparse` (0.16, reviewed for issue 33), because:
+//! - **Link types.** Captures come in seven link types here (Ethernet with stacked VLAN
+//!   tags, Linux cooked v1 and v2, raw IP, BSD and OpenBSD loopback); etherparse slices
+//!   Ethernet, Linux cooked v1 and raw IP only, so the dispatch on the link type (and the
+//!   cooked v2 and loopback headers) would stay ours and the crate would replace only the
+//!   IPv4/UDP part below, about 40 lines.
+//! - **Same answers.** On HDL-32E data frames (1248 bytes), 802.1Q-tagged ones, every
+//!   truncation of both (2,502 frames) and a frame with Ethernet padding past the IP
+//!   length, [`parse_frame`] and `SlicedPacket::from_ethernet` give the same ports,
+//!   payload offset and length (fragments and non-UDP refused by both).
+//! - **Cost.** 99 instructions a frame against etherparse's 265 (callgrind, release,
+//!   per-frame difference of 10,000 and 20,000 frames; 25 against 98 ns a frame timed):
+//!   etherparse validates and slices every header it meets (checksums aside), where we
+//!   read the five fields the decoder needs. Per frame of a capture this is small either
+//!   way; the dependency buys nothing we use.
+//!
+//! The measurement is a scratch program outside the repository (our functions copied
+//! beside the crates' calls); the notes of branch h-fig give the commands.
 
 /// What a captured frame turned out to be.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

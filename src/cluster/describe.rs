@@ -1,4 +1,19 @@
 //! Per-cluster report: size, position, boxes, ranges, intensity and lasers.
+//!
+//! The convex hull and the minimum-area rectangle are hand-written rather than taken from
+//! `geo` (0.29, `ConvexHull` and `MinimumRotatedRect`; reviewed for issue 33), because:
+//! - **Same hull, different last bits.** On 2,000 random clusters of 20-620 points
+//!   (f32 coordinates, as cluster members are) geo's hull has the same vertices as ours
+//!   in every case, but its rectangle (corners, from which length, width, centre and yaw
+//!   follow) is bit-identical in none: lengths differ by up to 1.5e-14 m and centres by
+//!   2.8e-14 m. Reports that print full precision (JSON) would change their bytes (the
+//!   golden cluster CSV rounds to 4 decimals, which hides it except at rounding edges),
+//!   and a box exactly at an object-rule threshold could change its verdict.
+//! - **Cost.** 47,000 instructions a cluster (mean 322 points) against geo's 139,000
+//!   (callgrind, release; 24 against 59 microseconds timed): ours drops interior points
+//!   first (Akl-Toussaint) and sorts packed f32 keys, which a general `geo` cannot assume.
+//! - The dependency (geo with geo-types, rstar, robust, i_overlay, spade and more) would be
+//!   the crate's largest for about 150 lines of code that are tested against a reference.
 
 use crate::error::{Error, Result};
 use crate::frame::Return;

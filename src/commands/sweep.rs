@@ -57,6 +57,11 @@ pub struct Args {
     /// Half-width of the bird's-eye view in metres.
     #[arg(long, value_name = "M", default_value_t = 40.0)]
     pub figure_extent: f64,
+    /// File format of the plots and heatmaps: png, or svg (vector, for print; text stays
+    /// text). The bird's-eye figure is always PNG: its tens of thousands of points would
+    /// make an SVG of tens of megabytes.
+    #[arg(long, value_enum, value_name = "FORMAT", default_value = "png")]
+    pub figure_format: crate::writers::png::FigureFormat,
     /// Replace the results of another sweep (other captures, configuration, --vary,
     /// seeds, frames, bands or figure) in the folder as a whole; cells of this sweep are
     /// kept. Files lidar-noise did not write are never deleted (the sweep is refused).
@@ -397,6 +402,7 @@ fn sweep_into(
         figure.as_ref(),
         &protected,
         &cell_files,
+        args.figure_format,
     )?;
     let files: Vec<String> = written
         .iter()

@@ -380,6 +380,45 @@ pub const INTERACTIONS_CSV: &str = "interactions.csv";
 /// The interaction JSON file.
 pub const INTERACTIONS_JSON: &str = "interactions.json";
 
+/// What to conclude from one capture's heatmap: how many cells have each verdict, and
+/// what masking means where it occurs.
+fn verdict_conclusion(rows: &[&InteractionRow]) -> String {
+    let verdicts: Vec<Verdict> = rows
+        .iter()
+        .filter_map(|r| r.result.as_ref().map(|p| p.verdict))
+        .collect();
+    if verdicts.is_empty() {
+        return String::new();
+    }
+    let count: Vec<String> = [
+        Verdict::Compounding,
+        Verdict::Independent,
+        Verdict::Masking,
+        Verdict::Unclear,
+    ]
+    .iter()
+    .map(|v| (v, verdicts.iter().filter(|w| *w == v).count()))
+    .filter(|(_, n)| *n > 0)
+    .map(|(v, n)| format!("{n} {}", v.word()))
+    .collect();
+    let mut s = format!(
+        "Conclusion: of {} pair and band cells with objects, {}.",
+        verdicts.len(),
+        count.join(", ")
+    );
+    if verdicts.contains(&Verdict::Masking) {
+        s.push_str(
+            " Masking cells are where the pair detects more than its worse stage alone: \
+             one stage removes returns that would hurt the other (an occlusion blocking \
+             the lasers whose rain-noised ground returns would merge with objects), not a \
+             gain in the sensor.",
+        );
+    } else if verdicts.contains(&Verdict::Compounding) {
+        s.push_str(" Compounding cells are where the two stages together cost more objects than independent stages would.");
+    }
+    s
+}
+
 /// Colour of a verdict in the heatmap (and its key).
 fn verdict_color(v: Option<Verdict>) -> plotters::style::RGBColor {
     use plotters::style::RGBColor;
@@ -401,6 +440,7 @@ pub fn write_outputs(
     captures: &[String],
     rows: &[Row],
     protected: &[&std::path::Path],
+    format: crate::writers::png::FigureFormat,
 ) -> crate::error::Result<Option<(Vec<std::path::PathBuf>, crate::writers::html::Section)>> {
     use crate::writers::heatmap::{heatmap, HeatCell, Heatmap};
     use crate::writers::html::{Figure, Section};
@@ -512,9 +552,13 @@ pub fn write_outputs(
             ],
         };
         std::fs::create_dir_all(dir.join("plots")).map_err(|e| crate::error::Error::io(dir, e))?;
-        let rel = format!("plots/interactions_{}.png", safe(capture));
+        let rel = format!(
+            "plots/interactions_{}.{}",
+            safe(capture),
+            format.extension()
+        );
         let path = dir.join(&rel);
-        heatmap(&map, &path, protected)?;
+        heatmap(&map, &path, protected, format)?;
         written.push(path);
         section.figures.push(Figure {
             src: rel,
@@ -523,6 +567,7 @@ pub fn write_outputs(
                    Y\" the detected share with both stages against the product of each alone. \
                    Read a row across to see at which distances two stages interact."
                 .into(),
+            conclusion: verdict_conclusion(&rows),
             wide: true,
         });
     }

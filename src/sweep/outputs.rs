@@ -6,7 +6,7 @@ use super::run::{Panel, Row};
 use super::tables::{self, Group};
 use crate::error::{Error, Result};
 use crate::writers::html::{Figure, Link, LinkGroup, Page, Section};
-use crate::writers::png::{self, BirdsEyePanel, LinePlot, Series};
+use crate::writers::png::{self, BirdsEyePanel, FigureFormat, LinePlot, Series};
 use std::path::{Path, PathBuf};
 
 /// The bird's-eye figure to draw.
@@ -30,6 +30,8 @@ pub const TIDY_CSV: &str = "sweep.csv";
 pub const TIDY_JSON: &str = "sweep.json";
 /// The aggregate table.
 pub const AGGREGATE_CSV: &str = "aggregate.csv";
+/// What each column of the aggregate table holds.
+pub const AGGREGATE_COLUMNS_CSV: &str = "aggregate_columns.csv";
 /// The page.
 pub const INDEX_HTML: &str = "index.html";
 
@@ -206,6 +208,9 @@ fn file_note(rel: &str, titles: &[(String, String)]) -> String {
         TIDY_JSON => "the same rows as JSON, with the metrics nested".into(),
         AGGREGATE_CSV => {
             "per capture and varied values: mean, lower and upper 95 % bound of every metric".into()
+        }
+        AGGREGATE_COLUMNS_CSV => {
+            "what each column of the aggregate table holds, the interval method included".into()
         }
         _ if rel.starts_with("cells/") => "one cell's per-frame metrics and settings".into(),
         super::interactions::INTERACTIONS_CSV => {
@@ -402,6 +407,195 @@ fn y_label(kind: Kind) -> &'static str {
     }
 }
 
+/// What to conclude from the bird's-eye panels: each panel's clusters against the clean
+/// one's.
+fn birdseye_conclusion(panels: &[Panel]) -> String {
+    let Some((clean, rest)) = panels.split_first() else {
+        return String::new();
+    };
+    if rest.is_empty() {
+        return String::new();
+    }
+    let each: Vec<String> = rest
+        .iter()
+        .map(|p| format!("{} {}", p.title, p.clusters))
+        .collect();
+    format!(
+        "Conclusion: against {} clusters without noise ({}), {}; more clusters than clean \
+         means noise split objects or added clutter clusters, fewer means objects were lost \
+         or merged (with each other or with the ground): the sweep's tables and plots say \
+         which.",
+        clean.clusters,
+        clean.title,
+        each.join(", ")
+    )
+}
+
+/// "at 7 mm/h" or "at KEY = 7": where on the x axis a value lies, for a sentence.
+fn x_at(x: &Vary, v: f64) -> String {
+    if x.key.ends_with("rate_mm_h") {
+        format!("at {v} mm/h")
+    } else {
+        format!("at {} = {v}", x.key)
+    }
+}
+
+/// A point of a line: x, mean, lower and upper bound.
+type Point = (f64, f64, f64, f64);
+
+/// True when two intervals (lo, hi) overlap; `None` when either has no width (one seed
+/// or every seed equal): nothing can be said about the spread.
+fn overlap(a: Point, b: Point) -> Option<bool> {
+    let width = |p: Point| p.3 > p.2;
+    (width(a) || width(b)).then_some(a.3 >= b.2 && b.3 >= a.2)
+}
+
+/// One sentence on what to conclude from line plot `plot`, from the values it draws:
+/// how a single line changes from the smallest x to the largest, and whether that is
+/// more than the spread over seeds; with several lines, how they compare at the largest
+/// x. `better`: higher values are better (`Some(true)`), lower (`Some(false)`), or
+/// neither.
+fn conclusion(plot: &LinePlot, kind: Kind, x: &Vary, better: Option<bool>) -> String {
+    let f = |v: f64| format_value(kind, v);
+    let ends = |s: &Series| Some((*s.points.first()?, *s.points.last()?));
+    let lines: Vec<(&Series, _)> = plot
+        .series
+        .iter()
+        .filter_map(|s| ends(s).map(|e| (s, e)))
+        .collect();
+    let Some(&(_, (first, last))) = lines.first() else {
+        return String::new();
+    };
+    if lines.len() == 1 || first.0 == last.0 {
+        if first.0 == last.0 || f(first.1) == f(last.1) {
+            return format!(
+                "Conclusion: the mean stays at {} over the {} shown; this setting does not \
+                    move it.",
+                f(last.1),
+                x_label(x)
+            );
+        }
+        let verb = if last.1 > first.1 { "rises" } else { "falls" };
+        let judged = match better {
+            Some(b) if b == (last.1 > first.1) => " (better)",
+            Some(_) => " (worse)",
+            None => "",
+        };
+        let spread = match overlap(first, last) {
+            Some(false) => {
+                ", more than the spread over seeds (the intervals at the two ends \
+                do not overlap)"
+            }
+            Some(true) => {
+                ", but the intervals at the two ends overlap: with these seeds the \
+                change is within the spread over seeds"
+            }
+            None => "",
+        };
+        return format!(
+            "Conclusion: from {} to {} the mean {verb}{judged} from {} to {}{spread}.",
+            x_at(x, first.0).trim_start_matches("at "),
+            x_at(x, last.0).trim_start_matches("at "),
+            f(first.1),
+            f(last.1)
+        );
+    }
+    // Several lines: how they compare at the largest x.
+    let xmax = lines
+        .iter()
+        .map(|(_, (_, l))| l.0)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let mut at_end: Vec<(&str, Point)> = lines
+        .iter()
+        .filter(|(_, (_, l))| l.0 == xmax)
+        .map(|(s, (_, l))| (s.label.as_str(), *l))
+        .collect();
+    at_end.sort_by(|a, b| b.1 .1.total_cmp(&a.1 .1));
+    let (top, bottom) = (at_end[0], at_end[at_end.len() - 1]);
+    if f(top.1 .1) == f(bottom.1 .1) {
+        return format!(
+            "Conclusion: {} every line gives {}: the other varied values do not change this \
+                metric there (lines drawn over each other; the markers tell them apart).",
+            x_at(x, xmax),
+            f(top.1 .1)
+        );
+    }
+    let listed: Vec<String> = at_end
+        .iter()
+        .take(4)
+        .map(|(l, p)| format!("{l} {}", f(p.1)))
+        .collect();
+    let more = if at_end.len() > 4 {
+        format!(
+            " and {} more lines down to {}",
+            at_end.len() - 4,
+            f(bottom.1 .1)
+        )
+    } else {
+        String::new()
+    };
+    let best = match better {
+        Some(true) => format!("; {} is best there", top.0),
+        Some(false) => format!("; {} is best there", bottom.0),
+        None => String::new(),
+    };
+    let spread = match overlap(top.1, bottom.1) {
+        Some(false) => ", a gap larger than the spread over seeds",
+        Some(true) => ", though the highest and lowest intervals overlap",
+        None => "",
+    };
+    format!(
+        "Conclusion: {} the lines give {}{more}{best}{spread}.",
+        x_at(x, xmax),
+        listed.join(", ")
+    )
+}
+
+/// The masking sentence: when a line with an occlusion on detects more objects than
+/// the same line with it off at 2 mm/h of rain or more, say why (it is the ground
+/// method's artifact, not a better sensor). `None` when the plot shows no such case.
+fn masking(plot: &LinePlot, x: &Vary) -> Option<String> {
+    if !x.key.ends_with("rate_mm_h") {
+        return None;
+    }
+    for on in &plot.series {
+        if !on.label.contains("occlusion on") {
+            continue;
+        }
+        let off_label = on.label.replace("occlusion on", "occlusion off");
+        let Some(off) = plot.series.iter().find(|s| s.label == off_label) else {
+            continue;
+        };
+        let above: Vec<(f64, f64, f64)> = on
+            .points
+            .iter()
+            .filter(|p| p.0 >= 2.0)
+            .filter_map(|p| {
+                let q = off.points.iter().find(|q| q.0 == p.0)?;
+                (p.1 > q.1 + 0.005).then_some((p.0, p.1, q.1))
+            })
+            .collect();
+        let Some(&(r, a, b)) = above
+            .iter()
+            .max_by(|u, v| (u.1 - u.2).total_cmp(&(v.1 - v.2)))
+        else {
+            continue;
+        };
+        return Some(format!(
+            "Masking: with the occlusion on more objects are detected than with it off at \
+                rain of 2 mm/h or more ({} against {} at {r} mm/h). This is not a better \
+                sensor: the occluded lasers are the noisiest near-ground rings, and with \
+             range-image ground removal (paper.toml's) rain's range noise breaks its \
+             ring-to-ring test, so their ground returns stay in the cloud as clutter that \
+             merges with nearby objects; blocking those lasers removes that clutter along \
+             with a few object returns.",
+            format_value(Kind::Share, a),
+            format_value(Kind::Share, b)
+        ));
+    }
+    None
+}
+
 /// Which plot group a metric belongs to.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum PlotGroup {
@@ -416,6 +610,7 @@ struct Planned {
     plot: LinePlot,
     caption: String,
     read: String,
+    kind: Kind,
 }
 
 /// Writes the plots of every capture and returns their page sections; `titles` gets
@@ -431,6 +626,7 @@ fn plot_sections(
     protected: &[&Path],
     written: &mut Vec<PathBuf>,
     titles: &mut Vec<(String, String)>,
+    format: FigureFormat,
 ) -> Result<Vec<Section>> {
     let Some(xi) = x_axis(varies) else {
         return Ok(Vec::new());
@@ -504,6 +700,7 @@ fn plot_sections(
                 ),
                 caption: pres.title,
                 read: pres.read,
+                kind: pres.kind,
             });
         }
         // With one line per plot, the bands (and the kinds) share one plot: one line
@@ -540,6 +737,7 @@ fn plot_sections(
                     ),
                     caption: what.into(),
                     read: read.into(),
+                    kind: Kind::Share,
                 }];
             }
         }
@@ -552,15 +750,30 @@ fn plot_sections(
                     continue;
                 }
                 std::fs::create_dir_all(dir.join(&sub)).map_err(|e| Error::io(dir, e))?;
-                let rel = format!("{sub}/{}.png", p.name);
+                let rel = format!("{sub}/{}.{}", p.name, format.extension());
                 let path = dir.join(&rel);
-                png::line_plot(&p.plot, &path, protected)?;
+                png::line_plot(&p.plot, &path, protected, format)?;
                 written.push(path);
                 titles.push((rel.clone(), p.plot.title.clone()));
+                let better = if p.read.contains("higher is better") {
+                    Some(true)
+                } else if p.read.contains("lower is better") {
+                    Some(false)
+                } else {
+                    None
+                };
+                let mut conclusion = conclusion(&p.plot, p.kind, xv, better);
+                if p.name.starts_with("detected_share") {
+                    if let Some(m) = masking(&p.plot, xv) {
+                        conclusion.push(' ');
+                        conclusion.push_str(&m);
+                    }
+                }
                 figures[slot].push(Figure {
                     src: rel,
                     caption: p.caption,
                     read: p.read,
+                    conclusion,
                     wide: false,
                 });
             }
@@ -581,9 +794,9 @@ fn plot_sections(
             heading: format!("Plots: {capture}"),
             paragraphs: vec![format!(
                 "Each point is the mean over seeds (each seed first reduced to its mean \
-                 over frames), the shaded band its 95 % interval, clipped to the values \
-                 the metric can take (shares 0 to 1, counts from 0; the tables give the \
-                 interval unclipped). The x axis is the {}. {}",
+                 over frames), the shaded band its 95 % interval (shares: percentile \
+                 bootstrap over seeds, within 0 to 1; counts: Student t, drawn from 0 up, \
+                 the tables give it unclipped). The x axis is the {}. {}",
                 x_label(xv),
                 if varies.len() > 1 {
                     "One line per combination of the other varied values (legend on the right)."
@@ -625,6 +838,7 @@ fn plot_sections(
 /// Writes every output file into `dir` (a staging folder: it holds only what this call
 /// writes) and returns the paths written; `cells` are the cell files of the sweep
 /// (relative paths, in the final folder), which the page lists too.
+#[allow(clippy::too_many_arguments)]
 pub fn write_outputs(
     dir: &Path,
     varies: &[Vary],
@@ -633,6 +847,7 @@ pub fn write_outputs(
     figure: Option<&BirdsEye>,
     protected: &[&Path],
     cells: &[String],
+    format: FigureFormat,
 ) -> Result<Vec<PathBuf>> {
     let keys: Vec<String> = varies.iter().map(|v| v.key.clone()).collect();
     let mut written = Vec::new();
@@ -651,6 +866,10 @@ pub fn write_outputs(
     put(
         AGGREGATE_CSV,
         &tables::aggregate_csv(&keys, &groups, &metrics),
+    )?;
+    put(
+        AGGREGATE_COLUMNS_CSV,
+        &tables::aggregate_columns_csv(&keys, &metrics),
     )?;
 
     let mut page = Page {
@@ -682,14 +901,18 @@ pub fn write_outputs(
     );
     intro.paragraphs.push(
         "Intervals: each seed is first reduced to its mean over frames (shares pooled over \
-         frames), then the 95 % Student-t interval of the mean is taken over seeds; frames \
-         of one capture are not independent samples. With one seed there is no interval."
+         frames; frames of one capture are not independent samples), then the 95 % interval \
+         is taken over seeds. Shares get the percentile bootstrap over seeds (2000 \
+         resamples of the seeds' values; the 2.5th and 97.5th percentiles of their means), \
+         which stays in [0, 1] and within the seeds' range: with few seeds it shows the \
+         spread over seeds rather than a guaranteed coverage. Counts and lengths get the \
+         Student t interval of the mean. With one seed there is no interval."
             .into(),
     );
     intro.paragraphs.push(format!(
         "Files: {TIDY_CSV} (one row per capture, frame, values, seed), {TIDY_JSON}, \
-         {AGGREGATE_CSV}, cells/ (one result file per cell); every file is linked under \
-         Files at the end."
+         {AGGREGATE_CSV} (its columns explained in {AGGREGATE_COLUMNS_CSV}), cells/ (one \
+         result file per cell); every file is linked under Files at the end."
     ));
     page.sections.push(intro);
 
@@ -715,7 +938,14 @@ pub fn write_outputs(
             f.capture, f.frame, f.seed
         );
         let path = dir.join(&rel);
-        png::birdseye(&title, &panels, f.extent_m, &path, protected)?;
+        png::birdseye(
+            &title,
+            &panels,
+            f.extent_m,
+            &path,
+            protected,
+            FigureFormat::Png,
+        )?;
         written.push(path);
         titles.push((rel.clone(), title.clone()));
         let varied: Vec<&str> = varies.iter().map(|v| v.key.as_str()).collect();
@@ -735,6 +965,7 @@ pub fn write_outputs(
                        has its own colour (colours repeat), ground is light grey, returns in \
                        no cluster dark grey; dropped returns are not drawn."
                     .into(),
+                conclusion: birdseye_conclusion(&f.panels),
                 wide: true,
             }],
             ..Section::default()
@@ -751,6 +982,7 @@ pub fn write_outputs(
         protected,
         &mut written,
         &mut titles,
+        format,
     )?);
 
     let table = |names: &[String]| {
@@ -841,7 +1073,7 @@ pub fn write_outputs(
     }
     if let [vary] = varies {
         if let Some((files, section)) =
-            super::interactions::write_outputs(dir, vary, captures, rows, protected)?
+            super::interactions::write_outputs(dir, vary, captures, rows, protected, format)?
         {
             written.extend(files);
             page.sections.insert(1, section);

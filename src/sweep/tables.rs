@@ -4,11 +4,26 @@
 //! Frames of one capture are not independent samples (the same scene, the same objects,
 //! correlated noise), so the aggregate first reduces each seed to one value: the mean of
 //! the metric over the seed's frames (for shares such as the detected share, the pooled
-//! ratio: detected objects over objects, summed over the frames). The interval is then the
-//! Student-t 95 % confidence interval of the mean over seeds,
-//! `mean +- t(0.975, n-1) * sd / sqrt(n)` with `n` the number of seeds that have the
-//! metric and the exact t quantile. With a single seed there is no interval: the bounds
-//! are left empty.
+//! ratio: detected objects over objects, summed over the frames). The interval over seeds
+//! then depends on what the metric is:
+//!
+//! - **Shares** (values in [0, 1]: the object shares, object survival, ground precision,
+//!   recall and loss): the 95 % **percentile bootstrap over seeds**. The seeds' values
+//!   are resampled with replacement [`BOOTSTRAP_RESAMPLES`] times (fixed random stream,
+//!   so the same values give the same bounds on every machine and thread count), the
+//!   mean taken of each resample, and the bounds are the 2.5th and 97.5th percentiles of
+//!   those means (order statistics 50 and 1950 of 2000, 1-based). The bounds lie
+//!   between the smallest and the largest seed's value, so a share's interval stays in
+//!   [0, 1]: the Student t interval gave "0.984 [0.943, 1.024]" and
+//!   "0.001 [-0.001, 0.002]". With few seeds it is narrower than the t interval (it cannot
+//!   be wider than the seeds' range): read it as the spread over seeds, not as a
+//!   guaranteed 95 % coverage.
+//! - **Counts and lengths**: the Student t 95 % confidence interval of the mean,
+//!   `mean +- t(0.975, n-1) * sd / sqrt(n)` with the exact t quantile.
+//!
+//! `n` is the number of seeds that have the metric. With a single seed there is no
+//! interval: the bounds are left empty. [`aggregate_columns_csv`] writes what every
+//! column of the aggregate table holds, method included.
 
 use super::metrics::{BandMetrics, FrameMetrics};
 use super::run::Row;
@@ -30,6 +45,45 @@ pub struct Metric {
     pub weight: Option<Getter>,
     /// True when it needs ground-truth labels.
     pub needs_labels: bool,
+    /// A share in [0, 1]: its interval is the percentile bootstrap over seeds, which
+    /// stays in [0, 1]; otherwise the Student t interval.
+    pub share: bool,
+}
+
+impl Metric {
+    /// How the bounds of this metric's interval are computed.
+    pub fn method(&self) -> IntervalMethod {
+        if self.share {
+            IntervalMethod::Bootstrap
+        } else {
+            IntervalMethod::StudentT
+        }
+    }
+}
+
+/// How the 95 % interval of a metric over seeds is computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum IntervalMethod {
+    /// Percentile bootstrap of the mean over seeds (shares: stays in [0, 1]).
+    Bootstrap,
+    /// Student t interval of the mean over seeds (counts and lengths).
+    StudentT,
+}
+
+impl IntervalMethod {
+    /// One phrase naming the method, for the column notes and the page.
+    pub fn describe(self) -> &'static str {
+        match self {
+            IntervalMethod::Bootstrap => {
+                "95 % percentile bootstrap over seeds (2000 resamples of the seeds' values, \
+                    2.5th and 97.5th percentile of their means; stays within the seeds' range)"
+            }
+            IntervalMethod::StudentT => {
+                "95 % Student t interval of the mean over seeds (mean +- t(0.975, n-1) sd / \
+                    sqrt(n))"
+            }
+        }
+    }
 }
 
 fn plain(name: &str, label: &str, get: fn(&FrameMetrics) -> Option<f64>) -> Metric {
@@ -39,6 +93,7 @@ fn plain(name: &str, label: &str, get: fn(&FrameMetrics) -> Option<f64>) -> Metr
         get: Box::new(get),
         weight: None,
         needs_labels: false,
+        share: false,
     }
 }
 
@@ -60,6 +115,7 @@ fn share(
         }),
         weight: Some(Box::new(move |m| w2(m).map(|w| w as f64))),
         needs_labels: false,
+        share: true,
     }
 }
 
@@ -110,10 +166,13 @@ pub fn metrics(rows: &[Row]) -> Vec<Metric> {
         object_share!(merged_into_ground, "merged into ground"),
         object_share!(lost, "lost"),
         int!(objects, "objects (count)"),
-        opt!(
-            object_survival,
-            "object survival (share of clean object clusters matched, IoU >= 0.5)"
-        ),
+        Metric {
+            share: true,
+            ..opt!(
+                object_survival,
+                "object survival (share of clean object clusters matched, IoU >= 0.5)"
+            )
+        },
         int!(kept, "returns kept (count)"),
         int!(occluded, "returns dropped by occlusion (count)"),
         int!(below_power, "returns dropped below power threshold (count)"),
@@ -161,6 +220,7 @@ pub fn metrics(rows: &[Row]) -> Vec<Metric> {
     ] {
         let mut m = plain(name, label, get);
         m.needs_labels = true;
+        m.share = true;
         out.push(m);
     }
     if let Some(first) = rows.first() {
@@ -444,6 +504,58 @@ pub fn interval(values: &[f64]) -> Option<Interval> {
     })
 }
 
+/// Resamples of the percentile bootstrap.
+pub const BOOTSTRAP_RESAMPLES: usize = 2000;
+
+/// Mean of `values` (one per seed) and its 95 % percentile bootstrap interval: the
+/// 2.5th and 97.5th percentiles of the means of [`BOOTSTRAP_RESAMPLES`] resamples (with
+/// replacement, from a fixed random stream). The bounds lie within the values' range.
+/// `None` when empty, no bounds for one value.
+pub fn bootstrap_interval(values: &[f64]) -> Option<Interval> {
+    use rand::{Rng, SeedableRng};
+    let n = values.len();
+    if n == 0 {
+        return None;
+    }
+    let mean = values.iter().sum::<f64>() / n as f64;
+    if n == 1 {
+        return Some(Interval {
+            n,
+            mean,
+            lo: None,
+            hi: None,
+        });
+    }
+    // One fixed stream for every metric and group: the same values give the same
+    // bounds whatever else the sweep holds.
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x0b00_7577_a9b0_0757);
+    let mut means: Vec<f64> = (0..BOOTSTRAP_RESAMPLES)
+        .map(|_| {
+            (0..n)
+                .map(|_| values[rng.random_range(0..n as u32) as usize])
+                .sum::<f64>()
+                / n as f64
+        })
+        .collect();
+    means.sort_by(f64::total_cmp);
+    // Order statistics 50 and 1950 (1-based) of 2000: 2.5 % of the means lie at or
+    // below the lower bound, 2.5 % at or above the upper one.
+    let k = BOOTSTRAP_RESAMPLES / 40;
+    // A resample's mean can differ from the values' bounds by rounding; the bounds are
+    // kept within the values' range.
+    let (min, max) = values
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    Some(Interval {
+        n,
+        mean,
+        lo: Some(means[k - 1].clamp(min, max)),
+        hi: Some(means[BOOTSTRAP_RESAMPLES - k].clamp(min, max)),
+    })
+}
+
 /// One value per seed: the metric's mean over the seed's frames (weighted for shares).
 pub fn per_seed(metric: &Metric, rows: &[&Row]) -> Vec<f64> {
     let mut seeds: Vec<u64> = rows.iter().map(|r| r.seed).collect();
@@ -511,14 +623,21 @@ pub fn aggregate(rows: &[Row], metrics: &[Metric]) -> Vec<Group> {
                 seeds: seeds.len(),
                 metrics: metrics
                     .iter()
-                    .map(|m| interval(&per_seed(m, &rs)))
+                    .map(|m| {
+                        let values = per_seed(m, &rs);
+                        match m.method() {
+                            IntervalMethod::Bootstrap => bootstrap_interval(&values),
+                            IntervalMethod::StudentT => interval(&values),
+                        }
+                    })
                     .collect(),
             }
         })
         .collect()
 }
 
-/// The aggregate CSV: capture, varied keys, rows, seeds, then `<metric>_mean,_lo,_hi` each.
+/// The aggregate CSV: capture, varied keys, rows, seeds, then `<metric>_mean,_lo,_hi` each
+/// (what each holds: [`aggregate_columns_csv`]).
 pub fn aggregate_csv(keys: &[String], groups: &[Group], metrics: &[Metric]) -> Vec<u8> {
     let mut header = vec!["capture".to_string()];
     header.extend(keys.iter().cloned());
@@ -547,6 +666,47 @@ pub fn aggregate_csv(keys: &[String], groups: &[Group], metrics: &[Metric]) -> V
     csv_bytes(header, body)
 }
 
+/// The aggregate table's column dictionary: one row per column of [`aggregate_csv`]
+/// saying what it holds (`column,metric,holds`), the interval method included, so the
+/// table reads without the documentation.
+pub fn aggregate_columns_csv(keys: &[String], metrics: &[Metric]) -> Vec<u8> {
+    let header = vec!["column".to_string(), "metric".into(), "holds".into()];
+    let mut body: Vec<Vec<String>> =
+        vec![vec!["capture".into(), String::new(), "capture name".into()]];
+    for k in keys {
+        body.push(vec![k.clone(), String::new(), "varied value".into()]);
+    }
+    body.push(vec![
+        "rows".into(),
+        String::new(),
+        "rows (frames x seeds) aggregated".into(),
+    ]);
+    body.push(vec![
+        "seeds".into(),
+        String::new(),
+        "seeds aggregated; each seed is first reduced to one value (its mean over frames, \
+            shares pooled over frames)"
+            .into(),
+    ]);
+    for m in metrics {
+        let how = m.method().describe();
+        for (s, holds) in [
+            ("mean", format!("{}: mean over seeds", m.label)),
+            (
+                "lo",
+                format!("{}: lower bound of the {how}; empty with one seed", m.label),
+            ),
+            (
+                "hi",
+                format!("{}: upper bound of the {how}; empty with one seed", m.label),
+            ),
+        ] {
+            body.push(vec![format!("{}_{s}", m.name), m.name.clone(), holds]);
+        }
+    }
+    csv_bytes(header, body)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -560,6 +720,38 @@ mod tests {
         assert!(interval(&[]).is_none());
         let one = interval(&[0.7]).unwrap();
         assert_eq!((one.mean, one.lo, one.hi), (0.7, None, None));
+    }
+
+    /// A share near 1 (or near 0) over few seeds: the Student t interval left [0, 1]
+    /// ("0.984 [0.943, 1.024]", "0.001 [-0.001, 0.002]"); the bootstrap stays inside.
+    #[test]
+    fn share_intervals_stay_in_zero_one() {
+        for values in [
+            vec![1.0, 1.0, 0.952],
+            vec![1.0, 0.968, 1.0, 0.968, 1.0],
+            vec![0.0, 0.003, 0.0],
+            vec![0.0, 1.0],
+        ] {
+            let t = interval(&values).unwrap();
+            assert!(
+                t.lo.unwrap() < 0.0 || t.hi.unwrap() > 1.0,
+                "{values:?}: the t interval is the failing case"
+            );
+            let b = bootstrap_interval(&values).unwrap();
+            assert_eq!(b.mean, t.mean);
+            let (lo, hi) = (b.lo.unwrap(), b.hi.unwrap());
+            assert!((0.0..=1.0).contains(&lo) && (0.0..=1.0).contains(&hi));
+            assert!(lo <= b.mean && b.mean <= hi && lo < hi, "{values:?}: {b:?}");
+        }
+        let one = bootstrap_interval(&[0.7]).unwrap();
+        assert_eq!((one.lo, one.hi), (None, None));
+        let same = bootstrap_interval(&[0.5, 0.5, 0.5]).unwrap();
+        assert_eq!((same.lo, same.hi), (Some(0.5), Some(0.5)));
+        // Deterministic: the same values give the same bounds.
+        assert_eq!(
+            bootstrap_interval(&[0.2, 0.9, 0.4]),
+            bootstrap_interval(&[0.2, 0.9, 0.4])
+        );
     }
 
     #[test]

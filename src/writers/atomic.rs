@@ -3,6 +3,25 @@
 //! A crash, an error or Ctrl-C mid-write leaves at most a stray `.NAME.*.tmp` file (removed
 //! on drop where the process survives), never a truncated output. Paths that are inputs of
 //! the run are refused as targets so a typo cannot overwrite a capture.
+//!
+//! Built on `tempfile` (reviewed for issue 33): [`temp_file_for`] makes the hidden
+//! temporary with `tempfile::Builder` and both writers finish with
+//! `NamedTempFile::persist` (a rename in the same folder; the temporary is deleted on
+//! drop). What this module adds is what `tempfile` does not do:
+//! - refusing the run's inputs as targets, by canonical path and by device and inode
+//!   ([`refuse_inputs`]: another spelling, a symbolic link or a hard link to a capture);
+//! - refusing to rename over anything but a regular file ([`refuse_special`]): rename(2)
+//!   does not follow a symbolic link but replaces the link itself, and over a device node
+//!   would replace the node; `persist` does either silently, we refuse and say why;
+//! - registering the temporary for deletion on SIGINT/SIGTERM (`tempfile` deletes on
+//!   drop, which a signal's exit skips);
+//! - mode 0644 rather than `tempfile`'s 0600, so outputs read like any file.
+//!
+//! Like `persist`, nothing here calls fsync: the rename is atomic against a crash of the
+//! process (never a truncated file), not against a power loss, where a file system may
+//! keep an empty file. Outputs are reproducible, so rerunning is the recovery; an fsync
+//! of the file and its folder cost 5.2 ms a file against 0.19 ms without (200 files of
+//! 20 KB on this ext4 volume), which a sweep writing hundreds of cells would pay on each.
 
 use crate::error::{Error, Result};
 use std::fs;

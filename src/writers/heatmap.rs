@@ -1,10 +1,12 @@
-//! PNG table heatmaps: labelled rows and columns of coloured cells with text, and a key.
+//! Table heatmaps (PNG or SVG): labelled rows and columns of coloured cells with text,
+//! and a key. Each cell names its verdict in words, so the colour is never the only cue.
 //!
 //! Used for the interaction table of `sweep --interactions` (stage pairs x distance
 //! bands). Drawn with plotters' primitives rather than a chart: the axes are categories.
 
-use super::png::{draw_err, register_font, write_png, FAMILY};
+use super::png::{draw_err, register_font, wrap_text, write_figure, FigureFormat, FAMILY};
 use crate::error::{Error, Result};
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::path::Path;
@@ -41,8 +43,13 @@ const CELL_H: u32 = 64;
 const TOP: u32 = 90;
 const MARGIN: u32 = 20;
 
-/// Draws `map` to `path` (PNG, size from the grid).
-pub fn heatmap(map: &Heatmap, path: &Path, protected: &[&Path]) -> Result<()> {
+/// Draws `map` to `path` in `format` (size from the grid).
+pub fn heatmap(
+    map: &Heatmap,
+    path: &Path,
+    protected: &[&Path],
+    format: FigureFormat,
+) -> Result<()> {
     register_font()?;
     if map.cells.len() != map.rows.len() || map.cells.iter().any(|r| r.len() != map.columns.len()) {
         return Err(Error::Invalid(format!(
@@ -53,13 +60,19 @@ pub fn heatmap(map: &Heatmap, path: &Path, protected: &[&Path]) -> Result<()> {
     let w = MARGIN * 2 + ROW_LABEL_W + CELL_W * map.columns.len().max(1) as u32;
     let key_h = 34 * map.key.len().div_ceil(3) as u32 + 22 * map.notes.len() as u32;
     let h = TOP + CELL_H * map.rows.len() as u32 + 30 + key_h + MARGIN;
-    let mut buf = vec![0u8; (w * h * 3) as usize];
-    render(map, &mut buf, (w, h)).map_err(|e| Error::io(path, e))?;
-    write_png(path, protected, &buf, (w, h), &map.title, "")
+    write_figure(
+        path,
+        protected,
+        format,
+        (w, h),
+        &map.title,
+        "",
+        |root| render(map, root),
+        |root| render(map, root),
+    )
 }
 
-fn render(map: &Heatmap, buf: &mut [u8], size: (u32, u32)) -> std::io::Result<()> {
-    let root = BitMapBackend::with_buffer(buf, size).into_drawing_area();
+fn render<DB: DrawingBackend>(map: &Heatmap, root: DrawingArea<DB, Shift>) -> std::io::Result<()> {
     root.fill(&WHITE).map_err(draw_err)?;
     let style = |px: u32, h: HPos, v: VPos| {
         TextStyle::from((FAMILY, px).into_font())
@@ -78,17 +91,31 @@ fn render(map: &Heatmap, buf: &mut [u8], size: (u32, u32)) -> std::io::Result<()
     let x0 = MARGIN + ROW_LABEL_W;
     for (c, label) in map.columns.iter().enumerate() {
         let cx = x0 + CELL_W * c as u32 + CELL_W / 2;
-        root.draw(&Text::new(label.clone(), (i(cx), i(TOP - 18)), centred(16)))
+        // Wrapped to the cell's width, the last line just above the grid.
+        let lines = wrap_text(label, &centred(16), CELL_W - 8);
+        for (k, line) in lines.iter().enumerate() {
+            let up = 18 * (lines.len() - 1 - k) as u32;
+            root.draw(&Text::new(
+                line.clone(),
+                (i(cx), i(TOP - 18 - up)),
+                centred(16),
+            ))
             .map_err(draw_err)?;
+        }
     }
     for (r, label) in map.rows.iter().enumerate() {
         let y = TOP + CELL_H * r as u32;
-        root.draw(&Text::new(
-            label.clone(),
-            (i(MARGIN), i(y + CELL_H / 2)),
-            left(16),
-        ))
-        .map_err(draw_err)?;
+        let lines = wrap_text(label, &left(16), ROW_LABEL_W - 10);
+        let n = lines.len() as u32;
+        for (k, line) in lines.iter().enumerate() {
+            let ly = y + CELL_H / 2 + 19 * k as u32;
+            root.draw(&Text::new(
+                line.clone(),
+                (i(MARGIN), i(ly - 19 * (n - 1) / 2)),
+                left(16),
+            ))
+            .map_err(draw_err)?;
+        }
         for (c, cell) in map.cells[r].iter().enumerate() {
             let x = x0 + CELL_W * c as u32;
             root.draw(&Rectangle::new(

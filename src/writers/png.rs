@@ -1,11 +1,19 @@
-//! PNG figures drawn with plotters: line plots with interval bands and bird's-eye panels.
+//! Figures drawn with plotters, as PNG or SVG: line plots with interval bands and
+//! bird's-eye panels.
 //!
 //! Text is rendered by plotters' ab_glyph backend from the DejaVu Sans font kept in
-//! `assets/fonts/` and compiled into the binary, so no system font library is needed.
-//! Images are rendered into memory and encoded with the `png` crate through
-//! [`super::atomic::write_atomically`].
+//! `assets/fonts/` and compiled into the binary, so no system font library is needed; in
+//! SVG the text stays text (family `sans-serif`) and is laid out with the same font's
+//! measures. Images are rendered into memory and written through
+//! [`super::atomic::write_atomically`] (PNG encoded with the `png` crate).
+//!
+//! Series are told apart by colour, marker and line style together, so a figure reads
+//! in grey print and with any colour vision: the colours are Okabe and Ito's palette
+//! ("Color Universal Design", 2008), designed to stay distinct for the common forms of
+//! colour blindness. Text that does not fit is wrapped onto more lines, never cut.
 
 use crate::error::{Error, Result};
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::path::Path;
@@ -16,18 +24,94 @@ pub const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
 /// Family name the font is registered under.
 pub(crate) const FAMILY: &str = "sans-serif";
 
-/// Categorical colours for lines and clusters (Tableau 10 without its grey).
-pub const PALETTE: [RGBColor; 9] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(188, 189, 34),
-    RGBColor(23, 190, 207),
+/// Categorical colours for lines and clusters: Okabe and Ito's colour-blind-safe
+/// palette, ordered so the first lines get the most distinct colours, without its black
+/// (the bird's-eye figure draws unclustered returns dark grey) and with its yellow last
+/// (the least visible on white).
+pub const PALETTE: [RGBColor; 7] = [
+    RGBColor(0, 114, 178),   // blue
+    RGBColor(213, 94, 0),    // vermillion
+    RGBColor(0, 158, 115),   // bluish green
+    RGBColor(204, 121, 167), // reddish purple
+    RGBColor(230, 159, 0),   // orange
+    RGBColor(86, 180, 233),  // sky blue
+    RGBColor(240, 228, 66),  // yellow
 ];
+
+/// Shape of the marker drawn at each point of a line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Marker {
+    /// Filled circle.
+    Circle,
+    /// Open square (outline).
+    Square,
+    /// Filled triangle pointing up.
+    TriangleUp,
+    /// Open diamond (outline).
+    Diamond,
+    /// Filled triangle pointing down.
+    TriangleDown,
+    /// Diagonal cross (two strokes).
+    Cross,
+    /// Upright plus (two strokes).
+    Plus,
+}
+
+/// Markers in the order the lines get them.
+pub const MARKERS: [Marker; 7] = [
+    Marker::Circle,
+    Marker::Square,
+    Marker::TriangleUp,
+    Marker::Diamond,
+    Marker::TriangleDown,
+    Marker::Cross,
+    Marker::Plus,
+];
+
+/// Line styles in the order the lines get them: solid, or (dash, gap) in pixels.
+pub const DASHES: [Option<(u32, u32)>; 4] = [None, Some((12, 6)), Some((3, 4)), Some((22, 5))];
+
+/// How line `i` of a plot is drawn: colour, marker and line style.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SeriesStyle {
+    /// Line and marker colour.
+    pub color: RGBColor,
+    /// Marker at each point.
+    pub marker: Marker,
+    /// `None`: solid; else (dash, gap) in pixels.
+    pub dash: Option<(u32, u32)>,
+}
+
+/// The style of line `i`: colour, marker and dash cycle with different periods (7, 7
+/// and 4), so the first seven lines differ in both colour and marker and the first
+/// four in line style too; no two of the first 49 lines share colour and marker.
+pub fn series_style(i: usize) -> SeriesStyle {
+    SeriesStyle {
+        color: PALETTE[i % PALETTE.len()],
+        marker: MARKERS[(i + i / PALETTE.len()) % MARKERS.len()],
+        dash: DASHES[i % DASHES.len()],
+    }
+}
+
+/// File format of the figures (`--figure-format`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum FigureFormat {
+    /// Raster PNG (what a web page or a slide needs).
+    #[default]
+    Png,
+    /// Vector SVG (scales for print; convert to PDF with e.g. `rsvg-convert -f pdf`).
+    Svg,
+}
+
+impl FigureFormat {
+    /// The file extension, without the dot.
+    pub fn extension(self) -> &'static str {
+        match self {
+            FigureFormat::Png => "png",
+            FigureFormat::Svg => "svg",
+        }
+    }
+}
 
 pub(crate) fn register_font() -> Result<()> {
     static ONCE: Once = Once::new();
@@ -230,66 +314,278 @@ fn text_style(size: u32) -> TextStyle<'static> {
     TextStyle::from((FAMILY, size).into_font()).color(&BLACK)
 }
 
-/// Shortens `text` with an ellipsis until it fits `width` pixels in `style`.
-fn fit_text<DB: DrawingBackend>(
-    area: &DrawingArea<DB, plotters::coord::Shift>,
-    text: &str,
-    style: &TextStyle,
-    width: u32,
-) -> String {
-    let fits = |t: &str| {
-        area.estimate_text_size(t, style)
-            .map_or(true, |(w, _)| w <= width)
-    };
-    if fits(text) {
-        return text.to_string();
-    }
-    let chars: Vec<char> = text.chars().collect();
-    for n in (1..chars.len()).rev() {
-        let t: String = chars[..n].iter().collect::<String>() + "…";
-        if fits(&t) {
-            return t;
-        }
-    }
-    "…".into()
+/// Width of `text` in `style`, in pixels (0 when the font cannot lay it out).
+fn text_width(text: &str, style: &TextStyle) -> u32 {
+    style.font.box_size(text).map_or(0, |(w, _)| w)
 }
 
-/// Draws `plot` to `path` (PNG, 900 x 560, wider by the legend when there are several
-/// lines; one line needs no legend).
-pub fn line_plot(plot: &LinePlot, path: &Path, protected: &[&Path]) -> Result<()> {
-    register_font()?;
+/// Breaks `text` into lines no wider than `width` pixels in `style`, at spaces; a word
+/// wider than a line on its own is broken between characters. Nothing is left out.
+pub(crate) fn wrap_text(text: &str, style: &TextStyle, width: u32) -> Vec<String> {
+    let fits = |t: &str| text_width(t, style) <= width;
+    let mut lines: Vec<String> = Vec::new();
+    let mut line = String::new();
+    for word in text.split(' ').filter(|w| !w.is_empty()) {
+        let joined = if line.is_empty() {
+            word.to_string()
+        } else {
+            format!("{line} {word}")
+        };
+        if fits(&joined) {
+            line = joined;
+            continue;
+        }
+        if !line.is_empty() {
+            lines.push(std::mem::take(&mut line));
+        }
+        // The word alone: split it where it must be.
+        for c in word.chars() {
+            let mut longer = line.clone();
+            longer.push(c);
+            if !line.is_empty() && !fits(&longer) {
+                lines.push(std::mem::take(&mut line));
+                line.push(c);
+            } else {
+                line = longer;
+            }
+        }
+    }
+    if !line.is_empty() || lines.is_empty() {
+        lines.push(line);
+    }
+    lines
+}
+
+/// Writes `svg` (a document from plotters' SVG backend) to `path`, atomically, with the
+/// figure's title and description as its `<title>` and `<desc>` (what a PNG keeps in its
+/// text chunks).
+pub(crate) fn write_svg(
+    path: &Path,
+    protected: &[&Path],
+    svg: &str,
+    title: &str,
+    description: &str,
+) -> Result<()> {
+    let esc = super::html::escape;
+    let mut meta = format!("\n<title>{}</title>", esc(title));
+    if !description.is_empty() {
+        meta.push_str(&format!("\n<desc>{}</desc>", esc(description)));
+    }
+    // After the opening <svg ...> tag.
+    let at = svg
+        .find("<svg")
+        .and_then(|s| svg[s..].find('>').map(|e| s + e + 1));
+    let out = match at {
+        Some(i) => format!("{}{meta}{}", &svg[..i], &svg[i..]),
+        None => svg.to_string(),
+    };
+    super::atomic::write_atomically(path, protected, |o| o.write_all(out.as_bytes()))
+}
+
+/// Renders a figure of `size` in `format` with `png` or `svg` (the same generic drawing
+/// code, once per backend) and writes it to `path` with its title and description.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn write_figure(
+    path: &Path,
+    protected: &[&Path],
+    format: FigureFormat,
+    size: (u32, u32),
+    title: &str,
+    description: &str,
+    png: impl FnOnce(DrawingArea<BitMapBackend, Shift>) -> std::io::Result<()>,
+    svg: impl FnOnce(DrawingArea<SVGBackend, Shift>) -> std::io::Result<()>,
+) -> Result<()> {
+    match format {
+        FigureFormat::Png => {
+            let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
+            png(BitMapBackend::with_buffer(&mut buf, size).into_drawing_area())
+                .map_err(|e| Error::io(path, e))?;
+            write_png(path, protected, &buf, size, title, description)
+        }
+        FigureFormat::Svg => {
+            let mut text = String::new();
+            svg(SVGBackend::with_string(&mut text, size).into_drawing_area())
+                .map_err(|e| Error::io(path, e))?;
+            write_svg(path, protected, &text, title, description)
+        }
+    }
+}
+
+/// Draws marker `m` centred on pixel `at` of `area`.
+fn draw_marker<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    m: Marker,
+    (x, y): (i32, i32),
+    color: RGBColor,
+) -> std::result::Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let fill = color.filled();
+    // Strokes of the open markers are wider than the lines (3 px against 2), so the
+    // marker reads as a marker where it sits on its line.
+    let stroke = color.stroke_width(3);
+    // Square and diamond are open (outlines, a little larger), so where two lines
+    // coincide the filled circle or triangle of the other shows inside them.
+    let outline = |p: Vec<(i32, i32)>| {
+        let mut closed = p.clone();
+        closed.push(p[0]);
+        area.draw(&PathElement::new(closed, stroke))
+    };
+    match m {
+        Marker::Circle => area.draw(&Circle::new((x, y), 5, fill)),
+        Marker::Square => outline(vec![
+            (x - 7, y - 7),
+            (x + 7, y - 7),
+            (x + 7, y + 7),
+            (x - 7, y + 7),
+        ]),
+        Marker::TriangleUp => area.draw(&Polygon::new(
+            vec![(x, y - 6), (x + 6, y + 4), (x - 6, y + 4)],
+            fill,
+        )),
+        Marker::Diamond => outline(vec![(x, y - 9), (x + 9, y), (x, y + 9), (x - 9, y)]),
+        Marker::TriangleDown => area.draw(&Polygon::new(
+            vec![(x, y + 6), (x + 6, y - 4), (x - 6, y - 4)],
+            fill,
+        )),
+        Marker::Cross => {
+            area.draw(&PathElement::new(
+                vec![(x - 5, y - 5), (x + 5, y + 5)],
+                stroke,
+            ))?;
+            area.draw(&PathElement::new(
+                vec![(x - 5, y + 5), (x + 5, y - 5)],
+                stroke,
+            ))
+        }
+        Marker::Plus => {
+            area.draw(&PathElement::new(vec![(x - 6, y), (x + 6, y)], stroke))?;
+            area.draw(&PathElement::new(vec![(x, y - 6), (x, y + 6)], stroke))
+        }
+    }
+}
+
+/// Draws a line through pixels `points` of `area` in line style `dash`.
+fn draw_line<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    points: Vec<(i32, i32)>,
+    dash: Option<(u32, u32)>,
+    color: RGBColor,
+) -> std::result::Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let style = color.stroke_width(2);
+    match dash {
+        None => area.draw(&PathElement::new(points, style)),
+        Some((on, off)) => area.draw(&plotters::element::DashedPathElement::new(
+            points, on, off, style,
+        )),
+    }
+}
+
+/// Font size and line height of a line plot's title, and of its legend.
+const TITLE_PX: (u32, u32) = (22, 28);
+const LEGEND_PX: (u32, u32) = (15, 20);
+
+/// Where the parts of a line plot go: image size, legend width, the title's and the
+/// legend's lines (wrapped to fit).
+struct LineLayout {
+    size: (u32, u32),
+    legend_w: u32,
+    title: Vec<String>,
+    legend_title: Vec<String>,
+    labels: Vec<Vec<String>>,
+}
+
+impl LineLayout {
+    fn title_h(&self) -> u32 {
+        12 + TITLE_PX.1 * self.title.len() as u32
+    }
+}
+
+fn line_layout(plot: &LinePlot) -> LineLayout {
     let legend_w = legend_width(plot);
-    let size = (PLOT_W + legend_w, PLOT_H);
-    let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
-    render_line_plot(plot, legend_w, &mut buf, size).map_err(|e| Error::io(path, e))?;
-    write_png(path, protected, &buf, size, &plot.title, "")
+    let w = PLOT_W + legend_w;
+    let title = wrap_text(&plot.title, &text_style(TITLE_PX.0), w - 40);
+    let style = text_style(LEGEND_PX.0);
+    let (legend_title, labels) = if legend_w > 0 {
+        (
+            if plot.legend_title.is_empty() {
+                Vec::new()
+            } else {
+                wrap_text(&plot.legend_title, &style, legend_w - 12)
+            },
+            plot.series
+                .iter()
+                .map(|s| wrap_text(&s.label, &style, legend_w - 56))
+                .collect(),
+        )
+    } else {
+        (Vec::new(), Vec::new())
+    };
+    let mut layout = LineLayout {
+        size: (w, 0),
+        legend_w,
+        title,
+        legend_title,
+        labels,
+    };
+    let legend_h = legend_h(&layout);
+    layout.size.1 = layout.title_h() + (PLOT_H - 40).max(legend_h + 20);
+    layout
+}
+
+/// Height of the legend's lines.
+fn legend_h(l: &LineLayout) -> u32 {
+    let title = if l.legend_title.is_empty() {
+        0
+    } else {
+        LEGEND_PX.1 * l.legend_title.len() as u32 + 8
+    };
+    20 + title
+        + l.labels
+            .iter()
+            .map(|s| LEGEND_PX.1 * s.len() as u32 + 6)
+            .sum::<u32>()
+}
+
+/// Draws `plot` to `path` (900 x 560, wider by the legend when there are several lines,
+/// one line needing none, and taller when the title or the legend needs more lines).
+pub fn line_plot(
+    plot: &LinePlot,
+    path: &Path,
+    protected: &[&Path],
+    format: FigureFormat,
+) -> Result<()> {
+    register_font()?;
+    let layout = line_layout(plot);
+    write_figure(
+        path,
+        protected,
+        format,
+        layout.size,
+        &plot.title,
+        "",
+        |root| render_line_plot(plot, &layout, root),
+        |root| render_line_plot(plot, &layout, root),
+    )
 }
 
 fn legend_width(plot: &LinePlot) -> u32 {
     if plot.series.len() < 2 {
         return 0;
     }
-    // Text width estimated from the font without a canvas: a 1x1 area measures text.
-    let mut one = [0u8; 3];
-    let area = BitMapBackend::with_buffer(&mut one, (1, 1)).into_drawing_area();
-    let style = text_style(15);
+    let style = text_style(LEGEND_PX.0);
     let widest = plot
         .series
         .iter()
-        .map(|s| &s.label)
-        .chain(std::iter::once(&plot.legend_title))
-        .filter_map(|t| area.estimate_text_size(t, &style).ok())
-        .map(|(w, _)| w)
+        .map(|s| text_width(&s.label, &style) + 56)
+        .chain(std::iter::once(text_width(&plot.legend_title, &style) + 12))
         .max()
         .unwrap_or(0);
-    (widest + 70).min(LEGEND_MAX_W)
+    (widest + 14).min(LEGEND_MAX_W)
 }
 
-fn render_line_plot(
+fn render_line_plot<DB: DrawingBackend>(
     plot: &LinePlot,
-    legend_w: u32,
-    buf: &mut [u8],
-    size: (u32, u32),
+    layout: &LineLayout,
+    root: DrawingArea<DB, Shift>,
 ) -> std::io::Result<()> {
     let (dlo, dhi) = plot.y_domain.unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
     let clipped: Vec<Vec<(f64, f64, f64, f64)>> = plot
@@ -324,11 +620,22 @@ fn render_line_plot(
     };
     let xa = axis(x0, x1, plot.x_integer);
     let ya = axis(y0, y1, plot.y_integer);
-    let root = BitMapBackend::with_buffer(buf, size).into_drawing_area();
     root.fill(&WHITE).map_err(draw_err)?;
-    let (left, right) = root.split_horizontally(PLOT_W);
+    let (head, body) = root.split_vertically(layout.title_h());
+    let title_style = text_style(TITLE_PX.0).pos(Pos::new(HPos::Center, VPos::Top));
+    for (k, line) in layout.title.iter().enumerate() {
+        head.draw(&Text::new(
+            line.clone(),
+            (
+                layout.size.0 as i32 / 2,
+                10 + (TITLE_PX.1 * k as u32) as i32,
+            ),
+            title_style.clone(),
+        ))
+        .map_err(draw_err)?;
+    }
+    let (left, right) = body.split_horizontally(PLOT_W);
     let mut chart = ChartBuilder::on(&left)
-        .caption(&plot.title, (FAMILY, 22))
         .margin(15)
         .x_label_area_size(55)
         .y_label_area_size(80)
@@ -350,8 +657,9 @@ fn render_line_plot(
         .light_line_style(WHITE.mix(0.0))
         .draw()
         .map_err(draw_err)?;
+    // Bands first, then every line over them, then every marker over the lines: a line
+    // hidden under another (the same values) still shows its markers.
     for (i, points) in clipped.iter().enumerate() {
-        let color = PALETTE[i % PALETTE.len()];
         let band: Vec<(f64, f64)> = points
             .iter()
             .map(|p| (p.0, p.3))
@@ -360,60 +668,55 @@ fn render_line_plot(
         chart
             .draw_series(std::iter::once(Polygon::new(
                 band,
-                color.mix(0.18).filled(),
+                series_style(i).color.mix(0.15).filled(),
             )))
             .map_err(draw_err)?;
-        chart
-            .draw_series(LineSeries::new(
-                points.iter().map(|p| (p.0, p.1)),
-                color.stroke_width(2),
+    }
+    let pixels = |points: &Vec<(f64, f64, f64, f64)>| -> Vec<(i32, i32)> {
+        points
+            .iter()
+            .map(|p| chart.backend_coord(&(p.0, p.1)))
+            .collect()
+    };
+    for (i, points) in clipped.iter().enumerate() {
+        let st = series_style(i);
+        draw_line(&root, pixels(points), st.dash, st.color).map_err(draw_err)?;
+    }
+    for (i, points) in clipped.iter().enumerate() {
+        let st = series_style(i);
+        for p in pixels(points) {
+            draw_marker(&root, st.marker, p, st.color).map_err(draw_err)?;
+        }
+    }
+    if layout.legend_w > 0 {
+        // The legend sits right of the plot area, never over the data.
+        let style = text_style(LEGEND_PX.0).pos(Pos::new(HPos::Left, VPos::Center));
+        let (_, top) = right.get_base_pixel();
+        let (left_x, _) = right.get_base_pixel();
+        let at = |x: i32, y: i32| (left_x + x, top + y);
+        let mut y = 30;
+        for line in &layout.legend_title {
+            root.draw(&Text::new(
+                line.clone(),
+                at(6, y),
+                style.color(&RGBColor(70, 70, 70)),
             ))
             .map_err(draw_err)?;
-        chart
-            .draw_series(
-                points
-                    .iter()
-                    .map(|p| Circle::new((p.0, p.1), 4, color.filled())),
-            )
-            .map_err(draw_err)?;
-    }
-    if legend_w > 0 {
-        // The legend sits right of the plot area, never over the data.
-        let style = text_style(15);
-        let mut y = 62;
-        if !plot.legend_title.is_empty() {
-            let title = fit_text(&right, &plot.legend_title, &style, legend_w - 12);
-            right
-                .draw(&Text::new(
-                    title,
-                    (6, y),
-                    style
-                        .color(&RGBColor(70, 70, 70))
-                        .pos(Pos::new(HPos::Left, VPos::Center)),
-                ))
-                .map_err(draw_err)?;
-            y += 28;
+            y += LEGEND_PX.1 as i32;
         }
-        for (i, s) in plot.series.iter().enumerate() {
-            let color = PALETTE[i % PALETTE.len()];
-            right
-                .draw(&PathElement::new(
-                    vec![(6, y), (34, y)],
-                    color.stroke_width(2),
-                ))
-                .map_err(draw_err)?;
-            right
-                .draw(&Circle::new((20, y), 4, color.filled()))
-                .map_err(draw_err)?;
-            let label = fit_text(&right, &s.label, &style, legend_w.saturating_sub(56));
-            right
-                .draw(&Text::new(
-                    label,
-                    (44, y),
-                    style.pos(Pos::new(HPos::Left, VPos::Center)),
-                ))
-                .map_err(draw_err)?;
-            y += 26;
+        if !layout.legend_title.is_empty() {
+            y += 8;
+        }
+        for (i, lines) in layout.labels.iter().enumerate() {
+            let st = series_style(i);
+            draw_line(&root, vec![at(4, y), at(44, y)], st.dash, st.color).map_err(draw_err)?;
+            draw_marker(&root, st.marker, at(24, y), st.color).map_err(draw_err)?;
+            for line in lines {
+                root.draw(&Text::new(line.clone(), at(54, y), style.clone()))
+                    .map_err(draw_err)?;
+                y += LEGEND_PX.1 as i32;
+            }
+            y += 6;
         }
     }
     root.present().map_err(draw_err)?;
@@ -436,9 +739,15 @@ const GROUND: RGBColor = RGBColor(190, 190, 190);
 /// Colour of returns that are neither ground nor in a cluster.
 const UNCLUSTERED: RGBColor = RGBColor(90, 90, 90);
 
-/// Width and height of one bird's-eye panel (px), and the title and key around them.
-const PANEL_PX: (u32, u32) = (700, 710);
-const BIRDSEYE_FRAME_PX: u32 = 100;
+/// Width of one bird's-eye panel and height of its plot (px), and the title and key
+/// around the grid.
+const PANEL_W: u32 = 700;
+const PANEL_PLOT_H: u32 = 640;
+const BIRDSEYE_TITLE_PX: (u32, u32) = (26, 32);
+const BIRDSEYE_KEY_H: u32 = 90;
+/// Font sizes and line heights of a panel's title and of its detail lines.
+const PANEL_TITLE_PX: (u32, u32) = (21, 26);
+const PANEL_DETAIL_PX: (u32, u32) = (14, 19);
 
 /// Rows and columns of the bird's-eye grid for `n` panels: 2 columns up to four panels,
 /// 3 up to nine, then 4, as many rows as needed.
@@ -451,24 +760,88 @@ pub fn birdseye_grid(n: usize) -> (usize, usize) {
     (n.div_ceil(cols).max(1), cols)
 }
 
+/// Where the parts of a bird's-eye figure go: grid, panel height, the wrapped lines.
+struct BirdsEyeLayout {
+    rows: usize,
+    cols: usize,
+    title: Vec<String>,
+    /// Per panel: its title's lines and its detail lines, wrapped.
+    heads: Vec<(Vec<String>, Vec<String>)>,
+    /// Height of the panels' heads, per grid row (the row's tallest head): a row of
+    /// short titles does not leave room for another row's long stage lists.
+    head_h: Vec<u32>,
+    size: (u32, u32),
+}
+
+impl BirdsEyeLayout {
+    fn title_h(&self) -> u32 {
+        12 + BIRDSEYE_TITLE_PX.1 * self.title.len() as u32
+    }
+    /// Height of grid row `row`.
+    fn panel_h(&self, row: usize) -> u32 {
+        self.head_h[row] + PANEL_PLOT_H
+    }
+    /// Top of grid row `row`, below the figure's title.
+    fn row_top(&self, row: usize) -> u32 {
+        self.title_h() + (0..row).map(|r| self.panel_h(r)).sum::<u32>()
+    }
+}
+
+fn birdseye_layout(title: &str, panels: &[BirdsEyePanel]) -> BirdsEyeLayout {
+    let (rows, cols) = birdseye_grid(panels.len());
+    let w = cols as u32 * PANEL_W;
+    let heads: Vec<(Vec<String>, Vec<String>)> = panels
+        .iter()
+        .map(|p| {
+            let t = wrap_text(&p.title, &text_style(PANEL_TITLE_PX.0), PANEL_W - 30);
+            let d = p
+                .details
+                .iter()
+                .flat_map(|l| wrap_text(l, &text_style(PANEL_DETAIL_PX.0), PANEL_W - 30))
+                .collect();
+            (t, d)
+        })
+        .collect();
+    let head_h = (0..rows)
+        .map(|r| {
+            heads
+                .iter()
+                .skip(r * cols)
+                .take(cols)
+                .map(|(t, d)| {
+                    8 + PANEL_TITLE_PX.1 * t.len() as u32 + PANEL_DETAIL_PX.1 * d.len() as u32
+                })
+                .max()
+                .unwrap_or(0)
+                + 6
+        })
+        .collect();
+    let mut l = BirdsEyeLayout {
+        rows,
+        cols,
+        title: wrap_text(title, &text_style(BIRDSEYE_TITLE_PX.0), w - 40),
+        heads,
+        head_h,
+        size: (w, 0),
+    };
+    l.size.1 = l.row_top(rows) + BIRDSEYE_KEY_H;
+    l
+}
+
 /// Draws every panel in a grid that grows with their number ([`birdseye_grid`]), each
 /// showing `-extent..extent` metres around the sensor, clusters coloured, ground grey,
-/// unclustered points dark grey, with a colour key under the panels.
+/// unclustered points dark grey, with a colour key under the panels. Titles and stage
+/// lines that do not fit a panel's width are wrapped, never cut.
 pub fn birdseye(
     title: &str,
     panels: &[BirdsEyePanel],
     extent_m: f64,
     path: &Path,
     protected: &[&Path],
+    format: FigureFormat,
 ) -> Result<()> {
     register_font()?;
-    let (rows, cols) = birdseye_grid(panels.len());
-    let size = (
-        cols as u32 * PANEL_PX.0,
-        rows as u32 * PANEL_PX.1 + BIRDSEYE_FRAME_PX,
-    );
-    let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
-    render_birdseye(title, panels, extent_m, &mut buf, size).map_err(|e| Error::io(path, e))?;
+    let layout = birdseye_layout(title, panels);
     // The panels' titles and stage lines, one panel per paragraph.
     let description: Vec<String> = panels
         .iter()
@@ -479,29 +852,37 @@ pub fn birdseye(
                 .join("\n")
         })
         .collect();
-    write_png(
+    write_figure(
         path,
         protected,
-        &buf,
-        size,
+        format,
+        layout.size,
         title,
         &description.join("\n\n"),
+        |root| render_birdseye(&layout, panels, extent_m, root),
+        |root| render_birdseye(&layout, panels, extent_m, root),
     )
 }
 
-fn render_birdseye(
-    title: &str,
+fn render_birdseye<DB: DrawingBackend>(
+    layout: &BirdsEyeLayout,
     panels: &[BirdsEyePanel],
     e: f64,
-    buf: &mut [u8],
-    size: (u32, u32),
+    root: DrawingArea<DB, Shift>,
 ) -> std::io::Result<()> {
-    let root = BitMapBackend::with_buffer(buf, size).into_drawing_area();
     root.fill(&WHITE).map_err(draw_err)?;
-    let root = root.titled(title, (FAMILY, 26)).map_err(draw_err)?;
-    let (grid, key) = root.split_vertically(size.1 - 40 - 60);
-    let lines = panels.iter().map(|p| p.details.len()).max().unwrap_or(0) as u32;
-    let header = 34 + 20 * lines;
+    let w = layout.size.0 as i32;
+    let title_style = text_style(BIRDSEYE_TITLE_PX.0).pos(Pos::new(HPos::Center, VPos::Top));
+    for (k, line) in layout.title.iter().enumerate() {
+        root.draw(&Text::new(
+            line.clone(),
+            (w / 2, 8 + (BIRDSEYE_TITLE_PX.1 * k as u32) as i32),
+            title_style.clone(),
+        ))
+        .map_err(draw_err)?;
+    }
+    let (_, rest) = root.split_vertically(layout.title_h());
+    let (grid, key) = rest.split_vertically(layout.row_top(layout.rows) - layout.title_h());
     let axes = Axis {
         lo: -e,
         hi: e,
@@ -510,27 +891,33 @@ fn render_birdseye(
     };
     let d = axes.decimals;
     let fmt = move |v: &f64| format_number(*v, d);
-    for (area, panel) in grid
-        .split_evenly(birdseye_grid(panels.len()))
+    let head_title = text_style(PANEL_TITLE_PX.0).pos(Pos::new(HPos::Center, VPos::Top));
+    let small = text_style(PANEL_DETAIL_PX.0)
+        .color(&RGBColor(70, 70, 70))
+        .pos(Pos::new(HPos::Center, VPos::Top));
+    let xs: Vec<u32> = (1..layout.cols as u32).map(|c| c * PANEL_W).collect();
+    let ys: Vec<u32> = (1..layout.rows)
+        .map(|r| layout.row_top(r) - layout.title_h())
+        .collect();
+    for (k, ((area, panel), (t, details))) in grid
+        .split_by_breakpoints(xs, ys)
         .iter()
         .zip(panels)
+        .zip(&layout.heads)
+        .enumerate()
     {
-        let (head, body) = area.split_vertically(header);
-        let (w, _) = head.dim_in_pixel();
-        head.draw(&Text::new(
-            fit_text(&head, &panel.title, &text_style(21), w - 20),
-            (w as i32 / 2, 16),
-            text_style(21).pos(Pos::new(HPos::Center, VPos::Center)),
-        ))
-        .map_err(draw_err)?;
-        let small = text_style(14).color(&RGBColor(70, 70, 70));
-        for (i, line) in panel.details.iter().enumerate() {
-            head.draw(&Text::new(
-                fit_text(&head, line, &small, w - 30),
-                (w as i32 / 2, 40 + 20 * i as i32),
-                small.pos(Pos::new(HPos::Center, VPos::Center)),
-            ))
-            .map_err(draw_err)?;
+        let (head, body) = area.split_vertically(layout.head_h[k / layout.cols]);
+        let cx = PANEL_W as i32 / 2;
+        let mut y = 6;
+        for line in t {
+            head.draw(&Text::new(line.clone(), (cx, y), head_title.clone()))
+                .map_err(draw_err)?;
+            y += PANEL_TITLE_PX.1 as i32;
+        }
+        for line in details {
+            head.draw(&Text::new(line.clone(), (cx, y), small.clone()))
+                .map_err(draw_err)?;
+            y += PANEL_DETAIL_PX.1 as i32;
         }
         let mut chart = ChartBuilder::on(&body)
             .margin(12)
@@ -586,7 +973,7 @@ fn render_birdseye(
 
 /// The colour key of the bird's-eye figure: ground, unclustered returns, clusters.
 fn draw_birdseye_key<DB: DrawingBackend>(
-    key: &DrawingArea<DB, plotters::coord::Shift>,
+    key: &DrawingArea<DB, Shift>,
 ) -> std::result::Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let style = text_style(16).pos(Pos::new(HPos::Left, VPos::Center));
     let y = 30;
@@ -645,20 +1032,23 @@ mod tests {
                 rows * cols >= n && (rows - 1) * cols < n,
                 "{n}: {rows} x {cols}"
             );
-            let size = (
-                cols as u32 * PANEL_PX.0,
-                rows as u32 * PANEL_PX.1 + BIRDSEYE_FRAME_PX,
-            );
+            let layout = birdseye_layout("t", &panels);
+            let size = layout.size;
             let mut buf = vec![0u8; (size.0 * size.1 * 3) as usize];
-            render_birdseye("t", &panels, 10.0, &mut buf, size).unwrap();
-            // The grid lies between the title (at most 40 px) and the key (100 px).
-            let (top, bottom) = (40, size.1 - BIRDSEYE_FRAME_PX);
-            let h = (bottom - top) / rows as u32;
+            render_birdseye(
+                &layout,
+                &panels,
+                10.0,
+                BitMapBackend::with_buffer(&mut buf, size).into_drawing_area(),
+            )
+            .unwrap();
+            // The grid lies between the title and the key.
             let inked = |k: usize| {
-                let (r, c) = ((k / cols) as u32, (k % cols) as u32);
-                let (x0, y0) = (c * PANEL_PX.0 + 20, top + r * h + 20);
+                let (r, c) = (k / cols, (k % cols) as u32);
+                let h = layout.panel_h(r);
+                let (x0, y0) = (c * PANEL_W + 20, layout.row_top(r) + 20);
                 (y0..y0 + h - 40).any(|y| {
-                    (x0..x0 + PANEL_PX.0 - 40).any(|x| {
+                    (x0..x0 + PANEL_W - 40).any(|x| {
                         let i = ((y * size.0 + x) * 3) as usize;
                         buf[i..i + 3] != [255, 255, 255]
                     })
@@ -666,6 +1056,222 @@ mod tests {
             };
             for k in 0..rows * cols {
                 assert_eq!(inked(k), k < n, "{n} panels: cell {k}");
+            }
+        }
+    }
+
+    /// A line plot rendered to SVG, parsed.
+    fn svg_of(plot: &LinePlot) -> String {
+        register_font().unwrap();
+        let layout = line_layout(plot);
+        let mut text = String::new();
+        render_line_plot(
+            plot,
+            &layout,
+            SVGBackend::with_string(&mut text, layout.size).into_drawing_area(),
+        )
+        .unwrap();
+        text
+    }
+
+    fn hex(c: RGBColor) -> String {
+        format!("#{:02X}{:02X}{:02X}", c.0, c.1, c.2)
+    }
+
+    /// What a series of colour `color` looks like in `svg`: its marker elements (shape
+    /// and vertex count) and its line style (solid, or the length of its dashes).
+    fn look(svg: &str, color: RGBColor) -> (Vec<String>, String) {
+        let doc = roxmltree::Document::parse(svg).unwrap();
+        let c = hex(color);
+        let mut marks: Vec<String> = Vec::new();
+        let mut lines: Vec<f64> = Vec::new();
+        for n in doc.descendants().filter(|n| n.is_element()) {
+            let attr = |a: &str| n.attribute(a).unwrap_or("");
+            let points = || -> Vec<(f64, f64)> {
+                attr("points")
+                    .split_whitespace()
+                    .filter_map(|p| p.split_once(','))
+                    .map(|(x, y)| (x.parse().unwrap(), y.parse().unwrap()))
+                    .collect()
+            };
+            let solid_fill = attr("fill") == c && attr("opacity") == "1";
+            match n.tag_name().name() {
+                "circle" | "rect" if solid_fill => marks.push(n.tag_name().name().into()),
+                "polygon" if solid_fill => marks.push(format!("polygon{}", points().len())),
+                "polyline" if attr("stroke") == c && attr("stroke-width") == "3" => {
+                    let p = points();
+                    let upright = p.windows(2).all(|w| w[0].0 == w[1].0 || w[0].1 == w[1].1);
+                    marks.push(format!("stroke{} upright {upright}", p.len()))
+                }
+                "polyline" if attr("stroke") == c && attr("stroke-width") == "2" => {
+                    let p = points();
+                    lines.push(
+                        p.windows(2)
+                            .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
+                            .sum(),
+                    );
+                }
+                _ => {}
+            }
+        }
+        marks.sort();
+        marks.dedup();
+        // Solid: one path for the plot and one in the legend; dashed: many, most of
+        // them one dash long.
+        let style = if lines.len() <= 2 {
+            "solid".to_string()
+        } else {
+            let mut rounded: Vec<i64> = lines.iter().map(|l| l.round() as i64).collect();
+            rounded.sort_unstable();
+            let mode = rounded
+                .iter()
+                .max_by_key(|&&v| rounded.iter().filter(|&&w| w == v).count())
+                .copied()
+                .unwrap_or(0);
+            format!("dash {mode}")
+        };
+        (marks, style)
+    }
+
+    /// Lines differ by marker and line style as well as colour, and two lines with the
+    /// same values both stay visible (in "Objects per frame" one line hid the other, and
+    /// only colour told lines apart).
+    #[test]
+    fn lines_differ_by_marker_and_dash_not_only_colour() {
+        let same = [
+            (0.0, 0.9, 0.8, 1.0),
+            (2.0, 0.7, 0.6, 0.8),
+            (5.0, 0.5, 0.4, 0.6),
+        ];
+        let series: Vec<Series> = (0..4)
+            .map(|i| Series {
+                label: format!("occlusion {i}"),
+                // The first two lines coincide.
+                points: same
+                    .iter()
+                    .map(|p| (p.0, p.1 - 0.1 * (i / 2) as f64, p.2, p.3))
+                    .collect(),
+            })
+            .collect();
+        let plot = LinePlot {
+            title: "Objects detected (share)".into(),
+            x_label: "rain rate (mm/h)".into(),
+            y_label: "share".into(),
+            series,
+            y_range: Some((0.0, 1.0)),
+            legend_title: "other varied values".into(),
+            ..LinePlot::default()
+        };
+        let svg = svg_of(&plot);
+        let looks: Vec<(Vec<String>, String)> =
+            (0..4).map(|i| look(&svg, series_style(i).color)).collect();
+        for (i, (marks, style)) in looks.iter().enumerate() {
+            assert!(!marks.is_empty(), "line {i} has no marker: {looks:?}");
+            for (j, other) in looks.iter().enumerate().skip(i + 1) {
+                assert_ne!(marks, &other.0, "lines {i} and {j}: same marker");
+                assert_ne!(style, &other.1, "lines {i} and {j}: same line style");
+            }
+        }
+        // The palette is Okabe-Ito's (colour-blind safe), and the first lines differ in
+        // colour, marker and dash.
+        assert_eq!(hex(series_style(0).color), "#0072B2");
+        assert_eq!(hex(series_style(1).color), "#D55E00");
+        for i in 0..7 {
+            for j in i + 1..7 {
+                let (a, b) = (series_style(i), series_style(j));
+                assert!(a.color != b.color && a.marker != b.marker, "{i} {j}");
+            }
+        }
+    }
+
+    /// Every text element of an SVG: its content, x, anchor and font size.
+    fn texts(svg: &str) -> Vec<(String, f64, String, f64)> {
+        let doc = roxmltree::Document::parse(svg).unwrap();
+        doc.descendants()
+            // Rotated axis titles run along the height; their width is not the concern.
+            .filter(|n| n.has_tag_name("text") && n.attribute("transform").is_none())
+            .map(|n| {
+                let a = |k: &str| n.attribute(k).unwrap_or("").to_string();
+                (
+                    n.text().unwrap_or("").trim().to_string(),
+                    a("x").parse().unwrap_or(0.0),
+                    a("text-anchor"),
+                    a("font-size").parse().unwrap_or(0.0),
+                )
+            })
+            .collect()
+    }
+
+    /// Long titles, panel subtitles and legend labels are wrapped onto more lines, every
+    /// word kept, every line inside the image ("overlap 0.9..1…" was cut).
+    #[test]
+    fn long_text_is_wrapped_not_cut() {
+        register_font().unwrap();
+        let detail = "occlusion: lasers 1, 2, 3, 4, 5, 6, 7, 8 from azimuth 10 to 350 degrees, \
+            overlap 0.9..1.0 of the beam, transmission 0.05, scattering 0.3 \
+            (a dirty lens with a long list of settings)";
+        let panels: Vec<BirdsEyePanel> = (0..3)
+            .map(|i| BirdsEyePanel {
+                title: format!(
+                    "occlusion and rain together on a long capture name, seed {i}: 12 clusters"
+                ),
+                details: vec![detail.into(), "rain 3 mm/h".into()],
+                points: vec![(1.0, 2.0, 0)],
+            })
+            .collect();
+        let layout = birdseye_layout("monterey frame 1: base configuration, seed 1", &panels);
+        let mut svg = String::new();
+        render_birdseye(
+            &layout,
+            &panels,
+            10.0,
+            SVGBackend::with_string(&mut svg, layout.size).into_drawing_area(),
+        )
+        .unwrap();
+        let label = "a legend label naming every other varied value: rain.rate_mm_h=10, \
+            occlusion on, fog.visibility_m=200";
+        let plot = LinePlot {
+            title: "Objects detected by distance band (share) - a capture with a very long \
+                name, so long that the title cannot fit the width of the plot"
+                .into(),
+            series: vec![
+                Series {
+                    label: label.into(),
+                    points: vec![(0.0, 0.5, 0.4, 0.6), (1.0, 0.6, 0.5, 0.7)],
+                },
+                Series {
+                    label: "short".into(),
+                    points: vec![(0.0, 0.3, 0.2, 0.4), (1.0, 0.4, 0.3, 0.5)],
+                },
+            ],
+            legend_title: "other varied values".into(),
+            ..LinePlot::default()
+        };
+        let line_svg = svg_of(&plot);
+        let plot_w = line_layout(&plot).size.0;
+        for (svg, width, wanted) in [
+            (&svg, layout.size.0, vec![detail, panels[0].title.as_str()]),
+            (&line_svg, plot_w, vec![label, plot.title.as_str()]),
+        ] {
+            let all = texts(svg);
+            let words: Vec<&str> = all.iter().flat_map(|t| t.0.split_whitespace()).collect();
+            for w in wanted.iter().flat_map(|t| t.split_whitespace()) {
+                assert!(words.contains(&w), "{w:?} missing from the figure's text");
+            }
+            for (t, x, anchor, size) in &all {
+                assert!(!t.contains('…'), "cut: {t:?}");
+                // plotters writes font-size as size / 1.24.
+                let style = text_style((size * 1.24).round() as u32);
+                let w = f64::from(text_width(t, &style));
+                let (lo, hi) = match anchor.as_str() {
+                    "middle" => (x - w / 2.0, x + w / 2.0),
+                    "end" => (x - w, *x),
+                    _ => (*x, x + w),
+                };
+                assert!(
+                    lo >= -1.0 && hi <= f64::from(width) + 1.0,
+                    "{t:?} spans {lo}..{hi} of 0..{width}"
+                );
             }
         }
     }

@@ -22,6 +22,7 @@ pub mod csv;
 pub mod kitti;
 pub mod nuscenes;
 pub mod pcd;
+pub mod returns;
 
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};

@@ -34,6 +34,7 @@ __all__ = [
     "ground",
     "cluster",
     "detect_objects",
+    "sweep",
     "__version__",
 ]
 
@@ -475,3 +476,70 @@ def detect_objects(
     when None), without the noise unless ``noise=True``; see ``Chain.detect``."""
     chain = config if config is not None else Chain(_core.Chain.from_text(""))
     return chain.detect(points, seed=seed, frame=frame, noise=noise)
+
+
+def _parse_cell(text: str) -> Any:
+    if text in ("true", "false"):
+        return text == "true"
+    if text == "":
+        return None
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def sweep(
+    captures: Union[str, "os.PathLike[str]", Sequence[Union[str, "os.PathLike[str]"]]],
+    config: Optional[Union[str, "os.PathLike[str]"]] = None,
+    vary: Optional[Dict[str, Sequence[Any]]] = None,
+    seeds: Optional[str] = None,
+    frames: Optional[str] = None,
+    sets: Optional[Dict[str, Any]] = None,
+    output: Optional[Union[str, "os.PathLike[str]"]] = None,
+    as_dataframe: Optional[bool] = None,
+) -> Any:
+    """Runs ``lidar-noise sweep`` (its own parser, plan and runner) and returns its tidy
+    table (sweep.csv: one row per capture, frame, cell and seed) as a list of dicts, or a
+    pandas DataFrame when pandas is importable (``as_dataframe=False`` forces the list).
+
+    ``vary`` maps keys to values (``{"rain.rate_mm_h": [0, 3, 7]}`` is ``--vary
+    rain.rate_mm_h=0,3,7``); ``seeds`` and ``frames`` as the command's (``"1..3"``);
+    ``sets`` are ``--set`` overrides; ``output`` keeps the sweep's folder (index.html,
+    plots), else a temporary one is removed. ValueError for bad options (the command's
+    message), OSError for files."""
+    import csv
+
+    if isinstance(captures, (str, os.PathLike)):
+        captures = [captures]
+    args = [str(Path(c)) for c in captures]
+    if config is not None:
+        args += ["-c", str(Path(config))]
+    for key, values in (vary or {}).items():
+        if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):
+            values = [values]
+        args += ["--vary", f"{key}=" + ",".join(str(v) for v in values)]
+    for key, value in (sets or {}).items():
+        args += ["--set", f"{key}={value}"]
+    if seeds is not None:
+        args += ["--seeds", str(seeds)]
+    if frames is not None:
+        args += ["--frames", str(frames)]
+    with tempfile.TemporaryDirectory(prefix="lidar-noise-sweep-") as tmp:
+        folder = Path(output) if output is not None else Path(tmp) / "sweep"
+        _core.sweep_command(args + ["-o", str(folder)])
+        table = folder / "sweep.csv"
+        if as_dataframe is not False:
+            try:
+                import pandas as pd  # type: ignore[import-not-found]
+            except ImportError:
+                if as_dataframe:
+                    raise
+            else:
+                return pd.read_csv(table)
+        with open(table, newline="") as f:
+            return [{k: _parse_cell(v) for k, v in row.items()} for row in csv.DictReader(f)]

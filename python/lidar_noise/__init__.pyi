@@ -104,3 +104,16 @@ def detect_objects(
     noise: bool = False,
 ) -> Tuple[npt.NDArray[Any], List[Dict[str, Any]]]:
     """Ground, clusters and objects of a frame (no noise unless noise=True)."""
+
+def sweep(
+    captures: Union[PathLike, List[PathLike]],
+    config: Optional[PathLike] = None,
+    vary: Optional[Dict[str, Any]] = None,
+    seeds: Optional[str] = None,
+    frames: Optional[str] = None,
+    sets: Optional[Dict[str, Any]] = None,
+    output: Optional[PathLike] = None,
+    as_dataframe: Optional[bool] = None,
+) -> Any:
+    """`lidar-noise sweep`'s tidy table (sweep.csv): a list of dicts, or a pandas
+    DataFrame when pandas is installed (as_dataframe=False forces the list)."""

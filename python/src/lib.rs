@@ -829,6 +829,37 @@ fn write_ply(path: PathBuf, cols: &Bound<'_, PyDict>, frame: u32) -> PyResult<()
     lidar_noise::writers::atomic::write_atomically(&path, &[], |out| ply.write(out)).map_err(py_err)
 }
 
+/// Runs `lidar-noise sweep ARGS` (the command's own parser, plan and runner, quiet) and
+/// returns its message on failure: the sweep's tidy table is then in the output folder
+/// the arguments name. The GIL is released while it runs.
+#[pyfunction]
+fn sweep_command(py: Python<'_>, args: Vec<String>) -> PyResult<()> {
+    use clap::Parser;
+    use lidar_noise::cli::{Cli, Command, Global};
+    let argv = ["lidar-noise", "--quiet", "sweep"]
+        .into_iter()
+        .map(String::from)
+        .chain(args);
+    let cli = Cli::try_parse_from(argv)
+        .map_err(|e| PyValueError::new_err(format!("sweep: {}", e.to_string().trim_end())))?;
+    let Command::Sweep(args) = cli.command else {
+        return Err(PyValueError::new_err("sweep: not a sweep"));
+    };
+    py.detach(|| lidar_noise::commands::sweep::run(args, Global { quiet: true }))
+        .map_err(|e| {
+            let message = lidar_noise::cli::message_of(&e);
+            let io = e.chain().any(|c| {
+                matches!(c.downcast_ref::<Error>(), Some(Error::Io { .. }))
+                    || c.downcast_ref::<std::io::Error>().is_some()
+            });
+            if io {
+                PyOSError::new_err(message)
+            } else {
+                PyValueError::new_err(message)
+            }
+        })
+}
+
 /// The compiled module.
 #[pymodule]
 fn _lidar_noise(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -837,6 +868,7 @@ fn _lidar_noise(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_capture, m)?)?;
     m.add_function(wrap_pyfunction!(read_cloud, m)?)?;
     m.add_function(wrap_pyfunction!(write_ply, m)?)?;
+    m.add_function(wrap_pyfunction!(sweep_command, m)?)?;
     m.add("VERSION", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -361,3 +361,35 @@ def test_detect_objects_runs_the_pipeline():
     ids = {c["id"] for c in clusters} if "id" in clusters[0] else None
     if ids is not None:
         assert set(out["cluster"][out["cluster"] >= 0]) <= ids
+
+
+# --- sweep ----------------------------------------------------------------------------
+
+
+def test_sweep_gives_the_commands_tidy_table(cli, tmp_path):
+    import csv
+
+    args = dict(vary={"rain.rate_mm_h": [0, 5]}, seeds="1..2", frames="0..1")
+    rows = ln.sweep(FIXTURES / "crossroad.pcap", REPO / "configs" / "rain.toml", as_dataframe=False, **args)
+    subprocess.run(
+        [cli, "-q", "sweep", str(FIXTURES / "crossroad.pcap"), "-c", str(REPO / "configs" / "rain.toml"),
+         "--vary", "rain.rate_mm_h=0,5", "--seeds", "1..2", "--frames", "0..1", "-o", str(tmp_path / "s")],
+        check=True,
+    )
+    with open(tmp_path / "s" / "sweep.csv", newline="") as f:
+        expected = list(csv.DictReader(f))
+    assert len(rows) == len(expected) == 2 * 2 * 2  # frames x rates x seeds
+    for got, want in zip(rows, expected):
+        for k, v in want.items():
+            g = got[k]
+            if isinstance(g, bool):
+                assert str(g).lower() == v, k
+            elif g is None:
+                assert v == "", k
+            else:
+                assert g == type(g)(v), (k, g, v)
+    assert {r["rain.rate_mm_h"] for r in rows} == {0, 5}
+    with pytest.raises(ValueError, match="rain.rate_mm_hh"):
+        ln.sweep(FIXTURES / "crossroad.pcap", REPO / "configs" / "rain.toml", vary={"rain.rate_mm_hh": [1]}, as_dataframe=False)
+    with pytest.raises(OSError):
+        ln.sweep(FIXTURES / "missing.pcap", as_dataframe=False)

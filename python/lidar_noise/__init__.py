@@ -74,6 +74,10 @@ APPLIED_DTYPE = np.dtype(
     align=True,
 )
 
+# Byte offset of every field of APPLIED_DTYPE, for the compiled side's record writer.
+_APPLIED_LAYOUT = {n: APPLIED_DTYPE.fields[n][1] for n in APPLIED_DTYPE.names}
+_APPLIED_LAYOUT["__itemsize__"] = APPLIED_DTYPE.itemsize
+
 #: Plain points: x y z intensity ring (ring -1 where unknown).
 POINT_DTYPE = np.dtype(
     [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4"), ("ring", "<i8")],
@@ -391,13 +395,16 @@ class Chain:
             raise ValueError(f"seed {seed!r}: give a non-negative integer")
         if not isinstance(frame, (int, np.integer)) or not 0 <= frame < 2**32:
             raise ValueError(f"frame {frame!r}: give an integer from 0 to 2^32 - 1")
+        # The compiled side writes the records' bytes straight into the array numpy
+        # views as APPLIED_DTYPE (its field offsets passed along, so the two agree).
         if kind == "returns":
-            out = self._core.apply_returns(cols, seed, int(frame), threads)
+            out = self._core.apply_returns(cols, seed, int(frame), threads, _APPLIED_LAYOUT)
         else:
             out = self._core.apply_points(
-                cols, seed, int(frame), float(rotation_hz), intensity_scale, threads
+                cols, seed, int(frame), float(rotation_hz), intensity_scale, threads,
+                _APPLIED_LAYOUT,
             )
-        return _structured(out, APPLIED_DTYPE)
+        return out.view(APPLIED_DTYPE)
 
     def detect(
         self, points: np.ndarray, seed: Optional[int] = None, frame: int = 0, noise: bool = True

@@ -266,6 +266,113 @@ impl ReturnColumns {
     }
 }
 
+/// Every return of a noisy frame as `run --keep-dropped` writes it: the survivor (noisy)
+/// where the sensor reports it, the clean return where it was dropped.
+fn reported(noisy: &NoisyFrame) -> Vec<Return> {
+    let mut all = noisy.clean.clone();
+    let survivors = noisy.survivors();
+    for (s, &k) in noisy.kept_indices().iter().enumerate() {
+        all[k as usize] = survivors[s];
+    }
+    all
+}
+
+/// Range of return `i` before noise: 0 for a return a stage added.
+fn clean_range(noisy: &NoisyFrame, i: usize) -> f32 {
+    if i < noisy.clean_len {
+        noisy.clean[i].range
+    } else {
+        0.0
+    }
+}
+
+/// The fields of a record of `apply`'s result (the package's `APPLIED_DTYPE`) with their
+/// sizes in bytes, in the order [`RecordLayout::records`] writes them.
+const RECORD_FIELDS: [(&str, usize); 19] = [
+    ("x", 4),
+    ("y", 4),
+    ("z", 4),
+    ("range", 4),
+    ("azimuth", 4),
+    ("elevation", 4),
+    ("time", 8),
+    ("packet", 4),
+    ("raw_distance", 2),
+    ("intensity", 1),
+    ("laser", 1),
+    ("ring", 1),
+    ("block", 1),
+    ("kind", 1),
+    ("range_clean", 4),
+    ("power", 8),
+    ("fate", 1),
+    ("cause", 1),
+    ("kept", 1),
+];
+
+/// Where each of [`RECORD_FIELDS`] sits in a record of `itemsize` bytes (given by the
+/// Python side from its dtype, so that the two cannot disagree).
+struct RecordLayout {
+    itemsize: usize,
+    at: [usize; 19],
+}
+
+impl RecordLayout {
+    /// From a dict of field offsets plus `__itemsize__`; every field must fit.
+    fn of(d: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let get = |k: &str| -> PyResult<usize> {
+            d.get_item(k)?
+                .ok_or_else(|| PyValueError::new_err(format!("record layout: no `{k}`")))?
+                .extract()
+        };
+        let itemsize = get("__itemsize__")?;
+        let mut at = [0usize; 19];
+        for (j, (name, size)) in RECORD_FIELDS.iter().enumerate() {
+            at[j] = get(name)?;
+            if at[j] + size > itemsize {
+                return Err(PyValueError::new_err(format!(
+                    "record layout: `{name}` at byte {} does not fit {itemsize} bytes",
+                    at[j]
+                )));
+            }
+        }
+        Ok(RecordLayout { itemsize, at })
+    }
+
+    /// The records of `rows` (indices into the noisy frame), written straight into the
+    /// bytes numpy will view as the structured array (no column copies).
+    fn records(&self, noisy: &NoisyFrame, rows: &[u32]) -> Vec<u8> {
+        let all = reported(noisy);
+        let mut buf = vec![0u8; rows.len() * self.itemsize];
+        let a = &self.at;
+        for (rec, &i) in buf.chunks_exact_mut(self.itemsize).zip(rows) {
+            let i = i as usize;
+            let r = &all[i];
+            let mut put = |j: usize, b: &[u8]| rec[a[j]..a[j] + b.len()].copy_from_slice(b);
+            put(0, &r.x.to_le_bytes());
+            put(1, &r.y.to_le_bytes());
+            put(2, &r.z.to_le_bytes());
+            put(3, &r.range.to_le_bytes());
+            put(4, &r.azimuth.to_le_bytes());
+            put(5, &r.elevation.to_le_bytes());
+            put(6, &r.time.to_le_bytes());
+            put(7, &r.packet.to_le_bytes());
+            put(8, &r.raw_distance.to_le_bytes());
+            put(9, &[r.intensity]);
+            put(10, &[r.laser]);
+            put(11, &[r.ring]);
+            put(12, &[r.block]);
+            put(13, &[r.kind as u8]);
+            put(14, &clean_range(noisy, i).to_le_bytes());
+            put(15, &noisy.power[i].to_le_bytes());
+            put(16, &[noisy.fate[i] as u8]);
+            put(17, &[noisy.cause[i]]);
+            put(18, &[u8::from(noisy.fate[i].is_alive())]);
+        }
+        buf
+    }
+}
+
 /// What `apply` hands back: the returns after the chain, each at its noisy position when
 /// the sensor still reports it and at its recorded one when dropped (as `run
 /// --keep-dropped` writes them), with fate, cause, clean range and power.
@@ -281,20 +388,8 @@ struct Applied {
 impl Applied {
     /// Rows in `rows` order (indices into the noisy frame).
     fn of(noisy: &NoisyFrame, rows: &[u32]) -> Self {
-        // The same assembly as `run --keep-dropped`: survivors (noisy) where alive, the
-        // clean return where dropped.
-        let mut all = noisy.clean.clone();
-        let survivors = noisy.survivors();
-        for (s, &k) in noisy.kept_indices().iter().enumerate() {
-            all[k as usize] = survivors[s];
-        }
-        let clean_range = |i: usize| {
-            if i < noisy.clean_len {
-                noisy.clean[i].range
-            } else {
-                0.0
-            }
-        };
+        let all = reported(noisy);
+        let clean_range = |i: usize| clean_range(noisy, i);
         Applied {
             returns: ReturnColumns::of(rows.iter().map(|&i| &all[i as usize])),
             range_clean: rows.iter().map(|&i| clean_range(i as usize)).collect(),
@@ -512,7 +607,10 @@ impl Chain {
 
     /// Runs the chain on full returns (the fields of `read`'s arrays), rows in input order
     /// then the added returns.
-    #[pyo3(signature = (cols, seed=None, frame=0, threads=None))]
+    ///
+    /// With `layout` (field offsets of the package's `APPLIED_DTYPE`), the result is the
+    /// records' bytes, for numpy to view as that dtype; else a dict of columns.
+    #[pyo3(signature = (cols, seed=None, frame=0, threads=None, layout=None))]
     fn apply_returns<'py>(
         &self,
         py: Python<'py>,
@@ -520,22 +618,31 @@ impl Chain {
         seed: Option<u64>,
         frame: u32,
         threads: Option<usize>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+        layout: Option<&Bound<'py, PyDict>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let returns = returns_of(cols)?;
+        let layout = layout.map(RecordLayout::of).transpose()?;
         let chain = self.chain(seed)?;
-        let applied = py.detach(|| {
+        let out = py.detach(|| {
             on_threads(threads, || {
                 let noisy = chain.process_returns(frame, returns);
                 let rows: Vec<u32> = (0..noisy.len() as u32).collect();
-                Applied::of(&noisy, &rows)
+                match &layout {
+                    Some(l) => Ok(l.records(&noisy, &rows)),
+                    None => Err(Applied::of(&noisy, &rows)),
+                }
             })
         })?;
-        applied.into_dict(py)
+        match out {
+            Ok(bytes) => Ok(PyArray1::from_vec(py, bytes).into_any()),
+            Err(applied) => Ok(applied.into_dict(py)?.into_any()),
+        }
     }
 
     /// Runs the chain on plain points (x y z intensity, optional ring) made returns of the
     /// HDL-32E (`cloud::returns`); rows in input order then the added returns.
-    #[pyo3(signature = (cols, seed=None, frame=0, rotation_hz=10.0, intensity_scale="byte", threads=None))]
+    /// `layout` as for `apply_returns`.
+    #[pyo3(signature = (cols, seed=None, frame=0, rotation_hz=10.0, intensity_scale="byte", threads=None, layout=None))]
     #[allow(clippy::too_many_arguments)]
     fn apply_points<'py>(
         &self,
@@ -546,13 +653,15 @@ impl Chain {
         rotation_hz: f64,
         intensity_scale: &str,
         threads: Option<usize>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+        layout: Option<&Bound<'py, PyDict>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let points = cloud_points_of(cols)?;
         let scale = intensity_scale_of(intensity_scale)?;
+        let layout = layout.map(RecordLayout::of).transpose()?;
         let chain = self.chain(seed)?;
-        let applied = py
+        let out = py
             .detach(|| {
-                on_threads(threads, || -> Result<Applied, Error> {
+                on_threads(threads, || -> Result<Result<Vec<u8>, Applied>, Error> {
                     let placed = points_as_returns(&points, rotation_hz, scale)?;
                     let n = placed.order.len();
                     let noisy = chain.process_returns(frame, placed.returns);
@@ -562,11 +671,17 @@ impl Chain {
                         rows[i as usize] = j as u32;
                     }
                     rows.extend(n as u32..noisy.len() as u32);
-                    Ok(Applied::of(&noisy, &rows))
+                    Ok(match &layout {
+                        Some(l) => Ok(l.records(&noisy, &rows)),
+                        None => Err(Applied::of(&noisy, &rows)),
+                    })
                 })
             })?
             .map_err(py_err)?;
-        applied.into_dict(py)
+        match out {
+            Ok(bytes) => Ok(PyArray1::from_vec(py, bytes).into_any()),
+            Err(applied) => Ok(applied.into_dict(py)?.into_any()),
+        }
     }
 
     /// Ground labels of returns by the configuration's `[ground]` (the pipeline's stream

@@ -629,7 +629,7 @@ impl Chain {
                 let rows: Vec<u32> = (0..noisy.len() as u32).collect();
                 match &layout {
                     Some(l) => Ok(l.records(&noisy, &rows)),
-                    None => Err(Applied::of(&noisy, &rows)),
+                    None => Err(Box::new(Applied::of(&noisy, &rows))),
                 }
             })
         })?;
@@ -661,21 +661,24 @@ impl Chain {
         let chain = self.chain(seed)?;
         let out = py
             .detach(|| {
-                on_threads(threads, || -> Result<Result<Vec<u8>, Applied>, Error> {
-                    let placed = points_as_returns(&points, rotation_hz, scale)?;
-                    let n = placed.order.len();
-                    let noisy = chain.process_returns(frame, placed.returns);
-                    // Back to input order: row r of the output is the return of point r.
-                    let mut rows = vec![0u32; n];
-                    for (j, &i) in placed.order.iter().enumerate() {
-                        rows[i as usize] = j as u32;
-                    }
-                    rows.extend(n as u32..noisy.len() as u32);
-                    Ok(match &layout {
-                        Some(l) => Ok(l.records(&noisy, &rows)),
-                        None => Err(Applied::of(&noisy, &rows)),
-                    })
-                })
+                on_threads(
+                    threads,
+                    || -> Result<Result<Vec<u8>, Box<Applied>>, Error> {
+                        let placed = points_as_returns(&points, rotation_hz, scale)?;
+                        let n = placed.order.len();
+                        let noisy = chain.process_returns(frame, placed.returns);
+                        // Back to input order: row r of the output is the return of point r.
+                        let mut rows = vec![0u32; n];
+                        for (j, &i) in placed.order.iter().enumerate() {
+                            rows[i as usize] = j as u32;
+                        }
+                        rows.extend(n as u32..noisy.len() as u32);
+                        Ok(match &layout {
+                            Some(l) => Ok(l.records(&noisy, &rows)),
+                            None => Err(Box::new(Applied::of(&noisy, &rows))),
+                        })
+                    },
+                )
             })?
             .map_err(py_err)?;
         match out {

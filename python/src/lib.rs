@@ -414,19 +414,39 @@ impl Applied {
     }
 }
 
-/// Runs `work` on a pool of `threads` threads (rayon's global pool when `None`).
+/// Runs `work` on a pool of `threads` threads (rayon's global pool when `None`). Pools
+/// are kept by size: a data loader calls `apply` per scan, and starting threads each time
+/// cost more than a small frame's work.
 fn on_threads<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + Send) -> PyResult<T> {
-    match threads {
-        None => Ok(work()),
-        Some(0) => Err(PyValueError::new_err("threads: give at least 1")),
-        Some(n) => {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build()
-                .map_err(|e| PyOSError::new_err(format!("threads {n}: {e}")))?;
-            Ok(pool.install(work))
+    static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
+    let n = match threads {
+        None => return Ok(work()),
+        Some(n) if !(1..=1024).contains(&n) => {
+            return Err(PyValueError::new_err(format!(
+                "threads {n}: give 1 to 1024 (or None for rayon's pool)"
+            )))
         }
-    }
+        Some(n) => n,
+    };
+    let pool = {
+        let mut pools = POOLS
+            .lock()
+            .map_err(|_| PyOSError::new_err("thread pools: lock poisoned"))?;
+        match pools.iter().find(|(k, _)| *k == n) {
+            Some((_, p)) => Arc::clone(p),
+            None => {
+                let p = Arc::new(
+                    rayon::ThreadPoolBuilder::new()
+                        .num_threads(n)
+                        .build()
+                        .map_err(|e| PyOSError::new_err(format!("threads {n}: {e}")))?,
+                );
+                pools.push((n, Arc::clone(&p)));
+                p
+            }
+        }
+    };
+    Ok(pool.install(work))
 }
 
 /// A validated configuration and its noise chain (built again for another seed: stages

@@ -283,3 +283,33 @@ fn stage_order_does_not_decide_the_winner() {
     assert_eq!(run([a, b]), run([b, a]));
     assert_eq!(run([a, b]), (Fate::Replaced, 1, 8.0));
 }
+
+/// A dual frame where one slot holds only its strongest return (no last return for that
+/// laser, as a frame built by hand or from the Python package may be): an echo there
+/// competes with that return instead of panicking on the empty entry (it read the
+/// empty marker, u32::MAX, as an index).
+#[test]
+fn a_dual_slot_with_only_its_strongest_return_resolves() {
+    let mut v = Vec::new();
+    for laser in 0..32u8 {
+        v.push(ret(laser, 20.0, 0, ReturnKind::DualLast));
+    }
+    // Laser 0 of firing 1: its strongest return only.
+    v.push(ret(0, 20.0, 1, ReturnKind::DualStrongest));
+    let mut f = frame(v);
+    let i = f.len() - 1;
+    let p = f.power[i];
+    f.stage = 2;
+    f.propose(
+        i,
+        Echo {
+            range: 3.0,
+            power: p * 4.0,
+        },
+    );
+    resolve(&mut f);
+    // The stronger echo wins the strongest-return entry of the slot.
+    assert_eq!(f.fate[i], Fate::Replaced);
+    assert_eq!(f.cause[i], 2);
+    assert_eq!(f.range[i], 3.0);
+}

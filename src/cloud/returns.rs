@@ -141,8 +141,11 @@ pub fn to_returns(
             )));
         }
         let (x, y, z) = (f64::from(p.x), f64::from(p.y), f64::from(p.z));
-        let horizontal = x.hypot(y);
-        let range = horizontal.hypot(z);
+        // sqrt of the sums, not hypot: libm's hypot (overflow-safe, not needed for
+        // coordinates in metres) was an eighth of the conversion's time.
+        let h2 = x * x + y * y;
+        let horizontal = h2.sqrt();
+        let range = (h2 + z * z).sqrt();
         let azimuth = (-y).atan2(x).to_degrees().rem_euclid(360.0);
         let elevation = z.atan2(horizontal).to_degrees();
         let laser = match p.ring {

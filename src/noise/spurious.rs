@@ -605,9 +605,19 @@ fn resolve_slot(
     group: &[Candidate],
     contenders: &mut Vec<Contender>,
 ) {
+    // The occupied entries, whichever they are: a dual slot may hold only its strongest
+    // return (entry 1) when the frame has no last return for it (a frame of returns
+    // given through the Python package, say); taking the first `n` entries then read
+    // the empty marker as an index.
     let pair = slots.occupants[slot as usize];
-    let n_occ = pair.iter().filter(|&&i| i != NONE).count();
-    let occupants = [pair[0] as usize, pair[1] as usize];
+    let mut occupants = [0usize; 2];
+    let mut n_occ = 0;
+    for i in pair {
+        if i != NONE {
+            occupants[n_occ] = i as usize;
+            n_occ += 1;
+        }
+    }
     let occupants = &occupants[..n_occ];
     let vacant = occupants.is_empty();
     // The common case (one recorded return, one echo, single-return mode) without the

@@ -51,6 +51,28 @@ pub struct CloudPoint {
     pub time: Option<f64>,
 }
 
+impl CloudPoint {
+    /// The first of x, y, z and intensity that is not a finite number, with its value.
+    pub fn non_finite(&self) -> Option<(&'static str, f32)> {
+        // One test for the common case: all finite.
+        if self.x.is_finite()
+            && self.y.is_finite()
+            && self.z.is_finite()
+            && self.intensity.is_finite()
+        {
+            return None;
+        }
+        [
+            ("x", self.x),
+            ("y", self.y),
+            ("z", self.z),
+            ("intensity", self.intensity),
+        ]
+        .into_iter()
+        .find(|(_, v)| !v.is_finite())
+    }
+}
+
 /// The point-cloud formats read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Format {
@@ -242,17 +264,7 @@ pub fn read_bytes(bytes: &[u8], path: &Path, options: &ReadOptions) -> Result<Cl
 /// lasers is known) rings at or above it, naming the point index (0-based, file order).
 pub fn check_points(points: &[CloudPoint], path: &Path, lasers: Option<u16>) -> Result<()> {
     for (i, p) in points.iter().enumerate() {
-        // One test for the common case: all finite.
-        if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite() && p.intensity.is_finite()) {
-            let (field, v) = [
-                ("x", p.x),
-                ("y", p.y),
-                ("z", p.z),
-                ("intensity", p.intensity),
-            ]
-            .into_iter()
-            .find(|(_, v)| !v.is_finite())
-            .unwrap_or(("x", p.x));
+        if let Some((field, v)) = p.non_finite() {
             return Err(invalid(
                 path,
                 format!("point {i} (0-based): {field} is {v}, not a finite number"),

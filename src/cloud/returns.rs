@@ -126,16 +126,7 @@ pub fn to_returns(
     let mut slot_of = Vec::with_capacity(points.len());
     let mut placed = Vec::with_capacity(points.len());
     for (i, p) in points.iter().enumerate() {
-        if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite() && p.intensity.is_finite()) {
-            let (field, v) = [
-                ("x", p.x),
-                ("y", p.y),
-                ("z", p.z),
-                ("intensity", p.intensity),
-            ]
-            .into_iter()
-            .find(|(_, v)| !v.is_finite())
-            .unwrap_or(("x", p.x));
+        if let Some((field, v)) = p.non_finite() {
             return Err(Error::Invalid(format!(
                 "{source}: point {i} (0-based): {field} is {v}, not a finite number"
             )));

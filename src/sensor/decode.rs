@@ -111,31 +111,35 @@ impl ModelDecoder {
                 lay.payload_bytes
             ));
         }
-        if let Some(b) = (0..lay.blocks).find(|&b| {
-            let at = b * lay.block_bytes;
-            u16::from_le_bytes([payload[at], payload[at + 1]]) != lay.block_flag
-        }) {
+        if let Some(b) = lay.bad_flag(payload) {
+            let want = lay.bank_flags[b % lay.banks()].to_be_bytes();
             return Err(format!(
-                "block {b} has no 0xFFEE flag (payload byte offset {})",
+                "block {b} has no 0x{:02X}{:02X} flag (payload byte offset {})",
+                want[1],
+                want[0],
                 b * lay.block_bytes
             ));
         }
-        let byte = payload[lay.return_mode_at];
-        let mode = ReturnMode::from_byte(byte).ok_or_else(|| {
+        let mode = lay.return_mode(payload).map_err(|byte| {
             format!(
                 "unknown return mode byte 0x{byte:02x} (payload byte offset {})",
-                lay.return_mode_at
+                lay.return_mode_at.unwrap_or(0)
             )
         })?;
-        let per = if mode == ReturnMode::Dual { 2 } else { 1 };
+        let banks = lay.banks();
+        let per = m.blocks_per_firing(mode);
         let n = lay.blocks / per;
-        let azimuth: Vec<u32> = (0..n)
-            .map(|f| u32::from(lay.block_azimuth(payload, f * per)) % 36000)
+        // Azimuth of each firing and bank: the first block of the firing with that bank
+        // (dual mode: the pair's first block, as velodyne_decoder and ROS read it).
+        let azimuth: Vec<u32> = (0..n * banks)
+            .map(|fb| {
+                u32::from(lay.block_azimuth(payload, (fb / banks) * per + fb % banks)) % 36000
+            })
             .collect();
-        let mut step: Vec<u32> = (0..n)
-            .map(|f| match azimuth.get(f + 1) {
+        let mut step: Vec<u32> = (0..n * banks)
+            .map(|fb| match azimuth.get(fb + banks) {
                 Some(&next) => {
-                    let s = (next + 36000 - azimuth[f]) % 36000;
+                    let s = (next + 36000 - azimuth[fb]) % 36000;
                     if s > MAX_STEP_CENTIDEG {
                         0
                     } else {
@@ -146,7 +150,9 @@ impl ModelDecoder {
             })
             .collect();
         if n >= 2 {
-            step[n - 1] = step[n - 2];
+            for k in 0..banks {
+                step[(n - 1) * banks + k] = step[(n - 2) * banks + k];
+            }
         }
         let ts = f64::from(lay.timestamp_us(payload)) + hour_offset_us;
         let block_us = m.block_us();
@@ -158,10 +164,10 @@ impl ModelDecoder {
             let Some(kind) = self.kind(mode, block) else {
                 continue;
             };
-            let f = block / per;
-            let az0 = f64::from(azimuth[f]) * 0.01;
+            let fb = (block / per) * banks + block % banks;
+            let az0 = f64::from(azimuth[fb]) * 0.01;
             let gap = if self.interpolate {
-                f64::from(step[f]) * 0.01
+                f64::from(step[fb]) * 0.01
             } else {
                 0.0
             };
@@ -172,8 +178,8 @@ impl ModelDecoder {
                     counts.zero_distance += 1;
                     continue;
                 }
-                let (sequence, laser) = m.channel_laser(channel);
-                let into_block = sequence as f64 * m.sequence_us + laser as f64 * m.laser_us;
+                let (sequence, laser) = m.block_laser(block, channel);
+                let into_block = sequence as f64 * m.sequence_us + m.laser_offset_us(laser);
                 let mut az = az0 + gap * into_block / block_us + m.azimuth_offset_deg[laser];
                 az = az.rem_euclid(360.0);
                 let range = f64::from(raw) * m.distance_resolution_m;
@@ -206,7 +212,7 @@ impl ModelDecoder {
     fn kind(&self, mode: ReturnMode, block: usize) -> Option<ReturnKind> {
         match mode {
             ReturnMode::Dual => {
-                let last = block.is_multiple_of(2);
+                let last = !self.model.dual_block_is_strongest(block);
                 match (self.dual, last) {
                     (DualSelect::Both, true) | (DualSelect::Last, true) => {
                         Some(ReturnKind::DualLast)

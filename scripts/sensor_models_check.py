@@ -20,7 +20,10 @@ is written to DIR as NAME.bin (the 1206-byte payloads, concatenated) and NAME.cs
 z, intensity, time in seconds past the hour, ring, return type: 1 strongest, 2 last, 3
 both), and the ignored test `synthesized_captures_match_velodyne_decoder` of
 tests/sensor_models.rs decodes NAME.bin with the model named in DIR/manifest.txt and
-matches every point.
+matches every point. Two more cases give both decoders a unit's full calibration file
+(hdl64e_s3_calibrated: HDL-64E_S3-VeloView.yml; hdl64e_s2_calibrated_dual: the SZTAKI
+S2 file), read by src/sensor/calibration.rs; their intensities are not compared
+(velodyne_decoder applies the focal intensity correction, lidar-noise keeps the byte).
 
 usage: sensor_models_check.py [DIR]      (run from the project root; DIR default /tmp)
 """
@@ -62,6 +65,10 @@ cases = [
     ("hdl64e_s2_dual", "HDL-64E S2", vd.Model.HDL64E_S2, cal64, 48.0, 17, 2, True),
     ("hdl64e_s3_single", "HDL-64E S3", vd.Model.HDL64E_S3, cal64, 57.6, 21, 2, False),
     ("hdl64e_s3_dual", "HDL-64E S3", vd.Model.HDL64E_S3, cal64, 57.6, 21, 2, True),
+    # A unit's full calibration (distance, two-point, vertical and horizontal offsets):
+    # both decoders read the same ROS YAML file.
+    ("hdl64e_s3_calibrated", "HDL-64E S3", vd.Model.HDL64E_S3, "HDL-64E_S3-VeloView.yml", 57.6, 21, 2, False),
+    ("hdl64e_s2_calibrated_dual", "HDL-64E S2", vd.Model.HDL64E_S2, "HDL-64E_S2.1-sztaki.yml", 48.0, 17, 2, True),
 ]
 
 HOUR0 = 7200  # host clock at a whole hour, small so float64 seconds keep nanoseconds
@@ -106,6 +113,10 @@ for name, model_name, model, cal, firing_us, step, banks, dual in cases:
             p[1204] = 0x48 + i % 7  # status type and value: no meaning to the decoders
             p[1205] = (i * 13) % 256
         payloads.append(bytes(p))
+    calib_file = ""
+    if isinstance(cal, str):
+        calib_file = str(calib_dir / cal)
+        cal = vd.Calibration.read(calib_file)
     config = vd.Config(model=model, calibration=cal, min_range=0.0, max_range=1e4, timestamp_first_packet=True)
     packets = [
         vd.VelodynePacket(HOUR0 + int.from_bytes(p[1200:1204], "little") * 1e-6, np.frombuffer(p, dtype=np.uint8))
@@ -121,7 +132,7 @@ for name, model_name, model, cal, firing_us, step, banks, dual in cases:
                 "%.9g,%.9g,%.9g,%d,%.9f,%d,%d\n"
                 % (q["x"], q["y"], q["z"], q["intensity"], base + float(q["time"]), q["ring"], q["return_type"])
             )
-    manifest.append(f"{name}\t{model_name}\n")
+    manifest.append(f"{name}\t{model_name}\t{calib_file}\n")
     print(f"velodyne_decoder {vd.__version__}: {name}: {len(points)} points -> {out / name}.csv")
 (out / "manifest.txt").write_text("".join(manifest))
 env = dict(os.environ, SENSOR_CHECK_DIR=str(out))

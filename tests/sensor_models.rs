@@ -12,6 +12,7 @@ mod common;
 use lidar_noise::capture::CaptureReader;
 use lidar_noise::frame::Return;
 use lidar_noise::frame::ReturnKind;
+use lidar_noise::sensor::calibration::ModelCalibration;
 use lidar_noise::sensor::decode::{DualSelect, ModelDecoder};
 use lidar_noise::sensor::identify::identify;
 use lidar_noise::sensor::{SensorModel, HDL64E_S2, HDL64E_S3, MODELS, PUCK_HI_RES, VLP16, VLP32C};
@@ -711,7 +712,9 @@ fn synthesized_captures_match_velodyne_decoder() {
         std::path::PathBuf::from(std::env::var("SENSOR_CHECK_DIR").expect("SENSOR_CHECK_DIR"));
     let manifest = std::fs::read_to_string(dir.join("manifest.txt")).unwrap();
     for line in manifest.lines() {
-        let (case, name) = line.split_once('\t').unwrap();
+        let fields: Vec<&str> = line.split('\t').collect();
+        let (case, name) = (fields[0], fields[1]);
+        let calibration = fields.get(2).filter(|f| !f.is_empty());
         let model = MODELS.iter().find(|m| m.name == name).expect("model");
         let bytes = std::fs::read(dir.join(format!("{case}.bin"))).unwrap();
         let payloads: Vec<&[u8]> = bytes.chunks(1206).collect();
@@ -727,7 +730,12 @@ fn synthesized_captures_match_velodyne_decoder() {
             .collect();
         let id = identify(&with_times).unwrap();
         assert_eq!(id.model.name, model.name, "{case}: {}", id.note);
-        let dec = ModelDecoder::new(model, true, DualSelect::Both);
+        let mut dec = ModelDecoder::new(model, true, DualSelect::Both);
+        if let Some(file) = calibration {
+            let cal = ModelCalibration::from_ros_yaml_file(Path::new(file), model).unwrap();
+            assert!(cal.lasers.iter().any(|l| l.is_advanced()), "{file}");
+            dec = dec.with_calibration(cal).unwrap();
+        }
         let mut ours = Vec::new();
         for (i, p) in payloads.iter().enumerate() {
             dec.decode_packet(p, i as u32, 0.0, &mut ours).unwrap();
@@ -767,7 +775,9 @@ fn synthesized_captures_match_velodyne_decoder() {
                 q[4]
             );
             let r = hits[0];
-            assert_eq!(f64::from(r.intensity), q[3], "{case}: reference point {i}");
+            if calibration.is_none() {
+                assert_eq!(f64::from(r.intensity), q[3], "{case}: reference point {i}");
+            }
             let d = ((f64::from(r.x) - q[0]).powi(2)
                 + (f64::from(r.y) - q[1]).powi(2)
                 + (f64::from(r.z) - q[2]).powi(2))
@@ -789,4 +799,108 @@ fn synthesized_captures_match_velodyne_decoder() {
             max_dt * 1e6
         );
     }
+}
+
+/// A 64-laser ROS calibration YAML: laser k at elevation `-k / 4` deg, rotation
+/// correction `k / 100` rad, with the given extra keys on laser 5.
+fn yaml64(extra5: &str) -> String {
+    let mut s = String::from("distance_resolution: 0.002\nnum_lasers: 64\nlasers:\n");
+    for k in 0..64 {
+        s.push_str(&format!(
+            "- {{laser_id: {k}, rot_correction: {}, vert_correction: {}{}}}\n",
+            k as f64 / 100.0,
+            (-(k as f64) / 4.0).to_radians(),
+            if k == 5 { extra5 } else { "" }
+        ));
+    }
+    s
+}
+
+#[test]
+fn hdl64e_calibration_yaml_is_read_and_applied() {
+    let path = Path::new("unit.yaml");
+    let cal = ModelCalibration::from_ros_yaml(
+        &yaml64(
+            ", dist_correction: 1.5, horiz_offset_correction: 0.026, vert_offset_correction: 0.2",
+        ),
+        path,
+        &HDL64E_S3,
+    )
+    .unwrap();
+    assert_eq!(cal.lasers.len(), 64);
+    assert!((cal.lasers[7].elevation_deg + 1.75).abs() < 1e-12);
+    assert!((cal.lasers[7].azimuth_offset_deg + 0.07f64.to_degrees()).abs() < 1e-12);
+    // Laser 5 (upper bank, channel 5) at a raw distance of 10 m in block 0, azimuth 0:
+    // range 10 + 1.5 m; the horizontal offset moves the point 26 mm across the beam
+    // (ROS axes: +y at azimuth 0 plus the laser's offset a), z gains 0.2 m.
+    let p = packet(
+        |b| b % 2 == 1,
+        |b| (21 * (b / 2)) as u16,
+        0,
+        [0, 0],
+        |b, c| {
+            if (b, c) == (0, 5) {
+                (5000, 9)
+            } else {
+                (0, 0)
+            }
+        },
+    );
+    let dec = ModelDecoder::new(&HDL64E_S3, true, DualSelect::Both)
+        .with_calibration(cal)
+        .unwrap();
+    let mut out = Vec::new();
+    dec.decode_packet(&p, 0, 0.0, &mut out).unwrap();
+    assert_eq!(out.len(), 1);
+    let r = &out[0];
+    // Laser 5 fires 7.2 + 1.3 us into the firing (group 1, second laser): 0.21 deg per
+    // 57.6 us firing.
+    let a = (0.21 * 8.5 / 57.6 - 0.05f64.to_degrees()).to_radians();
+    let w = (-1.25f64).to_radians();
+    let (d, h) = (11.5, 0.026);
+    let want = [
+        d * w.cos() * a.cos() + h * a.sin(),
+        -d * w.cos() * a.sin() + h * a.cos(),
+        d * w.sin() + 0.2,
+    ];
+    let got = [f64::from(r.x), f64::from(r.y), f64::from(r.z)];
+    for (g, w) in got.iter().zip(&want) {
+        assert!((g - w).abs() < 1e-5, "{got:?} vs {want:?}");
+    }
+    assert_eq!((r.laser, r.range), (5, 11.5));
+    // Bad files name the file and the laser or key.
+    for (text, want) in [
+        (
+            yaml64("").replace("num_lasers: 64", "num_lasers: 32"),
+            "num_lasers is 32",
+        ),
+        (
+            yaml64("").replace("{laser_id: 9,", "{laser_id: 64,"),
+            "laser_id 64",
+        ),
+        (
+            yaml64("").replace("{laser_id: 9,", "{laser_id: 8,"),
+            "laser_id 8 appears twice",
+        ),
+        (
+            yaml64("").replace("vert_correction: -0.0", "vert_correction: -45.0"),
+            "radians are expected",
+        ),
+        (
+            yaml64("").replace("- {laser_id: 63,", "# {laser_id: 63,"),
+            "laser 63 is missing",
+        ),
+    ] {
+        let e = ModelCalibration::from_ros_yaml(&text, path, &HDL64E_S3)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unit.yaml") && e.contains(want), "{want}: {e}");
+    }
+    let e = ModelDecoder::new(&VLP32C, true, DualSelect::Both)
+        .with_calibration(ModelCalibration::builtin(&HDL64E_S2))
+        .unwrap_err();
+    assert!(
+        e.contains("64 lasers") && e.contains("VLP-32C has 32"),
+        "{e}"
+    );
 }

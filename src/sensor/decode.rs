@@ -23,6 +23,7 @@
 //! (0..23 for the VLP-16 in single mode), dual returns adjacent, so each (block, laser)
 //! pair of a packet is one firing slot of the spurious-return rules.
 
+use super::calibration::ModelCalibration;
 use super::{ReturnMode, SensorModel};
 use crate::frame::{Return, ReturnKind};
 pub use crate::hdl32e::decode::DualSelect;
@@ -46,11 +47,16 @@ pub struct PacketCounts {
 #[derive(Clone, Debug)]
 pub struct ModelDecoder {
     model: SensorModel,
+    /// Per-laser corrections (the model's table unless a file was given).
+    cal: ModelCalibration,
+    /// Any laser has distance or horizontal corrections (the manual's full formulas).
+    advanced: bool,
     cos_elev: Vec<f64>,
     sin_elev: Vec<f64>,
     rings: Vec<u8>,
     /// Vertical correction of each laser in metres (zeros when off).
     z_offset: Vec<f64>,
+    vertical_offsets: bool,
     interpolate: bool,
     dual: DualSelect,
 }
@@ -58,29 +64,71 @@ pub struct ModelDecoder {
 impl ModelDecoder {
     /// A decoder with the model's default calibration.
     pub fn new(model: &SensorModel, interpolate: bool, dual: DualSelect) -> Self {
-        let rad: Vec<f64> = model.elevation_deg.iter().map(|e| e.to_radians()).collect();
-        ModelDecoder {
+        let mut dec = ModelDecoder {
             model: *model,
-            cos_elev: rad.iter().map(|w| w.cos()).collect(),
-            sin_elev: rad.iter().map(|w| w.sin()).collect(),
-            rings: model.rings(),
-            z_offset: (0..model.lasers)
-                .map(|k| model.vertical_offset_mm.get(k).map_or(0.0, |mm| mm * 1e-3))
-                .collect(),
+            cal: ModelCalibration::builtin(model),
+            advanced: false,
+            cos_elev: Vec::new(),
+            sin_elev: Vec::new(),
+            rings: Vec::new(),
+            z_offset: Vec::new(),
+            vertical_offsets: true,
             interpolate,
             dual,
-        }
+        };
+        dec.cache();
+        dec
     }
 
-    /// Applies the manual's per-laser vertical corrections (the default) or not.
-    pub fn with_vertical_offsets(mut self, on: bool) -> Self {
-        self.z_offset = (0..self.model.lasers)
-            .map(|k| match self.model.vertical_offset_mm.get(k) {
-                Some(mm) if on => mm * 1e-3,
-                _ => 0.0,
-            })
+    /// Uses a calibration (a unit's own table, e.g. read by
+    /// [`ModelCalibration::from_ros_yaml_file`]) in place of the model's default; its
+    /// laser count must be the model's.
+    pub fn with_calibration(mut self, cal: ModelCalibration) -> Result<Self, String> {
+        if cal.lasers.len() != self.model.lasers {
+            return Err(format!(
+                "calibration {} has {} lasers, the {} has {}",
+                cal.source,
+                cal.lasers.len(),
+                self.model.name,
+                self.model.lasers
+            ));
+        }
+        self.cal = cal;
+        self.cache();
+        Ok(self)
+    }
+
+    /// Recomputes the per-laser caches from the calibration.
+    fn cache(&mut self) {
+        let rad: Vec<f64> = self
+            .cal
+            .lasers
+            .iter()
+            .map(|l| l.elevation_deg.to_radians())
             .collect();
+        self.cos_elev = rad.iter().map(|w| w.cos()).collect();
+        self.sin_elev = rad.iter().map(|w| w.sin()).collect();
+        self.rings = self.cal.rings();
+        self.advanced = self.cal.lasers.iter().any(|l| l.is_advanced());
+        let on = self.vertical_offsets;
+        self.z_offset = self
+            .cal
+            .lasers
+            .iter()
+            .map(|l| if on { l.vert_offset_m } else { 0.0 })
+            .collect();
+    }
+
+    /// Applies the per-laser vertical corrections (the default) or not.
+    pub fn with_vertical_offsets(mut self, on: bool) -> Self {
+        self.vertical_offsets = on;
+        self.cache();
         self
+    }
+
+    /// The calibration in use.
+    pub fn calibration(&self) -> &ModelCalibration {
+        &self.cal
     }
 
     /// The model decoded.
@@ -180,19 +228,34 @@ impl ModelDecoder {
                 }
                 let (sequence, laser) = m.block_laser(block, channel);
                 let into_block = sequence as f64 * m.sequence_us + m.laser_offset_us(laser);
-                let mut az = az0 + gap * into_block / block_us + m.azimuth_offset_deg[laser];
+                let cal = &self.cal.lasers[laser];
+                let mut az = az0 + gap * into_block / block_us + cal.azimuth_offset_deg;
                 az = az.rem_euclid(360.0);
-                let range = f64::from(raw) * m.distance_resolution_m;
-                let (sa, ca) = az.to_radians().sin_cos();
-                let xy = range * self.cos_elev[laser];
+                let distance = f64::from(raw) * self.cal.distance_resolution_m;
+                let (range, [x, y, z]) = if self.advanced {
+                    let (range, mut p) = cal.position(distance, az);
+                    p[2] += self.z_offset[laser] - cal.vert_offset_m;
+                    (range, p)
+                } else {
+                    let (sa, ca) = az.to_radians().sin_cos();
+                    let xy = distance * self.cos_elev[laser];
+                    (
+                        distance,
+                        [
+                            xy * ca,
+                            -xy * sa,
+                            distance * self.sin_elev[laser] + self.z_offset[laser],
+                        ],
+                    )
+                };
                 let seq = m.sequence_index(mode, block, sequence);
                 out.push(Return {
-                    x: (xy * ca) as f32,
-                    y: (-xy * sa) as f32,
-                    z: (range * self.sin_elev[laser] + self.z_offset[laser]) as f32,
+                    x: x as f32,
+                    y: y as f32,
+                    z: z as f32,
                     range: range as f32,
                     azimuth: (az as f32) % 360.0,
-                    elevation: m.elevation_deg[laser] as f32,
+                    elevation: cal.elevation_deg as f32,
                     time: (ts + m.firing_offset_us(mode, seq, laser)) * 1e-6,
                     packet: record,
                     raw_distance: raw,

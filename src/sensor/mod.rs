@@ -22,6 +22,7 @@
 //!   those of the ROS velodyne driver (`rawdata.cc`, `VLP16_BLOCK_TDURATION`,
 //!   `VLP16_DSR_TOFFSET`, `VLP16_FIRING_TOFFSET`) and Tier IV's nebula (`vlp16.hpp`).
 
+pub mod calibration;
 pub mod decode;
 pub mod identify;
 

@@ -904,3 +904,64 @@ fn hdl64e_calibration_yaml_is_read_and_applied() {
         "{e}"
     );
 }
+
+#[test]
+fn hdl64e_calibration_db_xml_reads_as_the_same_yaml() {
+    // The same unit in VeloView's db.xml units (degrees, centimetres) and as ROS YAML
+    // (radians, metres), as gen_calibration.py converts one into the other.
+    let mut xml = String::from(
+        "<?xml version=\"1.0\"?>\n<!DOCTYPE boost_serialization>\n<boost_serialization>\n<DB>\n<distLSB_>0.2</distLSB_>\n<points_>\n",
+    );
+    let mut yaml = String::from("distance_resolution: 0.002\nlasers:\n");
+    for k in 0..64 {
+        let (rot, vert) = (k as f64 / 10.0 - 3.0, -(k as f64) / 3.0);
+        let (dc, dx, dy, vo, ho) = (120.0 + k as f64, 125.0, 128.0, 20.0 - k as f64 / 4.0, 2.6);
+        xml.push_str(&format!(
+            "<item><px><id_>{k}</id_><rotCorrection_>{rot}</rotCorrection_><vertCorrection_>{vert}</vertCorrection_><distCorrection_>{dc}</distCorrection_><distCorrectionX_>{dx}</distCorrectionX_><distCorrectionY_>{dy}</distCorrectionY_><vertOffsetCorrection_>{vo}</vertOffsetCorrection_><horizOffsetCorrection_>{ho}</horizOffsetCorrection_><focalDistance_>1500</focalDistance_></px></item>\n"
+        ));
+        yaml.push_str(&format!(
+            "- {{laser_id: {k}, rot_correction: {}, vert_correction: {}, dist_correction: {}, dist_correction_x: {}, dist_correction_y: {}, vert_offset_correction: {}, horiz_offset_correction: {}}}\n",
+            rot.to_radians(), vert.to_radians(), dc / 100.0, dx / 100.0, dy / 100.0, vo / 100.0, ho / 100.0
+        ));
+    }
+    xml.push_str("</points_>\n</DB>\n</boost_serialization>\n");
+    let dir = std::env::temp_dir().join(format!("sensor-cal-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (xp, yp) = (dir.join("db.xml"), dir.join("unit.yaml"));
+    std::fs::write(&xp, &xml).unwrap();
+    std::fs::write(&yp, &yaml).unwrap();
+    let a = ModelCalibration::from_file(&xp, &HDL64E_S2).unwrap();
+    let b = ModelCalibration::from_file(&yp, &HDL64E_S2).unwrap();
+    assert!((a.distance_resolution_m - 0.002).abs() < 1e-15);
+    for (k, (x, y)) in a.lasers.iter().zip(&b.lasers).enumerate() {
+        for (u, v) in [
+            (x.elevation_deg, y.elevation_deg),
+            (x.azimuth_offset_deg, y.azimuth_offset_deg),
+            (x.dist_correction_m, y.dist_correction_m),
+            (x.dist_correction_x_m, y.dist_correction_x_m),
+            (x.dist_correction_y_m, y.dist_correction_y_m),
+            (x.vert_offset_m, y.vert_offset_m),
+            (x.horiz_offset_m, y.horiz_offset_m),
+        ] {
+            assert!((u - v).abs() < 1e-9, "laser {k}: {x:?} vs {y:?}");
+        }
+    }
+    assert!((a.lasers[10].azimuth_offset_deg - 2.0).abs() < 1e-9);
+    assert!((a.lasers[10].dist_correction_m - 1.30).abs() < 1e-9);
+    // A missing element names the item and its line.
+    std::fs::write(
+        &xp,
+        xml.replacen("<vertCorrection_>-0</vertCorrection_>", "", 1),
+    )
+    .unwrap();
+    let e = ModelCalibration::from_file(&xp, &HDL64E_S2)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("db.xml")
+            && e.contains("points_ item 0 (line 7)")
+            && e.contains("<vertCorrection_>"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

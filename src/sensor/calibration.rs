@@ -1,11 +1,13 @@
 //! Per-laser calibration of any described sensor (HDL-64E units above all: every unit
-//! ships its own table), read from the ROS velodyne driver's YAML, including the
+//! ships its own table), read from the ROS velodyne driver's YAML or VeloView's
+//! `db.xml`, including the
 //! corrections `src/calibration/` refuses for the HDL-32E: distance offset, two-point
 //! distance correction, vertical and horizontal offsets.
 //!
 //! Written here rather than by extending `src/calibration/`, whose readers and
 //! `Calibration` type are fixed at the HDL-32E's 32 lasers and refuse the offsets; the
-//! YAML is parsed with serde_norway as there.
+//! YAML is parsed with serde_norway and the XML with roxmltree as there (with its depth
+//! guard, `calibration::xml::too_deep`).
 //!
 //! Conventions: `azimuth_offset_deg` is the negated `rot_correction` (point azimuth =
 //! block azimuth + offset), elevations in degrees, lengths in metres. How the corrections
@@ -155,87 +157,138 @@ impl ModelCalibration {
         Self::from_ros_yaml(&text, path, model)
     }
 
+    /// Reads a ROS velodyne calibration YAML or a VeloView `db.xml` for `model`, told
+    /// apart by content (a file whose first non-blank character is `<` is XML).
+    pub fn from_file(path: &Path, model: &SensorModel) -> Result<Self> {
+        let text = crate::error::read_text_bounded(path)?;
+        if text
+            .trim_start_matches('\u{feff}')
+            .trim_start()
+            .starts_with('<')
+        {
+            Self::from_veloview_xml(&text, path, model)
+        } else {
+            Self::from_ros_yaml(&text, path, model)
+        }
+    }
+
     /// Parses a ROS velodyne calibration YAML for `model`: every laser id from 0 to
     /// `model.lasers - 1` exactly once, finite values, angles in radians within +-90
     /// degrees; `path` names the file in errors.
     pub fn from_ros_yaml(text: &str, path: &Path, model: &SensorModel) -> Result<Self> {
+        let file: RosFile = serde_norway::from_str(text).map_err(|e| Error::Config {
+            path: path.to_path_buf(),
+            message: format!("not a ROS velodyne calibration YAML: {e}"),
+        })?;
+        let lasers: Vec<(String, RosLaser)> = file
+            .lasers
+            .into_iter()
+            .enumerate()
+            .map(|(i, l)| (format!("lasers[{i}]"), l))
+            .collect();
+        assemble(
+            &lasers,
+            file.num_lasers,
+            file.distance_resolution,
+            path,
+            model,
+        )
+    }
+
+    /// Parses a VeloView calibration XML (`db.xml`, boost serialization: `<DB>` with
+    /// `<distLSB_>` in cm and `<points_>` items whose `<px>` holds `<id_>`,
+    /// `<rotCorrection_>` and `<vertCorrection_>` in degrees and `<distCorrection_>`,
+    /// `<distCorrectionX_>`, `<distCorrectionY_>`, `<vertOffsetCorrection_>`,
+    /// `<horizOffsetCorrection_>` in cm: the units of the ROS driver's
+    /// `gen_calibration.py`, which converts these files to its YAML). Same checks as
+    /// the YAML; places are named by item and line.
+    pub fn from_veloview_xml(text: &str, path: &Path, model: &SensorModel) -> Result<Self> {
         let err = |message: String| Error::Config {
             path: path.to_path_buf(),
             message,
         };
-        let file: RosFile = serde_norway::from_str(text)
-            .map_err(|e| err(format!("not a ROS velodyne calibration YAML: {e}")))?;
-        let n = model.lasers;
-        if let Some(k) = file.num_lasers {
-            if k != n as i64 {
+        let max = crate::calibration::xml::MAX_DEPTH;
+        if let Some(line) = crate::calibration::xml::too_deep(text, max) {
+            return Err(err(format!(
+                "elements nested more than {max} levels deep at line {line}: not a VeloView \
+                 calibration file"
+            )));
+        }
+        let options = roxmltree::ParsingOptions {
+            allow_dtd: true,
+            ..Default::default()
+        };
+        let doc = roxmltree::Document::parse_with_options(text, options)
+            .map_err(|e| err(format!("not a well-formed XML file: {e}")))?;
+        let line_of = |n: roxmltree::Node| doc.text_pos_at(n.range().start).row;
+        let number = |n: roxmltree::Node| -> Result<f64> {
+            let t = n.text().unwrap_or("").trim();
+            t.parse::<f64>().map_err(|_| {
+                err(format!(
+                    "line {}: <{}> holds {t:?}, expected a number",
+                    line_of(n),
+                    n.tag_name().name()
+                ))
+            })
+        };
+        let db = doc
+            .descendants()
+            .find(|n| n.has_tag_name("DB"))
+            .ok_or_else(|| err("no <DB> element: not a VeloView calibration file".into()))?;
+        let resolution = match child(db, "distLSB_") {
+            Some(n) => Some(number(n)? / 100.0),
+            None => None,
+        };
+        let points = child(db, "points_")
+            .ok_or_else(|| err(format!("<DB> at line {} has no <points_>", line_of(db))))?;
+        let mut lasers = Vec::new();
+        for (i, item) in points
+            .children()
+            .filter(|n| n.has_tag_name("item"))
+            .enumerate()
+        {
+            // A few more items than lasers is a wrong file, not one to scan to its end
+            // (each place's line number is a scan of the text).
+            if i >= 2 * model.lasers {
                 return Err(err(format!(
-                    "num_lasers is {k}, but a {} has {n} lasers",
+                    "points_ item {i} at line {}: more than {} items for the {} lasers of a {}",
+                    line_of(item),
+                    2 * model.lasers,
+                    model.lasers,
                     model.name
                 )));
             }
-        }
-        let resolution = file
-            .distance_resolution
-            .unwrap_or(model.distance_resolution_m);
-        if !(resolution.is_finite() && resolution > 0.0 && resolution < 1.0) {
-            return Err(err(format!(
-                "distance_resolution {resolution} is not a size in metres"
-            )));
-        }
-        let mut lasers: Vec<Option<LaserCorrection>> = vec![None; n];
-        for (i, l) in file.lasers.iter().enumerate() {
-            let id = usize::try_from(l.laser_id)
-                .ok()
-                .filter(|&id| id < n)
-                .ok_or_else(|| {
-                    err(format!(
-                        "lasers[{i}]: laser_id {} is not one of the {n} lasers of a {}",
-                        l.laser_id, model.name
-                    ))
-                })?;
-            let values = [
-                ("rot_correction", l.rot_correction),
-                ("vert_correction", l.vert_correction),
-                ("dist_correction", l.dist_correction),
-                ("dist_correction_x", l.dist_correction_x),
-                ("dist_correction_y", l.dist_correction_y),
-                ("vert_offset_correction", l.vert_offset_correction),
-                ("horiz_offset_correction", l.horiz_offset_correction),
-            ];
-            if let Some((key, v)) = values.iter().find(|(_, v)| !v.is_finite()) {
-                return Err(err(format!("lasers[{i}] (laser {id}): {key} is {v}")));
-            }
-            for (key, v) in &values[..2] {
-                if v.abs() > std::f64::consts::FRAC_PI_2 {
-                    return Err(err(format!(
-                        "lasers[{i}] (laser {id}): {key} {v} is beyond 90 degrees: \
-                         radians are expected"
-                    )));
+            let px = child(item, "px").ok_or_else(|| {
+                err(format!(
+                    "points_ item {i} at line {} has no <px>",
+                    line_of(item)
+                ))
+            })?;
+            let place = format!("points_ item {i} (line {})", line_of(px));
+            let get = |name: &str, required: bool| -> Result<f64> {
+                match child(px, name) {
+                    Some(n) => number(n),
+                    None if required => Err(err(format!("{place}: missing <{name}>"))),
+                    None => Ok(0.0),
                 }
+            };
+            let id = get("id_", true)?;
+            if id.fract() != 0.0 || id.abs() > 1e9 {
+                return Err(err(format!("{place}: <id_> {id} is not an integer")));
             }
-            if lasers[id].is_some() {
-                return Err(err(format!("lasers[{i}]: laser_id {id} appears twice")));
-            }
-            lasers[id] = Some(LaserCorrection {
-                elevation_deg: l.vert_correction.to_degrees(),
-                azimuth_offset_deg: -l.rot_correction.to_degrees(),
-                dist_correction_m: l.dist_correction,
-                dist_correction_x_m: l.dist_correction_x,
-                dist_correction_y_m: l.dist_correction_y,
-                vert_offset_m: l.vert_offset_correction,
-                horiz_offset_m: l.horiz_offset_correction,
-            });
+            let laser = RosLaser {
+                laser_id: id as i64,
+                rot_correction: get("rotCorrection_", true)?.to_radians(),
+                vert_correction: get("vertCorrection_", true)?.to_radians(),
+                dist_correction: get("distCorrection_", false)? / 100.0,
+                dist_correction_x: get("distCorrectionX_", false)? / 100.0,
+                dist_correction_y: get("distCorrectionY_", false)? / 100.0,
+                vert_offset_correction: get("vertOffsetCorrection_", false)? / 100.0,
+                horiz_offset_correction: get("horizOffsetCorrection_", false)? / 100.0,
+            };
+            lasers.push((place, laser));
         }
-        let lasers = lasers
-            .into_iter()
-            .enumerate()
-            .map(|(id, l)| l.ok_or_else(|| err(format!("laser {id} is missing from lasers"))))
-            .collect::<Result<Vec<_>>>()?;
-        Ok(ModelCalibration {
-            lasers,
-            distance_resolution_m: resolution,
-            source: path.display().to_string(),
-        })
+        assemble(&lasers, None, resolution, path, model)
     }
 
     /// Ring of each laser id: ids sorted by elevation, 0 lowest (ties in id order).
@@ -252,4 +305,93 @@ impl ModelCalibration {
         }
         rings
     }
+}
+
+/// Checks the entries of a calibration file against `model` and builds the calibration:
+/// each laser id once, finite values, angles within +-90 degrees (radians expected).
+fn assemble(
+    entries: &[(String, RosLaser)],
+    num_lasers: Option<i64>,
+    resolution: Option<f64>,
+    path: &Path,
+    model: &SensorModel,
+) -> Result<ModelCalibration> {
+    let err = |message: String| Error::Config {
+        path: path.to_path_buf(),
+        message,
+    };
+    let n = model.lasers;
+    if let Some(k) = num_lasers {
+        if k != n as i64 {
+            return Err(err(format!(
+                "num_lasers is {k}, but a {} has {n} lasers",
+                model.name
+            )));
+        }
+    }
+    let resolution = resolution.unwrap_or(model.distance_resolution_m);
+    if !(resolution.is_finite() && resolution > 0.0 && resolution < 1.0) {
+        return Err(err(format!(
+            "distance resolution {resolution} m is not a size in metres"
+        )));
+    }
+    let mut lasers: Vec<Option<LaserCorrection>> = vec![None; n];
+    for (place, l) in entries {
+        let id = usize::try_from(l.laser_id)
+            .ok()
+            .filter(|&id| id < n)
+            .ok_or_else(|| {
+                err(format!(
+                    "{place}: laser_id {} is not one of the {n} lasers of a {}",
+                    l.laser_id, model.name
+                ))
+            })?;
+        let values = [
+            ("rot_correction", l.rot_correction),
+            ("vert_correction", l.vert_correction),
+            ("dist_correction", l.dist_correction),
+            ("dist_correction_x", l.dist_correction_x),
+            ("dist_correction_y", l.dist_correction_y),
+            ("vert_offset_correction", l.vert_offset_correction),
+            ("horiz_offset_correction", l.horiz_offset_correction),
+        ];
+        if let Some((key, v)) = values.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(err(format!("{place} (laser {id}): {key} is {v}")));
+        }
+        for (key, v) in &values[..2] {
+            if v.abs() > std::f64::consts::FRAC_PI_2 {
+                return Err(err(format!(
+                    "{place} (laser {id}): {key} {v} rad is beyond 90 degrees: radians are \
+                     expected"
+                )));
+            }
+        }
+        if lasers[id].is_some() {
+            return Err(err(format!("{place}: laser_id {id} appears twice")));
+        }
+        lasers[id] = Some(LaserCorrection {
+            elevation_deg: l.vert_correction.to_degrees(),
+            azimuth_offset_deg: -l.rot_correction.to_degrees(),
+            dist_correction_m: l.dist_correction,
+            dist_correction_x_m: l.dist_correction_x,
+            dist_correction_y_m: l.dist_correction_y,
+            vert_offset_m: l.vert_offset_correction,
+            horiz_offset_m: l.horiz_offset_correction,
+        });
+    }
+    let lasers = lasers
+        .into_iter()
+        .enumerate()
+        .map(|(id, l)| l.ok_or_else(|| err(format!("laser {id} is missing from the file"))))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(ModelCalibration {
+        lasers,
+        distance_resolution_m: resolution,
+        source: path.display().to_string(),
+    })
+}
+
+/// The first child element of `node` named `name`.
+fn child<'a, 'i>(node: roxmltree::Node<'a, 'i>, name: &str) -> Option<roxmltree::Node<'a, 'i>> {
+    node.children().find(|n| n.has_tag_name(name))
 }

@@ -135,7 +135,64 @@ for name, model_name, model, cal, firing_us, step, banks, dual in cases:
     manifest.append(f"{name}\t{model_name}\t{calib_file}\n")
     print(f"velodyne_decoder {vd.__version__}: {name}: {len(points)} points -> {out / name}.csv")
 (out / "manifest.txt").write_text("".join(manifest))
+
+# HDL-64E S3 status-byte calibration: VeloView's S3 table written into the status bytes
+# of 4,400 packets (each 16 packets: H M S D N Y G T V status, then W and six more types
+# carrying 7 calibration bytes; the 1,820-byte block "UNIT#", noise thresholds, 64
+# records of 28 bytes, a 21-byte tail ending in the CRC-16), starting mid-block;
+# velodyne_decoder's hdl64e.read_status_info reads it back and its calibration is
+# written as status_calib.yml; the Rust test reads the same packets' status bytes.
+import struct
+
+full = yaml.safe_load((calib_dir / "HDL-64E_S3-VeloView.yml").read_text())
+records = b""
+for l in sorted(full["lasers"], key=lambda l: l["laser_id"]):
+    rec = struct.pack(
+        "<BhhhhhhhhhBB",
+        l["laser_id"],
+        round(np.degrees(l["vert_correction"]) * 100),
+        round(np.degrees(l["rot_correction"]) * 100),
+        round(l.get("dist_correction", 0) * 1000),
+        round(l.get("dist_correction_x", 0) * 1000),
+        round(l.get("dist_correction_y", 0) * 1000),
+        round(l.get("vert_offset_correction", 0) * 1000),
+        round(l.get("horiz_offset_correction", 0) * 1000),
+        round(l.get("focal_distance", 0) * 1000),
+        round(l.get("focal_slope", 0) * 10),
+        int(l.get("min_intensity", 0)),
+        int(l.get("max_intensity", 255)),
+    )
+    # 7 more bytes a record: the last record's are read as the calibration date and
+    # humidity (velodyne_decoder reads the last 28 bytes of the block as the tail).
+    records += rec + bytes([16, 11, 15, 12, 47, 47, 25])
+crc = vd.hdl64e.crc16(b"".join(records[i + 1 : i + 21] for i in range(0, len(records), 28)))
+tail = struct.pack("<hHH", 600, 0, 36000) + bytes(13) + struct.pack("<H", crc)
+block = b"UNIT#" + bytes([24, 24]) + records + tail
+assert len(block) == 1820
+data = (block[600:] + block + block)  # starts mid-block, as a capture does
+status = {"H": 7, "M": 8, "S": 9, "D": 6, "N": 5, "Y": 24, "G": 0, "T": 20, "V": 227}
+payloads = []
+k = 0
+for i in range(4400):
+    p = bytearray(1206)
+    for b in range(12):
+        p[b * 100 : b * 100 + 2] = (0xEEFF if b % 2 == 0 else 0xDDFF).to_bytes(2, "little")
+    p[1200:1204] = (1_000_000 + round(i * 345.6)).to_bytes(4, "little")
+    phase = i % 16
+    if phase < 9:
+        t = "HMSDNYGTV"[phase]
+        p[1204], p[1205] = ord(t), status[t]
+    else:
+        p[1204], p[1205] = ord("W1234567"[phase - 9]), data[k]
+        k += 1
+    payloads.append(bytes(p))
+meta = vd.hdl64e.read_status_info(payloads)
+calib = vd.hdl64e.status_info_to_calib_dict(meta)
+calib.pop("status")
+(out / "status_calib.yml").write_text(yaml.dump(calib, sort_keys=False))
+(out / "hdl64e_s3_status.bin").write_bytes(b"".join(payloads))
+print(f"velodyne_decoder hdl64e.read_status_info: {meta['Model']}, {len(meta['Calibration'])} lasers -> {out / 'status_calib.yml'}")
 env = dict(os.environ, SENSOR_CHECK_DIR=str(out))
 cmd = ["cargo", "test", "--test", "sensor_models", "--", "--ignored", "--nocapture",
-       "synthesized_captures_match_velodyne_decoder"]
+       "synthesized_captures_match_velodyne_decoder", "status_byte_calibration_matches_velodyne_decoder"]
 sys.exit(subprocess.run(cmd, cwd=root, env=env).returncode)

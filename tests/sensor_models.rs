@@ -965,3 +965,112 @@ fn hdl64e_calibration_db_xml_reads_as_the_same_yaml() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Against velodyne_decoder's `hdl64e.read_status_info`: run
+/// `scripts/sensor_models_check.py` (it writes the packets and the calibration
+/// velodyne_decoder read from their status bytes).
+#[test]
+#[ignore = "needs the files written by scripts/sensor_models_check.py"]
+fn status_byte_calibration_matches_velodyne_decoder() {
+    let dir =
+        std::path::PathBuf::from(std::env::var("SENSOR_CHECK_DIR").expect("SENSOR_CHECK_DIR"));
+    let bytes = std::fs::read(dir.join("hdl64e_s3_status.bin")).unwrap();
+    let status: Vec<(u8, u8)> = bytes.chunks(1206).map(|p| (p[1204], p[1205])).collect();
+    let ours = ModelCalibration::from_status_bytes(status.iter().copied(), &HDL64E_S3).unwrap();
+    let theirs =
+        ModelCalibration::from_ros_yaml_file(&dir.join("status_calib.yml"), &HDL64E_S3).unwrap();
+    let mut max = 0f64;
+    for (k, (a, b)) in ours.lasers.iter().zip(&theirs.lasers).enumerate() {
+        for (u, v) in [
+            (a.elevation_deg, b.elevation_deg),
+            (a.azimuth_offset_deg, b.azimuth_offset_deg),
+            (a.dist_correction_m, b.dist_correction_m),
+            (a.dist_correction_x_m, b.dist_correction_x_m),
+            (a.dist_correction_y_m, b.dist_correction_y_m),
+            (a.vert_offset_m, b.vert_offset_m),
+            (a.horiz_offset_m, b.horiz_offset_m),
+        ] {
+            // velodyne_decoder rounds radians and metres to 7 decimals.
+            assert!((u - v).abs() < 1e-5, "laser {k}: {a:?} vs {b:?}");
+            max = max.max((u - v).abs());
+        }
+    }
+    // The same stream cut before a whole block has passed is refused with the count.
+    let e = ModelCalibration::from_status_bytes(status[..2000].iter().copied(), &HDL64E_S3)
+        .unwrap_err();
+    assert!(
+        e.contains("2000 data packets") && e.contains("4,160"),
+        "{e}"
+    );
+    eprintln!("status-byte calibration: 64 lasers equal to velodyne_decoder's within {max:e}");
+}
+
+#[test]
+fn hdl64e_s2_status_bytes_give_the_units_calibration() {
+    // An S2 block (no `W` type; the check is the block length, 1820): "UNIT#", two noise
+    // thresholds, 64 records of 28 bytes, 21-byte tail. Laser k's record: vertical
+    // correction -k * 0.25 deg, rotational 0.01 k deg; laser 5 also 1.234 m far distance
+    // correction, 25 mm horizontal and -120 mm vertical offset.
+    let mut block = b"UNIT#".to_vec();
+    block.extend([30, 30]);
+    for k in 0..64u8 {
+        let mut r = vec![k];
+        let mut put = |v: i16| r.extend(v.to_le_bytes());
+        put(-25 * i16::from(k));
+        put(i16::from(k));
+        let (far, h, v) = if k == 5 { (1234, 25, -120) } else { (0, 0, 0) };
+        for value in [far, 0, 0, v, h, 0, 0] {
+            put(value);
+        }
+        r.extend([0, 255]);
+        r.extend([0u8; 7]);
+        assert_eq!(r.len(), 28);
+        block.extend(r);
+    }
+    block.extend([0u8; 19]);
+    block.extend(1820u16.to_le_bytes());
+    assert_eq!(block.len(), 1820);
+    // Start mid-block; each 16 packets: 9 status types, then 7 calibration bytes.
+    let data: Vec<u8> = block[900..].iter().chain(&block).copied().collect();
+    let mut status = Vec::new();
+    let mut next = data.iter();
+    'stream: for i in 0.. {
+        let phase = i % 16;
+        if phase < 9 {
+            status.push((b"HMSDNYGTV"[phase], 1));
+        } else {
+            match next.next() {
+                Some(&v) => status.push((b'1' + (phase - 9) as u8, v)),
+                None => break 'stream,
+            }
+        }
+    }
+    let cal = ModelCalibration::from_status_bytes(status.iter().copied(), &HDL64E_S2).unwrap();
+    for (k, l) in cal.lasers.iter().enumerate() {
+        assert!(
+            (l.elevation_deg + 0.25 * k as f64).abs() < 1e-12,
+            "laser {k}"
+        );
+        assert!(
+            (l.azimuth_offset_deg + 0.01 * k as f64).abs() < 1e-12,
+            "laser {k}"
+        );
+    }
+    let l5 = cal.lasers[5];
+    assert!((l5.dist_correction_m - 1.234).abs() < 1e-12);
+    assert!((l5.horiz_offset_m - 0.025).abs() < 1e-12);
+    assert!((l5.vert_offset_m + 0.120).abs() < 1e-12);
+    // A wrong check value: no block is accepted, and the message says how many were tried.
+    let mut bad = status.clone();
+    for s in &mut bad {
+        if s.0 != b'H' && s.1 == 0x07 {
+            s.1 = 0x08;
+        }
+    }
+    let e = ModelCalibration::from_status_bytes(bad, &HDL64E_S2).unwrap_err();
+    assert!(
+        e.contains("no HDL-64E calibration block with a valid check"),
+        "{e}"
+    );
+    assert!(ModelCalibration::from_status_bytes(status, &VLP32C).is_err());
+}

@@ -291,6 +291,67 @@ impl ModelCalibration {
         assemble(&lasers, None, resolution, path, model)
     }
 
+    /// Reads an HDL-64E's own calibration from the status bytes of its data packets
+    /// (bytes 1204 and 1205: status type and value). Types `H M S D N Y G T V` carry the
+    /// clock and unit status; every other byte (the S3's `W` included) is the next byte
+    /// of a 1,820-byte calibration block starting "UNIT#": two noise thresholds, 64
+    /// laser records of 28 bytes (id u8; vertical and rotational correction i16 in
+    /// 0.01 deg; far distance, x and y two-point, vertical and horizontal offset
+    /// corrections, focal distance i16 in mm; focal slope i16; min and max intensity u8)
+    /// and a 21-byte tail ending in a u16 check: the CRC-16 (polynomial 0x8005) of bytes
+    /// 1-20 of each record on the S3 (which writes `W`), the block length on the S2.
+    /// The layout and check are those velodyne_decoder's `hdl64e.read_status_info`
+    /// reads (the S2/S3 manuals' status cycle: 7 calibration bytes in each 16 packets,
+    /// 4,160 packets a block). The first block whose check holds is used.
+    pub fn from_status_bytes(
+        status: impl IntoIterator<Item = (u8, u8)>,
+        model: &SensorModel,
+    ) -> std::result::Result<Self, String> {
+        const BLOCK: usize = 1820;
+        if model.lasers != 64 {
+            return Err(format!("{} packets carry no calibration", model.name));
+        }
+        let mut values = Vec::with_capacity(BLOCK);
+        let (mut s3, mut blocks, mut seen) = (false, 0usize, 0usize);
+        for (kind, value) in status {
+            seen += 1;
+            if b"HMSDNYGTV".contains(&kind) {
+                continue;
+            }
+            s3 |= kind == b'W';
+            values.push(value);
+            if values.len() < BLOCK {
+                continue;
+            }
+            blocks += 1;
+            let Some(start) = values.windows(5).position(|w| w == b"UNIT#") else {
+                values.clear();
+                continue;
+            };
+            values.rotate_left(start);
+            let expected = u16::from_le_bytes([values[BLOCK - 2], values[BLOCK - 1]]);
+            let records = &values[7..BLOCK - 21];
+            let check = if s3 {
+                crc16(records.chunks(28).flat_map(|r| r[1..21].iter().copied()))
+            } else {
+                BLOCK as u16
+            };
+            if expected == check {
+                return decode_records(records, model);
+            }
+            // Keep the bytes after the start token: the next block may complete them.
+            values.truncate(BLOCK - start);
+            if start == 0 {
+                values.clear();
+            }
+        }
+        Err(format!(
+            "no HDL-64E calibration block with a valid check in the status bytes of {seen} \
+             data packets ({blocks} blocks of {BLOCK} bytes tried; a whole block takes \
+             4,160 packets)"
+        ))
+    }
+
     /// Ring of each laser id: ids sorted by elevation, 0 lowest (ties in id order).
     pub fn rings(&self) -> Vec<u8> {
         let mut ids: Vec<usize> = (0..self.lasers.len()).collect();
@@ -394,4 +455,58 @@ fn assemble(
 /// The first child element of `node` named `name`.
 fn child<'a, 'i>(node: roxmltree::Node<'a, 'i>, name: &str) -> Option<roxmltree::Node<'a, 'i>> {
     node.children().find(|n| n.has_tag_name(name))
+}
+
+/// CRC-16 with polynomial 0x8005, initial value 0, no reflection (the HDL-64E S3's
+/// calibration check).
+fn crc16(bytes: impl Iterator<Item = u8>) -> u16 {
+    let mut reg: u16 = 0;
+    for octet in bytes {
+        for i in 0..8 {
+            let mut top = reg & 0x8000;
+            if octet & (0x80 >> i) != 0 {
+                top ^= 0x8000;
+            }
+            reg <<= 1;
+            if top != 0 {
+                reg ^= 0x8005;
+            }
+        }
+    }
+    reg
+}
+
+/// The 64 laser records of a status calibration block (28 bytes each).
+fn decode_records(
+    records: &[u8],
+    model: &SensorModel,
+) -> std::result::Result<ModelCalibration, String> {
+    let mut lasers: Vec<Option<LaserCorrection>> = vec![None; model.lasers];
+    for (i, r) in records.chunks(28).enumerate() {
+        let v = |k: usize| f64::from(i16::from_le_bytes([r[1 + 2 * k], r[2 + 2 * k]]));
+        let id = usize::from(r[0]);
+        if id >= model.lasers || lasers[id].is_some() {
+            return Err(format!(
+                "status calibration record {i} names laser {id}: not a new laser of 0..{}",
+                model.lasers - 1
+            ));
+        }
+        lasers[id] = Some(LaserCorrection {
+            elevation_deg: v(0) * 0.01,
+            azimuth_offset_deg: -v(1) * 0.01,
+            dist_correction_m: v(2) * 0.001,
+            dist_correction_x_m: v(3) * 0.001,
+            dist_correction_y_m: v(4) * 0.001,
+            vert_offset_m: v(5) * 0.001,
+            horiz_offset_m: v(6) * 0.001,
+        });
+    }
+    Ok(ModelCalibration {
+        lasers: lasers
+            .into_iter()
+            .map(|l| l.expect("64 records, each id once"))
+            .collect(),
+        distance_resolution_m: model.distance_resolution_m,
+        source: "the packets' status bytes".to_string(),
+    })
 }

@@ -2,8 +2,11 @@
 //! dual, with the conventions of `src/hdl32e/decode.rs` (ROS velodyne axes: x forward,
 //! y left, z up; azimuth clockwise seen from above; ring 0 lowest).
 //!
-//! Per channel `c` of block `b`: firing sequence `s = c / lasers`, laser id
-//! `k = c % lasers` (VLP-16 manual 9.3.1.5 and 9.5). Azimuth interpolation (on by
+//! Per channel `c` of block `b`: firing sequence `s = c / n`, laser id
+//! `k = bank * n + c % n`, where `n` is the lasers of a bank and `bank = b % banks`
+//! (VLP-16 manual 9.3.1.5 and 9.5; the HDL-64E's lower-bank blocks carry lasers 32-63).
+//! A laser fires `SensorModel::laser_offset_us` into its sequence (in pairs on the
+//! VLP-32C, in groups of 4 on the HDL-64E). Azimuth interpolation (on by
 //! default, as velodyne_decoder, VeloView and the ROS VLP-16 path do): the laser fires
 //! `s * sequence_us + k * laser_us` into its block, so its azimuth is the block's plus
 //! that fraction of the block duration times the step to the next block's azimuth (next

@@ -1,6 +1,6 @@
 //! One description of a spinning Velodyne sensor (issue 31): lasers, firing timing,
-//! packet layout, return modes and rotation, with the HDL-32E, VLP-16, Puck LITE and
-//! Puck Hi-Res as instances.
+//! packet layout, return modes and rotation, with the HDL-32E, VLP-16, Puck LITE, Puck
+//! Hi-Res, VLP-32C and HDL-64E S2/S3 as instances.
 //!
 //! Sources:
 //! - HDL-32E: the constants of `src/hdl32e/packet.rs` and the built-in table of
@@ -21,6 +21,16 @@
 //!   both sequences of a block (azimuth + gap * (2.304 * k + 55.296 * s) / 110.592) are
 //!   those of the ROS velodyne driver (`rawdata.cc`, `VLP16_BLOCK_TDURATION`,
 //!   `VLP16_DSR_TOFFSET`, `VLP16_FIRING_TOFFSET`) and Tier IV's nebula (`vlp16.hpp`).
+//! - VLP-32C: VLP-32C user manual 63-9325, Table 9-1 (elevation and azimuth offset by
+//!   laser id; the same numbers as velodyne_decoder's `calib_db.cpp` and bundled
+//!   `VLP-32C.yml`), 9.5 (lasers fired in pairs every 2.304 us, 55.296 us a sequence,
+//!   one sequence per block), 4 mm distance units (`distance_resolution: 0.004` in the
+//!   ROS and velodyne_decoder tables).
+//! - HDL-64E S2/S3: packet layout of the HDL-64E S2 and S3 manuals (upper block 0xEEFF,
+//!   lower block 0xDDFF, status type and value bytes after the timestamp); firing timing
+//!   from their "laser firing time table" as velodyne_decoder 3 (`buildTimings`,
+//!   `unpack_hdl64e`) applies it, with its dual-mode block order and mode detection;
+//!   default angles from VeloView's `HDL-64.xml` (the manuals print no table).
 
 pub mod calibration;
 pub mod decode;
@@ -28,8 +38,8 @@ pub mod identify;
 
 pub use crate::hdl32e::packet::ReturnMode;
 
-/// The data packet layout shared by the HDL-32E and the VLP-16 family (1206-byte UDP
-/// payload: 12 blocks of flag, azimuth and 32 channels; timestamp; two factory bytes).
+/// The data packet layout of these sensors (1206-byte UDP payload: 12 blocks of flag,
+/// azimuth and 32 channels; timestamp; two factory or status bytes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PacketLayout {
     /// UDP payload size of a data packet.
@@ -287,8 +297,9 @@ const VLP32C_AZIMUTH_OFFSET_DEG: [f64; 32] = [
 
 /// Velodyne VLP-32C: 32 lasers fired in 16 pairs 2.304 us apart, one 55.296 us firing
 /// sequence per block, 4 mm distance units (VLP-32C user manual 63-9325: 9.3 packet
-/// format, 9.5 firing timing "TimeOffset = 55.296 us * sequence + 2.304 us *
-/// floor(channel / 2)", timestamp = first firing of the packet; product id 0x28).
+/// format, 9.5 firing timing: time offset = 55.296 us * sequence + 2.304 us *
+/// floor(channel / 2), as velodyne_decoder's `buildTimings` cites it; timestamp = first
+/// firing of the packet; product id 0x28).
 pub const VLP32C: SensorModel = SensorModel {
     name: "VLP-32C",
     product_id: 0x28,

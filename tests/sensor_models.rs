@@ -1,15 +1,21 @@
 //! Sensor models of issue 31 (src/sensor/): identification by structure on synthetic
 //! packet sequences and the real captures in ../shared/data, the VLP-16 decoder on the
 //! real VLP-16 capture (counts per ring from the raw bytes), and, as an ignored test run
-//! by scripts/vlp16_check.py, against velodyne_decoder's points of one frame.
+//! by scripts/vlp16_check.py, against velodyne_decoder's points of one frame. The
+//! VLP-32C and HDL-64E S2/S3 decoders on hand-written packets checked against tables
+//! typed here from the manuals (and VeloView's default HDL-64 table), their
+//! identification (also with a lying product byte), and, as an ignored test run by
+//! scripts/sensor_models_check.py, against velodyne_decoder on synthesized captures.
 
 mod common;
 
 use lidar_noise::capture::CaptureReader;
 use lidar_noise::frame::Return;
+use lidar_noise::frame::ReturnKind;
+use lidar_noise::sensor::calibration::ModelCalibration;
 use lidar_noise::sensor::decode::{DualSelect, ModelDecoder};
 use lidar_noise::sensor::identify::identify;
-use lidar_noise::sensor::{PUCK_HI_RES, VLP16};
+use lidar_noise::sensor::{SensorModel, HDL64E_S2, HDL64E_S3, MODELS, PUCK_HI_RES, VLP16, VLP32C};
 use std::path::Path;
 
 /// A run of `n` data packets: `period_us` apart (sensor and capture clocks), block
@@ -82,11 +88,13 @@ fn synthetic_captures_are_told_apart_by_structure() {
 
 #[test]
 fn unknown_structures_are_refused_with_what_was_measured() {
-    // VLP-32C timing (one 55.296 us sequence per block, 663.5 us per packet) in single
-    // mode: no described sensor.
-    let e = ident(&packets(40, 664, 20, 0x37, 0x28)).unwrap_err();
+    // A 900 us packet period in single mode: no described sensor.
+    let e = ident(&packets(40, 900, 20, 0x37, 0x28)).unwrap_err();
     assert!(
-        e.contains("unknown sensor") && e.contains("0x28") && e.contains("664 us"),
+        e.contains("unknown sensor")
+            && e.contains("0x28 (VLP-32C)")
+            && e.contains("900 us")
+            && e.contains("VLP-32C 664 us"),
         "{e}"
     );
     // HDL-32E timing but the azimuth advancing as a VLP-16's (24 Hz for an HDL-32E).
@@ -272,4 +280,797 @@ fn real_vlp16_capture_matches_velodyne_decoder() {
     );
     assert_eq!(ours_count, ref_count, "counts per ring");
     assert!(max_d < 0.002, "max position difference {max_d} m");
+}
+
+/// VLP-32C user manual 63-9325, Table 9-1: (elevation, azimuth offset) in degrees by laser
+/// id, typed from the manual (not read from the library).
+const VLP32C_TABLE: [(f64, f64); 32] = [
+    (-25.0, 1.4),
+    (-1.0, -4.2),
+    (-1.667, 1.4),
+    (-15.639, -1.4),
+    (-11.31, 1.4),
+    (0.0, -1.4),
+    (-0.667, 4.2),
+    (-8.843, -1.4),
+    (-7.254, 1.4),
+    (0.333, -4.2),
+    (-0.333, 1.4),
+    (-6.148, -1.4),
+    (-5.333, 4.2),
+    (1.333, -1.4),
+    (0.667, 4.2),
+    (-4.0, -1.4),
+    (-4.667, 1.4),
+    (1.667, -4.2),
+    (1.0, 1.4),
+    (-3.667, -4.2),
+    (-3.333, 4.2),
+    (3.333, -1.4),
+    (2.333, 1.4),
+    (-2.667, -1.4),
+    (-3.0, 1.4),
+    (7.0, -1.4),
+    (4.667, 1.4),
+    (-2.333, -4.2),
+    (-2.0, 4.2),
+    (15.0, -1.4),
+    (10.333, 1.4),
+    (-1.333, -1.4),
+];
+
+/// VeloView's default HDL-64 table (elevation, azimuth offset = -rotCorrection) by laser
+/// id, typed from velodyne_decoder's HDL-64E_S3-VeloView.yml (converted from Kitware's
+/// HDL-64.xml), two decimals.
+const HDL64E_ELEVATION: [f64; 64] = [
+    -6.29, -5.89, 1.15, 1.52, -5.61, -5.29, -7.63, -7.26, -4.96, -4.57, -7.0, -6.64, -2.22, -1.84,
+    -4.26, -3.84, -1.55, -1.18, -3.58, -3.2, -0.88, -0.52, -2.91, -2.53, 1.86, 2.19, -0.15, 0.23,
+    2.51, 2.81, 0.48, 0.89, -21.77, -21.28, -10.67, -9.99, -20.91, -20.34, -23.95, -23.44, -19.74,
+    -19.14, -22.82, -22.27, -15.58, -15.15, -18.72, -18.19, -14.72, -14.16, -17.77, -17.3, -13.73,
+    -13.13, -16.71, -16.2, -9.37, -9.15, -12.37, -12.05, -8.65, -8.11, -11.59, -11.12,
+];
+const HDL64E_AZIMUTH_OFFSET: [f64; 64] = [
+    4.55, 2.46, -3.3, -5.52, 0.23, -2.05, 1.01, -1.22, -4.05, -6.29, -3.26, -5.54, 4.55, 2.28,
+    5.31, 3.09, 0.26, -2.01, 1.04, -1.21, -4.01, -6.23, -3.23, -5.46, 4.58, 2.32, 5.35, 3.09, 0.28,
+    -1.95, 1.1, -1.18, 7.45, 3.99, -5.01, -8.21, 0.51, -2.96, 1.82, -1.69, -6.43, -9.79, -5.23,
+    -8.7, 7.27, 3.8, 8.63, 5.1, 0.46, -2.86, 1.75, -1.69, -6.13, -9.49, -5.01, -8.43, 7.0, 3.76,
+    8.3, 4.98, 0.45, -2.65, 1.71, -1.54,
+];
+
+/// A 1206-byte packet from its parts, every offset written out: block `b` at `100 b`
+/// (flag bytes FF then EE or DD, azimuth u16 LE at +2, channel `c` distance u16 LE at
+/// `+4 + 3 c` and intensity at `+6 + 3 c`), timestamp u32 LE at 1200, bytes 1204-1205.
+fn packet(
+    lower: impl Fn(usize) -> bool,
+    az: impl Fn(usize) -> u16,
+    ts: u32,
+    tail: [u8; 2],
+    fill: impl Fn(usize, usize) -> (u16, u8),
+) -> Vec<u8> {
+    let mut p = vec![0u8; 1206];
+    for b in 0..12 {
+        p[b * 100] = 0xFF;
+        p[b * 100 + 1] = if lower(b) { 0xDD } else { 0xEE };
+        p[b * 100 + 2..b * 100 + 4].copy_from_slice(&az(b).to_le_bytes());
+        for c in 0..32 {
+            let (d, i) = fill(b, c);
+            p[b * 100 + 4 + 3 * c..b * 100 + 6 + 3 * c].copy_from_slice(&d.to_le_bytes());
+            p[b * 100 + 6 + 3 * c] = i;
+        }
+    }
+    p[1200..1204].copy_from_slice(&ts.to_le_bytes());
+    p[1204..1206].copy_from_slice(&tail);
+    p
+}
+
+/// Ring of each laser from a hand table: its rank by elevation (ties in id order).
+fn ranks(elevation: &[f64]) -> Vec<usize> {
+    (0..elevation.len())
+        .map(|k| {
+            (0..elevation.len())
+                .filter(|&i| elevation[i] < elevation[k] || (elevation[i] == elevation[k] && i < k))
+                .count()
+        })
+        .collect()
+}
+
+/// Checks one decoded return against the position, azimuth and time computed here.
+#[allow(clippy::too_many_arguments)]
+fn check_return(
+    r: &Return,
+    what: &str,
+    raw: u16,
+    resolution: f64,
+    az_deg: f64,
+    elevation: f64,
+    time_s: f64,
+) {
+    let range = f64::from(raw) * resolution;
+    let (a, w) = (az_deg.to_radians(), elevation.to_radians());
+    let want = [
+        range * w.cos() * a.cos(),
+        -range * w.cos() * a.sin(),
+        range * w.sin(),
+    ];
+    let got = [f64::from(r.x), f64::from(r.y), f64::from(r.z)];
+    for (g, w) in got.iter().zip(&want) {
+        assert!((g - w).abs() < 1e-4, "{what}: {got:?} vs {want:?}");
+    }
+    let da = (f64::from(r.azimuth) - az_deg.rem_euclid(360.0)).rem_euclid(360.0);
+    assert!(
+        da.min(360.0 - da) < 1e-4,
+        "{what}: azimuth {} vs {az_deg}",
+        r.azimuth
+    );
+    assert!(
+        (r.time - time_s).abs() < 1e-9,
+        "{what}: time {} vs {time_s}",
+        r.time
+    );
+    assert_eq!(r.raw_distance, raw, "{what}");
+    assert!((f64::from(r.elevation) - elevation).abs() < 1e-5, "{what}");
+}
+
+#[test]
+fn vlp32c_packets_decode_with_the_manual_table_and_paired_firing() {
+    // 20 centidegrees per 55.296 us block (10.05 Hz), crossing 360 degrees.
+    let az = |b: usize| ((35_900 + 20 * b) % 36_000) as u16;
+    let dist = |b: usize, c: usize| (700 + 41 * b as u16 + 97 * c as u16, (7 * b + c) as u8);
+    let ts = 2_000_000u32;
+    let mut p = packet(|_| false, az, ts, [0x37, 0x28], dist);
+    // Block 3 channel 5 written by its literal byte offsets: 3 * 100 + 4 + 3 * 5 = 319.
+    p[319] = 0x34;
+    p[320] = 0x12;
+    p[321] = 0xAB;
+    let dec = ModelDecoder::new(&VLP32C, true, DualSelect::Both);
+    let mut out = Vec::new();
+    let counts = dec.decode_packet(&p, 4, 0.0, &mut out).unwrap();
+    assert_eq!((out.len(), counts.zero_distance), (384, 0));
+    let rings = ranks(&VLP32C_TABLE.map(|(e, _)| e));
+    for (i, r) in out.iter().enumerate() {
+        let (b, c) = (i / 32, i % 32);
+        let (raw, intensity) = if (b, c) == (3, 5) {
+            (0x1234, 0xAB)
+        } else {
+            dist(b, c)
+        };
+        let (elev, offset) = VLP32C_TABLE[c];
+        // Manual 9.5: lasers fire in pairs, 2.304 us apart, one 55.296 us sequence per
+        // block; the timestamp marks the first firing; distances in 4 mm units.
+        let into = 2.304 * (c / 2) as f64;
+        let az_deg = f64::from(az(b)) / 100.0 + 0.2 * into / 55.296 + offset;
+        let t = (f64::from(ts) + 55.296 * b as f64 + into) * 1e-6;
+        check_return(
+            r,
+            &format!("block {b} channel {c}"),
+            raw,
+            0.004,
+            az_deg,
+            elev,
+            t,
+        );
+        assert_eq!(
+            (
+                usize::from(r.laser),
+                usize::from(r.ring),
+                usize::from(r.block),
+                r.intensity,
+                r.kind,
+                r.packet
+            ),
+            (c, rings[c], b, intensity, ReturnKind::Strongest, 4)
+        );
+    }
+    // Dual: blocks 2f (last) and 2f + 1 (strongest) share azimuth and firing times.
+    let azd = |b: usize| (1000 + 20 * (b / 2)) as u16;
+    let p = packet(
+        |_| false,
+        azd,
+        ts,
+        [0x39, 0x28],
+        |b, c| (500 + (b % 2) as u16 * 300 + c as u16, 1),
+    );
+    let mut out = Vec::new();
+    dec.decode_packet(&p, 0, 0.0, &mut out).unwrap();
+    assert_eq!(out.len(), 384);
+    for (i, r) in out.iter().enumerate() {
+        let (b, c) = (i / 32, i % 32);
+        let into = 2.304 * (c / 2) as f64;
+        let az_deg = f64::from(azd(b)) / 100.0 + 0.2 * into / 55.296 + VLP32C_TABLE[c].1;
+        let t = (f64::from(ts) + 55.296 * (b / 2) as f64 + into) * 1e-6;
+        let raw = 500 + (b % 2) as u16 * 300 + c as u16;
+        check_return(
+            r,
+            &format!("dual block {b} channel {c}"),
+            raw,
+            0.004,
+            az_deg,
+            VLP32C_TABLE[c].0,
+            t,
+        );
+        let kind = if b % 2 == 0 {
+            ReturnKind::DualLast
+        } else {
+            ReturnKind::DualStrongest
+        };
+        assert_eq!((r.kind, usize::from(r.block)), (kind, 2 * (b / 2) + b % 2));
+    }
+    assert_eq!(
+        VLP32C.packet_period_us(lidar_noise::sensor::ReturnMode::Strongest),
+        12.0 * 55.296
+    );
+}
+
+/// HDL-64E firing time of bank lane `j` after the firing's start (the manuals' laser
+/// firing time tables as velodyne_decoder applies them): groups of 4 lasers.
+fn hdl64e_lane_us(model: &SensorModel, j: usize) -> f64 {
+    if model.name == "HDL-64E S2" {
+        6.0 * (j / 4) as f64 + [0.0, 1.26, 2.46, 3.66][j % 4]
+    } else {
+        7.2 * (j / 4) as f64 + [0.0, 1.3, 2.5, 3.7][j % 4]
+    }
+}
+
+#[test]
+fn hdl64e_packets_decode_by_bank_with_the_firing_table() {
+    let rings = ranks(&HDL64E_ELEVATION);
+    for (model, firing_us) in [(&HDL64E_S2, 48.0), (&HDL64E_S3, 57.6)] {
+        let dec = ModelDecoder::new(model, true, DualSelect::Both);
+        // Single return: blocks 2f (upper, FF EE, lasers 0-31) and 2f + 1 (lower, FF DD,
+        // lasers 32-63) of firing f share the azimuth; 21 centidegrees per firing.
+        let az = |b: usize| ((35_950 + 21 * (b / 2)) % 36_000) as u16;
+        let dist = |b: usize, c: usize| {
+            if (b * 32 + c).is_multiple_of(13) {
+                (0, 0)
+            } else {
+                (300 + 29 * b as u16 + 71 * c as u16, (b + 3 * c) as u8)
+            }
+        };
+        // Bytes 1204-1205 are status bytes: 0x37 there must not be read as a mode.
+        let p = packet(|b| b % 2 == 1, az, 123_456, [0x37, 0x21], dist);
+        let mut out = Vec::new();
+        let counts = dec.decode_packet(&p, 9, 0.0, &mut out).unwrap();
+        let zeros = (0..384).filter(|i| i % 13 == 0).count();
+        assert_eq!(
+            (out.len(), counts.zero_distance as usize),
+            (384 - zeros, zeros)
+        );
+        let mut it = out.iter();
+        for b in 0..12 {
+            for c in 0..32 {
+                let (raw, intensity) = dist(b, c);
+                if raw == 0 {
+                    continue;
+                }
+                let r = it.next().unwrap();
+                let laser = c + 32 * (b % 2);
+                let into = hdl64e_lane_us(model, c);
+                let az_deg = f64::from(az(b)) / 100.0
+                    + 0.21 * into / firing_us
+                    + HDL64E_AZIMUTH_OFFSET[laser];
+                let t = (123_456.0 + firing_us * (b / 2) as f64 + into) * 1e-6;
+                let what = format!("{} block {b} channel {c}", model.name);
+                check_return(r, &what, raw, 0.002, az_deg, HDL64E_ELEVATION[laser], t);
+                assert_eq!(
+                    (
+                        usize::from(r.laser),
+                        usize::from(r.ring),
+                        usize::from(r.block),
+                        r.intensity,
+                        r.kind
+                    ),
+                    (laser, rings[laser], b / 2, intensity, ReturnKind::Strongest),
+                    "{what}"
+                );
+            }
+        }
+        // Dual: no mode byte; blocks 4f, 4f + 1 (strongest, upper and lower) and 4f + 2,
+        // 4f + 3 (last) of firing f carry the same azimuth.
+        let azd = |b: usize| (2000 + 21 * (b / 4)) as u16;
+        let p = packet(
+            |b| b % 2 == 1,
+            azd,
+            0,
+            [0x00, 0x00],
+            |b, c| (1000 + b as u16 * 40 + c as u16, 5),
+        );
+        let mut out = Vec::new();
+        let counts = dec.decode_packet(&p, 0, 0.0, &mut out).unwrap();
+        assert_eq!(
+            (counts.mode, out.len()),
+            (Some(lidar_noise::sensor::ReturnMode::Dual), 384)
+        );
+        for (i, r) in out.iter().enumerate() {
+            let (b, c) = (i / 32, i % 32);
+            let laser = c + 32 * (b % 2);
+            let into = hdl64e_lane_us(model, c);
+            let az_deg =
+                f64::from(azd(b)) / 100.0 + 0.21 * into / firing_us + HDL64E_AZIMUTH_OFFSET[laser];
+            let t = (firing_us * (b / 4) as f64 + into) * 1e-6;
+            let what = format!("{} dual block {b} channel {c}", model.name);
+            check_return(
+                r,
+                &what,
+                1000 + b as u16 * 40 + c as u16,
+                0.002,
+                az_deg,
+                HDL64E_ELEVATION[laser],
+                t,
+            );
+            let (kind, strongest) = if b % 4 < 2 {
+                (ReturnKind::DualStrongest, 1)
+            } else {
+                (ReturnKind::DualLast, 0)
+            };
+            assert_eq!(
+                (r.kind, usize::from(r.block), usize::from(r.laser)),
+                (kind, 2 * (b / 4) + strongest, laser),
+                "{what}"
+            );
+        }
+        // A lower-bank block flagged as upper is refused with its place.
+        let mut bad = p.clone();
+        bad[301] = 0xEE;
+        let e = dec
+            .decode_packet(&bad, 0, 0.0, &mut Vec::new())
+            .unwrap_err();
+        assert!(
+            e.contains("block 3") && e.contains("0xFFDD") && e.contains("300"),
+            "{e}"
+        );
+    }
+    assert_eq!(
+        HDL64E_S2.packet_period_us(lidar_noise::sensor::ReturnMode::Strongest),
+        288.0
+    );
+    assert!(
+        (HDL64E_S3.packet_period_us(lidar_noise::sensor::ReturnMode::Dual) - 172.8).abs() < 1e-9
+    );
+}
+
+/// A run of HDL-64E data packets: blocks alternating FF EE / FF DD, `step` centidegrees
+/// per firing, status bytes that change from packet to packet.
+fn packets64(n: usize, period_us: f64, step: u32, dual: bool) -> Vec<(Vec<u8>, u64)> {
+    let per = if dual { 4 } else { 2 };
+    (0..n)
+        .map(|i| {
+            let ts = 500_000 + (i as f64 * period_us).round() as u32;
+            let f0 = (i * 12 / per) as u32;
+            let p = packet(
+                |b| b % 2 == 1,
+                |b| (((f0 + (b / per) as u32) * step) % 36_000) as u16,
+                ts,
+                [0x48 + (i % 7) as u8, (i * 13) as u8],
+                |_, _| (0, 0),
+            );
+            (p, u64::from(ts) * 1000)
+        })
+        .collect()
+}
+
+#[test]
+fn vlp32c_and_hdl64e_are_identified_by_structure() {
+    // VLP-32C at 10 Hz: 663.552 us a packet, 0.20 deg per 55.296 us block.
+    let v = ident(&packets(40, 664, 20, 0x37, 0x28)).unwrap();
+    assert_eq!((v.model.name, v.product_byte_agrees), ("VLP-32C", true));
+    assert!((v.rotation_hz - 10.05).abs() < 0.1, "{}", v.rotation_hz);
+    let v = ident(&packets(40, 332, 20, 0x39, 0x28)).unwrap();
+    assert_eq!(v.model.name, "VLP-32C");
+    // A VLP-32C whose product byte says VLP-16 or HDL-32E, single and dual.
+    for (period, mode, product) in [(664, 0x37, 0x22), (332, 0x39, 0x21)] {
+        let lie = ident(&packets(40, period, 20, mode, product)).unwrap();
+        assert_eq!(
+            (lie.model.name, lie.product_byte_agrees),
+            ("VLP-32C", false),
+            "{}",
+            lie.note
+        );
+        assert!(lie.note.contains("VLP-32C"), "{}", lie.note);
+    }
+    // A VLP-16 in dual mode has the VLP-32C's single-mode period; the mode byte and the
+    // step per block pair tell it, even when its product byte says VLP-32C.
+    let v = ident(&packets(40, 664, 40, 0x39, 0x28)).unwrap();
+    assert_eq!((v.model.name, v.product_byte_agrees), ("VLP-16", false));
+    // HDL-64E: no product byte; the alternating bank flags and the period (288 us S2,
+    // 345.6 us S3; half in dual mode) decide.
+    for (period, step, dual, name) in [
+        (288.0, 17, false, "HDL-64E S2"),
+        (144.0, 17, true, "HDL-64E S2"),
+        (345.6, 21, false, "HDL-64E S3"),
+        (172.8, 21, true, "HDL-64E S3"),
+    ] {
+        let h = ident(&packets64(40, period, step, dual)).unwrap();
+        assert_eq!(
+            (h.model.name, h.product_byte_agrees),
+            (name, true),
+            "{period}"
+        );
+        let want = if dual {
+            lidar_noise::sensor::ReturnMode::Dual
+        } else {
+            lidar_noise::sensor::ReturnMode::Strongest
+        };
+        assert_eq!(h.mode, want);
+        assert!((h.rotation_hz - 10.0).abs() < 0.5, "{}", h.rotation_hz);
+    }
+    // Alternating flags at a period no HDL-64E has.
+    let e = ident(&packets64(40, 500.0, 21, false)).unwrap_err();
+    assert!(
+        e.contains("unknown sensor")
+            && e.contains("none: status bytes")
+            && e.contains("HDL-64E S3 346 us"),
+        "{e}"
+    );
+}
+
+/// Against velodyne_decoder: run `scripts/sensor_models_check.py` (it synthesizes the
+/// captures, writes velodyne_decoder's points and runs this test with SENSOR_CHECK_DIR).
+#[test]
+#[ignore = "needs the files written by scripts/sensor_models_check.py"]
+fn synthesized_captures_match_velodyne_decoder() {
+    let dir =
+        std::path::PathBuf::from(std::env::var("SENSOR_CHECK_DIR").expect("SENSOR_CHECK_DIR"));
+    let manifest = std::fs::read_to_string(dir.join("manifest.txt")).unwrap();
+    for line in manifest.lines() {
+        let fields: Vec<&str> = line.split('\t').collect();
+        let (case, name) = (fields[0], fields[1]);
+        let calibration = fields.get(2).filter(|f| !f.is_empty());
+        let model = MODELS.iter().find(|m| m.name == name).expect("model");
+        let bytes = std::fs::read(dir.join(format!("{case}.bin"))).unwrap();
+        let payloads: Vec<&[u8]> = bytes.chunks(1206).collect();
+        // Identification by structure names the model the capture was made for.
+        let with_times: Vec<(&[u8], u64)> = payloads
+            .iter()
+            .map(|p| {
+                (
+                    *p,
+                    u64::from(u32::from_le_bytes([p[1200], p[1201], p[1202], p[1203]])) * 1000,
+                )
+            })
+            .collect();
+        let id = identify(&with_times).unwrap();
+        assert_eq!(id.model.name, model.name, "{case}: {}", id.note);
+        let mut dec = ModelDecoder::new(model, true, DualSelect::Both);
+        if let Some(file) = calibration {
+            let cal = ModelCalibration::from_ros_yaml_file(Path::new(file), model).unwrap();
+            assert!(cal.lasers.iter().any(|l| l.is_advanced()), "{file}");
+            dec = dec.with_calibration(cal).unwrap();
+        }
+        let mut ours = Vec::new();
+        for (i, p) in payloads.iter().enumerate() {
+            dec.decode_packet(p, i as u32, 0.0, &mut ours).unwrap();
+        }
+        let text = std::fs::read_to_string(dir.join(format!("{case}.csv"))).unwrap();
+        // x, y, z, intensity, time, ring, return type (1 strongest, 2 last, 3 both)
+        let refs: Vec<[f64; 7]> = text
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let v: Vec<f64> = l.split(',').map(|s| s.parse().unwrap()).collect();
+                [v[0], v[1], v[2], v[3], v[4], v[5], v[6]]
+            })
+            .collect();
+        assert_eq!(refs.len(), ours.len(), "{case}: point count");
+        let mut by_ring: Vec<Vec<&Return>> = vec![Vec::new(); model.lasers];
+        for r in &ours {
+            by_ring[usize::from(r.ring)].push(r);
+        }
+        let (mut max_d, mut max_dt) = (0f64, 0f64);
+        for (i, q) in refs.iter().enumerate() {
+            let ring = q[5] as usize;
+            let want_kind = match (q[6] as u8, ours[0].kind) {
+                (1, ReturnKind::Strongest) => ReturnKind::Strongest,
+                (1, _) => ReturnKind::DualStrongest,
+                (2, _) => ReturnKind::DualLast,
+                (k, _) => panic!("{case}: reference point {i} has return type {k}"),
+            };
+            let hits: Vec<&&Return> = by_ring[ring]
+                .iter()
+                .filter(|r| r.kind == want_kind && (r.time - q[4]).abs() < 0.02e-6)
+                .collect();
+            assert_eq!(
+                hits.len(),
+                1,
+                "{case}: reference point {i} (ring {ring}, t {})",
+                q[4]
+            );
+            let r = hits[0];
+            if calibration.is_none() {
+                assert_eq!(f64::from(r.intensity), q[3], "{case}: reference point {i}");
+            }
+            let d = ((f64::from(r.x) - q[0]).powi(2)
+                + (f64::from(r.y) - q[1]).powi(2)
+                + (f64::from(r.z) - q[2]).powi(2))
+            .sqrt();
+            // velodyne_decoder rounds each point's azimuth to 0.01 deg: 0.005 deg of
+            // arc at the point's range, plus float32 rounding.
+            let allowed = f64::from(r.range) * 0.0051f64.to_radians() + 2e-4;
+            assert!(
+                d <= allowed,
+                "{case}: reference point {i}: {d} m apart (allowed {allowed})"
+            );
+            max_d = max_d.max(d);
+            max_dt = max_dt.max((r.time - q[4]).abs());
+        }
+        eprintln!(
+            "{case} ({name}): {} points, each matched by ring, return and firing time; max position difference {:.4} m, max time difference {:.3} us",
+            refs.len(),
+            max_d,
+            max_dt * 1e6
+        );
+    }
+}
+
+/// A 64-laser ROS calibration YAML: laser k at elevation `-k / 4` deg, rotation
+/// correction `k / 100` rad, with the given extra keys on laser 5.
+fn yaml64(extra5: &str) -> String {
+    let mut s = String::from("distance_resolution: 0.002\nnum_lasers: 64\nlasers:\n");
+    for k in 0..64 {
+        s.push_str(&format!(
+            "- {{laser_id: {k}, rot_correction: {}, vert_correction: {}{}}}\n",
+            k as f64 / 100.0,
+            (-(k as f64) / 4.0).to_radians(),
+            if k == 5 { extra5 } else { "" }
+        ));
+    }
+    s
+}
+
+#[test]
+fn hdl64e_calibration_yaml_is_read_and_applied() {
+    let path = Path::new("unit.yaml");
+    let cal = ModelCalibration::from_ros_yaml(
+        &yaml64(
+            ", dist_correction: 1.5, horiz_offset_correction: 0.026, vert_offset_correction: 0.2",
+        ),
+        path,
+        &HDL64E_S3,
+    )
+    .unwrap();
+    assert_eq!(cal.lasers.len(), 64);
+    assert!((cal.lasers[7].elevation_deg + 1.75).abs() < 1e-12);
+    assert!((cal.lasers[7].azimuth_offset_deg + 0.07f64.to_degrees()).abs() < 1e-12);
+    // Laser 5 (upper bank, channel 5) at a raw distance of 10 m in block 0, azimuth 0:
+    // range 10 + 1.5 m; the horizontal offset moves the point 26 mm across the beam
+    // (ROS axes: +y at azimuth 0 plus the laser's offset a), z gains 0.2 m.
+    let p = packet(
+        |b| b % 2 == 1,
+        |b| (21 * (b / 2)) as u16,
+        0,
+        [0, 0],
+        |b, c| {
+            if (b, c) == (0, 5) {
+                (5000, 9)
+            } else {
+                (0, 0)
+            }
+        },
+    );
+    let dec = ModelDecoder::new(&HDL64E_S3, true, DualSelect::Both)
+        .with_calibration(cal)
+        .unwrap();
+    let mut out = Vec::new();
+    dec.decode_packet(&p, 0, 0.0, &mut out).unwrap();
+    assert_eq!(out.len(), 1);
+    let r = &out[0];
+    // Laser 5 fires 7.2 + 1.3 us into the firing (group 1, second laser): 0.21 deg per
+    // 57.6 us firing.
+    let a = (0.21 * 8.5 / 57.6 - 0.05f64.to_degrees()).to_radians();
+    let w = (-1.25f64).to_radians();
+    let (d, h) = (11.5, 0.026);
+    let want = [
+        d * w.cos() * a.cos() + h * a.sin(),
+        -d * w.cos() * a.sin() + h * a.cos(),
+        d * w.sin() + 0.2,
+    ];
+    let got = [f64::from(r.x), f64::from(r.y), f64::from(r.z)];
+    for (g, w) in got.iter().zip(&want) {
+        assert!((g - w).abs() < 1e-5, "{got:?} vs {want:?}");
+    }
+    assert_eq!((r.laser, r.range), (5, 11.5));
+    // Bad files name the file and the laser or key.
+    for (text, want) in [
+        (
+            yaml64("").replace("num_lasers: 64", "num_lasers: 32"),
+            "num_lasers is 32",
+        ),
+        (
+            yaml64("").replace("{laser_id: 9,", "{laser_id: 64,"),
+            "laser_id 64",
+        ),
+        (
+            yaml64("").replace("{laser_id: 9,", "{laser_id: 8,"),
+            "laser_id 8 appears twice",
+        ),
+        (
+            yaml64("").replace("vert_correction: -0.0", "vert_correction: -45.0"),
+            "radians are expected",
+        ),
+        (
+            yaml64("").replace("- {laser_id: 63,", "# {laser_id: 63,"),
+            "laser 63 is missing",
+        ),
+    ] {
+        let e = ModelCalibration::from_ros_yaml(&text, path, &HDL64E_S3)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unit.yaml") && e.contains(want), "{want}: {e}");
+    }
+    let e = ModelDecoder::new(&VLP32C, true, DualSelect::Both)
+        .with_calibration(ModelCalibration::builtin(&HDL64E_S2))
+        .unwrap_err();
+    assert!(
+        e.contains("64 lasers") && e.contains("VLP-32C has 32"),
+        "{e}"
+    );
+}
+
+#[test]
+fn hdl64e_calibration_db_xml_reads_as_the_same_yaml() {
+    // The same unit in VeloView's db.xml units (degrees, centimetres) and as ROS YAML
+    // (radians, metres), as gen_calibration.py converts one into the other.
+    let mut xml = String::from(
+        "<?xml version=\"1.0\"?>\n<!DOCTYPE boost_serialization>\n<boost_serialization>\n<DB>\n<distLSB_>0.2</distLSB_>\n<points_>\n",
+    );
+    let mut yaml = String::from("distance_resolution: 0.002\nlasers:\n");
+    for k in 0..64 {
+        let (rot, vert) = (k as f64 / 10.0 - 3.0, -(k as f64) / 3.0);
+        let (dc, dx, dy, vo, ho) = (120.0 + k as f64, 125.0, 128.0, 20.0 - k as f64 / 4.0, 2.6);
+        xml.push_str(&format!(
+            "<item><px><id_>{k}</id_><rotCorrection_>{rot}</rotCorrection_><vertCorrection_>{vert}</vertCorrection_><distCorrection_>{dc}</distCorrection_><distCorrectionX_>{dx}</distCorrectionX_><distCorrectionY_>{dy}</distCorrectionY_><vertOffsetCorrection_>{vo}</vertOffsetCorrection_><horizOffsetCorrection_>{ho}</horizOffsetCorrection_><focalDistance_>1500</focalDistance_></px></item>\n"
+        ));
+        yaml.push_str(&format!(
+            "- {{laser_id: {k}, rot_correction: {}, vert_correction: {}, dist_correction: {}, dist_correction_x: {}, dist_correction_y: {}, vert_offset_correction: {}, horiz_offset_correction: {}}}\n",
+            rot.to_radians(), vert.to_radians(), dc / 100.0, dx / 100.0, dy / 100.0, vo / 100.0, ho / 100.0
+        ));
+    }
+    xml.push_str("</points_>\n</DB>\n</boost_serialization>\n");
+    let dir = std::env::temp_dir().join(format!("sensor-cal-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (xp, yp) = (dir.join("db.xml"), dir.join("unit.yaml"));
+    std::fs::write(&xp, &xml).unwrap();
+    std::fs::write(&yp, &yaml).unwrap();
+    let a = ModelCalibration::from_file(&xp, &HDL64E_S2).unwrap();
+    let b = ModelCalibration::from_file(&yp, &HDL64E_S2).unwrap();
+    assert!((a.distance_resolution_m - 0.002).abs() < 1e-15);
+    for (k, (x, y)) in a.lasers.iter().zip(&b.lasers).enumerate() {
+        for (u, v) in [
+            (x.elevation_deg, y.elevation_deg),
+            (x.azimuth_offset_deg, y.azimuth_offset_deg),
+            (x.dist_correction_m, y.dist_correction_m),
+            (x.dist_correction_x_m, y.dist_correction_x_m),
+            (x.dist_correction_y_m, y.dist_correction_y_m),
+            (x.vert_offset_m, y.vert_offset_m),
+            (x.horiz_offset_m, y.horiz_offset_m),
+        ] {
+            assert!((u - v).abs() < 1e-9, "laser {k}: {x:?} vs {y:?}");
+        }
+    }
+    assert!((a.lasers[10].azimuth_offset_deg - 2.0).abs() < 1e-9);
+    assert!((a.lasers[10].dist_correction_m - 1.30).abs() < 1e-9);
+    // A missing element names the item and its line.
+    std::fs::write(
+        &xp,
+        xml.replacen("<vertCorrection_>-0</vertCorrection_>", "", 1),
+    )
+    .unwrap();
+    let e = ModelCalibration::from_file(&xp, &HDL64E_S2)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("db.xml")
+            && e.contains("points_ item 0 (line 7)")
+            && e.contains("<vertCorrection_>"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Against velodyne_decoder's `hdl64e.read_status_info`: run
+/// `scripts/sensor_models_check.py` (it writes the packets and the calibration
+/// velodyne_decoder read from their status bytes).
+#[test]
+#[ignore = "needs the files written by scripts/sensor_models_check.py"]
+fn status_byte_calibration_matches_velodyne_decoder() {
+    let dir =
+        std::path::PathBuf::from(std::env::var("SENSOR_CHECK_DIR").expect("SENSOR_CHECK_DIR"));
+    let bytes = std::fs::read(dir.join("hdl64e_s3_status.bin")).unwrap();
+    let status: Vec<(u8, u8)> = bytes.chunks(1206).map(|p| (p[1204], p[1205])).collect();
+    let ours = ModelCalibration::from_status_bytes(status.iter().copied(), &HDL64E_S3).unwrap();
+    let theirs =
+        ModelCalibration::from_ros_yaml_file(&dir.join("status_calib.yml"), &HDL64E_S3).unwrap();
+    let mut max = 0f64;
+    for (k, (a, b)) in ours.lasers.iter().zip(&theirs.lasers).enumerate() {
+        for (u, v) in [
+            (a.elevation_deg, b.elevation_deg),
+            (a.azimuth_offset_deg, b.azimuth_offset_deg),
+            (a.dist_correction_m, b.dist_correction_m),
+            (a.dist_correction_x_m, b.dist_correction_x_m),
+            (a.dist_correction_y_m, b.dist_correction_y_m),
+            (a.vert_offset_m, b.vert_offset_m),
+            (a.horiz_offset_m, b.horiz_offset_m),
+        ] {
+            // velodyne_decoder rounds radians and metres to 7 decimals.
+            assert!((u - v).abs() < 1e-5, "laser {k}: {a:?} vs {b:?}");
+            max = max.max((u - v).abs());
+        }
+    }
+    // The same stream cut before a whole block has passed is refused with the count.
+    let e = ModelCalibration::from_status_bytes(status[..2000].iter().copied(), &HDL64E_S3)
+        .unwrap_err();
+    assert!(
+        e.contains("2000 data packets") && e.contains("4,160"),
+        "{e}"
+    );
+    eprintln!("status-byte calibration: 64 lasers equal to velodyne_decoder's within {max:e}");
+}
+
+#[test]
+fn hdl64e_s2_status_bytes_give_the_units_calibration() {
+    // An S2 block (no `W` type; the check is the block length, 1820): "UNIT#", two noise
+    // thresholds, 64 records of 28 bytes, 21-byte tail. Laser k's record: vertical
+    // correction -k * 0.25 deg, rotational 0.01 k deg; laser 5 also 1.234 m far distance
+    // correction, 25 mm horizontal and -120 mm vertical offset.
+    let mut block = b"UNIT#".to_vec();
+    block.extend([30, 30]);
+    for k in 0..64u8 {
+        let mut r = vec![k];
+        let mut put = |v: i16| r.extend(v.to_le_bytes());
+        put(-25 * i16::from(k));
+        put(i16::from(k));
+        let (far, h, v) = if k == 5 { (1234, 25, -120) } else { (0, 0, 0) };
+        for value in [far, 0, 0, v, h, 0, 0] {
+            put(value);
+        }
+        r.extend([0, 255]);
+        r.extend([0u8; 7]);
+        assert_eq!(r.len(), 28);
+        block.extend(r);
+    }
+    block.extend([0u8; 19]);
+    block.extend(1820u16.to_le_bytes());
+    assert_eq!(block.len(), 1820);
+    // Start mid-block; each 16 packets: 9 status types, then 7 calibration bytes.
+    let data: Vec<u8> = block[900..].iter().chain(&block).copied().collect();
+    let mut status = Vec::new();
+    let mut next = data.iter();
+    'stream: for i in 0.. {
+        let phase = i % 16;
+        if phase < 9 {
+            status.push((b"HMSDNYGTV"[phase], 1));
+        } else {
+            match next.next() {
+                Some(&v) => status.push((b'1' + (phase - 9) as u8, v)),
+                None => break 'stream,
+            }
+        }
+    }
+    let cal = ModelCalibration::from_status_bytes(status.iter().copied(), &HDL64E_S2).unwrap();
+    for (k, l) in cal.lasers.iter().enumerate() {
+        assert!(
+            (l.elevation_deg + 0.25 * k as f64).abs() < 1e-12,
+            "laser {k}"
+        );
+        assert!(
+            (l.azimuth_offset_deg + 0.01 * k as f64).abs() < 1e-12,
+            "laser {k}"
+        );
+    }
+    let l5 = cal.lasers[5];
+    assert!((l5.dist_correction_m - 1.234).abs() < 1e-12);
+    assert!((l5.horiz_offset_m - 0.025).abs() < 1e-12);
+    assert!((l5.vert_offset_m + 0.120).abs() < 1e-12);
+    // A wrong check value: no block is accepted, and the message says how many were tried.
+    let mut bad = status.clone();
+    for s in &mut bad {
+        if s.0 != b'H' && s.1 == 0x07 {
+            s.1 = 0x08;
+        }
+    }
+    let e = ModelCalibration::from_status_bytes(bad, &HDL64E_S2).unwrap_err();
+    assert!(
+        e.contains("no HDL-64E calibration block with a valid check"),
+        "{e}"
+    );
+    assert!(ModelCalibration::from_status_bytes(status, &VLP32C).is_err());
 }

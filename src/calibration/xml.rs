@@ -25,7 +25,7 @@ pub const MAX_DEPTH: usize = 64;
 /// The line of the first element nested deeper than `max` levels, by a linear scan of the
 /// tags (comments, CDATA, declarations and processing instructions skipped, quoted
 /// attribute values read past): `None` when the nesting stays within `max`.
-fn too_deep(text: &str, max: usize) -> Option<usize> {
+pub(crate) fn too_deep(text: &str, max: usize) -> Option<usize> {
     let b = text.as_bytes();
     let (mut i, mut depth, mut line) = (0usize, 0usize, 1usize);
     // Skips to just past `end`, counting lines; false when the text ends first.

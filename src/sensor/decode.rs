@@ -2,8 +2,11 @@
 //! dual, with the conventions of `src/hdl32e/decode.rs` (ROS velodyne axes: x forward,
 //! y left, z up; azimuth clockwise seen from above; ring 0 lowest).
 //!
-//! Per channel `c` of block `b`: firing sequence `s = c / lasers`, laser id
-//! `k = c % lasers` (VLP-16 manual 9.3.1.5 and 9.5). Azimuth interpolation (on by
+//! Per channel `c` of block `b`: firing sequence `s = c / n`, laser id
+//! `k = bank * n + c % n`, where `n` is the lasers of a bank and `bank = b % banks`
+//! (VLP-16 manual 9.3.1.5 and 9.5; the HDL-64E's lower-bank blocks carry lasers 32-63).
+//! A laser fires `SensorModel::laser_offset_us` into its sequence (in pairs on the
+//! VLP-32C, in groups of 4 on the HDL-64E). Azimuth interpolation (on by
 //! default, as velodyne_decoder, VeloView and the ROS VLP-16 path do): the laser fires
 //! `s * sequence_us + k * laser_us` into its block, so its azimuth is the block's plus
 //! that fraction of the block duration times the step to the next block's azimuth (next
@@ -23,6 +26,7 @@
 //! (0..23 for the VLP-16 in single mode), dual returns adjacent, so each (block, laser)
 //! pair of a packet is one firing slot of the spurious-return rules.
 
+use super::calibration::ModelCalibration;
 use super::{ReturnMode, SensorModel};
 use crate::frame::{Return, ReturnKind};
 pub use crate::hdl32e::decode::DualSelect;
@@ -46,11 +50,16 @@ pub struct PacketCounts {
 #[derive(Clone, Debug)]
 pub struct ModelDecoder {
     model: SensorModel,
+    /// Per-laser corrections (the model's table unless a file was given).
+    cal: ModelCalibration,
+    /// Any laser has distance or horizontal corrections (the manual's full formulas).
+    advanced: bool,
     cos_elev: Vec<f64>,
     sin_elev: Vec<f64>,
     rings: Vec<u8>,
     /// Vertical correction of each laser in metres (zeros when off).
     z_offset: Vec<f64>,
+    vertical_offsets: bool,
     interpolate: bool,
     dual: DualSelect,
 }
@@ -58,29 +67,71 @@ pub struct ModelDecoder {
 impl ModelDecoder {
     /// A decoder with the model's default calibration.
     pub fn new(model: &SensorModel, interpolate: bool, dual: DualSelect) -> Self {
-        let rad: Vec<f64> = model.elevation_deg.iter().map(|e| e.to_radians()).collect();
-        ModelDecoder {
+        let mut dec = ModelDecoder {
             model: *model,
-            cos_elev: rad.iter().map(|w| w.cos()).collect(),
-            sin_elev: rad.iter().map(|w| w.sin()).collect(),
-            rings: model.rings(),
-            z_offset: (0..model.lasers)
-                .map(|k| model.vertical_offset_mm.get(k).map_or(0.0, |mm| mm * 1e-3))
-                .collect(),
+            cal: ModelCalibration::builtin(model),
+            advanced: false,
+            cos_elev: Vec::new(),
+            sin_elev: Vec::new(),
+            rings: Vec::new(),
+            z_offset: Vec::new(),
+            vertical_offsets: true,
             interpolate,
             dual,
-        }
+        };
+        dec.cache();
+        dec
     }
 
-    /// Applies the manual's per-laser vertical corrections (the default) or not.
-    pub fn with_vertical_offsets(mut self, on: bool) -> Self {
-        self.z_offset = (0..self.model.lasers)
-            .map(|k| match self.model.vertical_offset_mm.get(k) {
-                Some(mm) if on => mm * 1e-3,
-                _ => 0.0,
-            })
+    /// Uses a calibration (a unit's own table, e.g. read by
+    /// [`ModelCalibration::from_ros_yaml_file`]) in place of the model's default; its
+    /// laser count must be the model's.
+    pub fn with_calibration(mut self, cal: ModelCalibration) -> Result<Self, String> {
+        if cal.lasers.len() != self.model.lasers {
+            return Err(format!(
+                "calibration {} has {} lasers, the {} has {}",
+                cal.source,
+                cal.lasers.len(),
+                self.model.name,
+                self.model.lasers
+            ));
+        }
+        self.cal = cal;
+        self.cache();
+        Ok(self)
+    }
+
+    /// Recomputes the per-laser caches from the calibration.
+    fn cache(&mut self) {
+        let rad: Vec<f64> = self
+            .cal
+            .lasers
+            .iter()
+            .map(|l| l.elevation_deg.to_radians())
             .collect();
+        self.cos_elev = rad.iter().map(|w| w.cos()).collect();
+        self.sin_elev = rad.iter().map(|w| w.sin()).collect();
+        self.rings = self.cal.rings();
+        self.advanced = self.cal.lasers.iter().any(|l| l.is_advanced());
+        let on = self.vertical_offsets;
+        self.z_offset = self
+            .cal
+            .lasers
+            .iter()
+            .map(|l| if on { l.vert_offset_m } else { 0.0 })
+            .collect();
+    }
+
+    /// Applies the per-laser vertical corrections (the default) or not.
+    pub fn with_vertical_offsets(mut self, on: bool) -> Self {
+        self.vertical_offsets = on;
+        self.cache();
         self
+    }
+
+    /// The calibration in use.
+    pub fn calibration(&self) -> &ModelCalibration {
+        &self.cal
     }
 
     /// The model decoded.
@@ -111,31 +162,35 @@ impl ModelDecoder {
                 lay.payload_bytes
             ));
         }
-        if let Some(b) = (0..lay.blocks).find(|&b| {
-            let at = b * lay.block_bytes;
-            u16::from_le_bytes([payload[at], payload[at + 1]]) != lay.block_flag
-        }) {
+        if let Some(b) = lay.bad_flag(payload) {
+            let want = lay.bank_flags[b % lay.banks()].to_be_bytes();
             return Err(format!(
-                "block {b} has no 0xFFEE flag (payload byte offset {})",
+                "block {b} has no 0x{:02X}{:02X} flag (payload byte offset {})",
+                want[1],
+                want[0],
                 b * lay.block_bytes
             ));
         }
-        let byte = payload[lay.return_mode_at];
-        let mode = ReturnMode::from_byte(byte).ok_or_else(|| {
+        let mode = lay.return_mode(payload).map_err(|byte| {
             format!(
                 "unknown return mode byte 0x{byte:02x} (payload byte offset {})",
-                lay.return_mode_at
+                lay.return_mode_at.unwrap_or(0)
             )
         })?;
-        let per = if mode == ReturnMode::Dual { 2 } else { 1 };
+        let banks = lay.banks();
+        let per = m.blocks_per_firing(mode);
         let n = lay.blocks / per;
-        let azimuth: Vec<u32> = (0..n)
-            .map(|f| u32::from(lay.block_azimuth(payload, f * per)) % 36000)
+        // Azimuth of each firing and bank: the first block of the firing with that bank
+        // (dual mode: the pair's first block, as velodyne_decoder and ROS read it).
+        let azimuth: Vec<u32> = (0..n * banks)
+            .map(|fb| {
+                u32::from(lay.block_azimuth(payload, (fb / banks) * per + fb % banks)) % 36000
+            })
             .collect();
-        let mut step: Vec<u32> = (0..n)
-            .map(|f| match azimuth.get(f + 1) {
+        let mut step: Vec<u32> = (0..n * banks)
+            .map(|fb| match azimuth.get(fb + banks) {
                 Some(&next) => {
-                    let s = (next + 36000 - azimuth[f]) % 36000;
+                    let s = (next + 36000 - azimuth[fb]) % 36000;
                     if s > MAX_STEP_CENTIDEG {
                         0
                     } else {
@@ -146,7 +201,9 @@ impl ModelDecoder {
             })
             .collect();
         if n >= 2 {
-            step[n - 1] = step[n - 2];
+            for k in 0..banks {
+                step[(n - 1) * banks + k] = step[(n - 2) * banks + k];
+            }
         }
         let ts = f64::from(lay.timestamp_us(payload)) + hour_offset_us;
         let block_us = m.block_us();
@@ -158,10 +215,10 @@ impl ModelDecoder {
             let Some(kind) = self.kind(mode, block) else {
                 continue;
             };
-            let f = block / per;
-            let az0 = f64::from(azimuth[f]) * 0.01;
+            let fb = (block / per) * banks + block % banks;
+            let az0 = f64::from(azimuth[fb]) * 0.01;
             let gap = if self.interpolate {
-                f64::from(step[f]) * 0.01
+                f64::from(step[fb]) * 0.01
             } else {
                 0.0
             };
@@ -172,21 +229,36 @@ impl ModelDecoder {
                     counts.zero_distance += 1;
                     continue;
                 }
-                let (sequence, laser) = m.channel_laser(channel);
-                let into_block = sequence as f64 * m.sequence_us + laser as f64 * m.laser_us;
-                let mut az = az0 + gap * into_block / block_us + m.azimuth_offset_deg[laser];
+                let (sequence, laser) = m.block_laser(block, channel);
+                let into_block = sequence as f64 * m.sequence_us + m.laser_offset_us(laser);
+                let cal = &self.cal.lasers[laser];
+                let mut az = az0 + gap * into_block / block_us + cal.azimuth_offset_deg;
                 az = az.rem_euclid(360.0);
-                let range = f64::from(raw) * m.distance_resolution_m;
-                let (sa, ca) = az.to_radians().sin_cos();
-                let xy = range * self.cos_elev[laser];
+                let distance = f64::from(raw) * self.cal.distance_resolution_m;
+                let (range, [x, y, z]) = if self.advanced {
+                    let (range, mut p) = cal.position(distance, az);
+                    p[2] += self.z_offset[laser] - cal.vert_offset_m;
+                    (range, p)
+                } else {
+                    let (sa, ca) = az.to_radians().sin_cos();
+                    let xy = distance * self.cos_elev[laser];
+                    (
+                        distance,
+                        [
+                            xy * ca,
+                            -xy * sa,
+                            distance * self.sin_elev[laser] + self.z_offset[laser],
+                        ],
+                    )
+                };
                 let seq = m.sequence_index(mode, block, sequence);
                 out.push(Return {
-                    x: (xy * ca) as f32,
-                    y: (-xy * sa) as f32,
-                    z: (range * self.sin_elev[laser] + self.z_offset[laser]) as f32,
+                    x: x as f32,
+                    y: y as f32,
+                    z: z as f32,
                     range: range as f32,
                     azimuth: (az as f32) % 360.0,
-                    elevation: m.elevation_deg[laser] as f32,
+                    elevation: cal.elevation_deg as f32,
                     time: (ts + m.firing_offset_us(mode, seq, laser)) * 1e-6,
                     packet: record,
                     raw_distance: raw,
@@ -206,7 +278,7 @@ impl ModelDecoder {
     fn kind(&self, mode: ReturnMode, block: usize) -> Option<ReturnKind> {
         match mode {
             ReturnMode::Dual => {
-                let last = block.is_multiple_of(2);
+                let last = !self.model.dual_block_is_strongest(block);
                 match (self.dual, last) {
                     (DualSelect::Both, true) | (DualSelect::Last, true) => {
                         Some(ReturnKind::DualLast)

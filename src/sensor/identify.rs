@@ -10,6 +10,14 @@
 //! at 24 Hz and more). The period decides the timing family; the product byte then picks
 //! the model within it (the VLP-16 and Puck Hi-Res share their timing); a product byte
 //! that names no model of the measured family is reported as contradicted.
+//!
+//! The VLP-32C (663.552 us a packet in single mode, 331.776 us in dual) is told from a
+//! VLP-16 in dual mode (also 663.552 us) by the mode byte, and from an HDL-32E (552.96
+//! us) by the period. The HDL-64E S2 and S3 write no product or mode byte: their block
+//! flags alternate 0xFFEE (upper bank) and 0xFFDD (lower bank), which no other model
+//! writes, and the period tells them apart (6 firings of 48 us, 288 us, for the S2;
+//! 6 of 57.6 us, 345.6 us, for the S3; half in dual mode, where the first blocks of the
+//! two return groups carry the same azimuth).
 
 use super::{ReturnMode, SensorModel, MODELS};
 
@@ -23,9 +31,10 @@ pub struct Identified {
     pub model: &'static SensorModel,
     /// Return mode of the first data packet.
     pub mode: ReturnMode,
-    /// Product byte the packets carry.
+    /// Product byte the packets carry (0 for the HDL-64E, whose packets have none).
     pub product_byte: u8,
-    /// False when the product byte names another model (or 0x00, old firmware).
+    /// False when the product byte names another model (or 0x00, old firmware); true
+    /// where the layout has no product byte.
     pub product_byte_agrees: bool,
     /// Median time between data packets in microseconds.
     pub packet_period_us: f64,
@@ -61,40 +70,49 @@ fn spacing_us(times: impl Iterator<Item = f64>) -> Option<f64> {
 /// data packets with block flags are skipped. The error says what was measured and why
 /// no described sensor fits.
 pub fn identify(packets: &[(&[u8], u64)]) -> Result<Identified, String> {
-    let layout = super::LAYOUT_1206;
-    let data: Vec<(&[u8], u64)> = packets
+    // The layout most packets follow: all blocks 0xFFEE, or the HDL-64E's alternating
+    // 0xFFEE / 0xFFDD banks.
+    let layouts = [super::LAYOUT_1206, super::LAYOUT_HDL64E];
+    let (layout, data) = layouts
         .iter()
-        .copied()
-        .filter(|(p, _)| layout.is_data_packet(p))
-        .collect();
+        .map(|l| {
+            let data: Vec<(&[u8], u64)> = packets
+                .iter()
+                .copied()
+                .filter(|(p, _)| l.is_data_packet(p))
+                .collect();
+            (*l, data)
+        })
+        .max_by_key(|(_, d)| d.len())
+        .expect("two layouts");
     if data.len() < 3 {
         return Err(format!(
-            "{} Velodyne data packets (1206-byte UDP payloads with 0xFFEE block flags) \
-             among {} packets: at least 3 are needed to tell the sensor by its packet timing",
+            "{} Velodyne data packets (1206-byte UDP payloads with 0xFFEE block flags, or \
+             0xFFEE and 0xFFDD alternating) among {} packets: at least 3 are needed to tell \
+             the sensor by its packet timing",
             data.len(),
             packets.len()
         ));
     }
-    let product = data[0].0[layout.product_at];
-    if let Some(k) = data
-        .iter()
-        .position(|(p, _)| p[layout.product_at] != product)
-    {
-        return Err(format!(
-            "data packets disagree on the product id: data packet {k} has 0x{:02x} where \
-             data packet 0 has 0x{product:02x}: the capture mixes sensors",
-            data[k].0[layout.product_at]
-        ));
+    let product = layout.product_at.map_or(0, |at| data[0].0[at]);
+    if let Some(at) = layout.product_at {
+        if let Some(k) = data.iter().position(|(p, _)| p[at] != product) {
+            return Err(format!(
+                "data packets disagree on the product id: data packet {k} has 0x{:02x} where \
+                 data packet 0 has 0x{product:02x}: the capture mixes sensors",
+                data[k].0[at]
+            ));
+        }
     }
-    let byte = data[0].0[layout.return_mode_at];
-    let mode = ReturnMode::from_byte(byte)
-        .ok_or_else(|| format!("unknown return mode byte 0x{byte:02x} in the first data packet"))?;
+    let mode = layout.return_mode(data[0].0).map_err(|byte| {
+        format!("unknown return mode byte 0x{byte:02x} in the first data packet")
+    })?;
     let device = spacing_us(data.iter().map(|(p, _)| f64::from(layout.timestamp_us(p))));
     let period = device
         .or_else(|| spacing_us(data.iter().map(|(_, ns)| *ns as f64 / 1000.0)))
         .ok_or("no two data packets with increasing timestamps: the packet timing is unknown")?;
-    // Azimuth step between consecutive firings' blocks inside each packet.
-    let per = if mode == ReturnMode::Dual { 2 } else { 1 };
+    // Azimuth step between consecutive firings' first blocks inside each packet.
+    let per = layout.banks() * if mode == ReturnMode::Dual { 2 } else { 1 };
     let steps: Vec<f64> = data
         .iter()
         .flat_map(|(p, _)| {
@@ -115,16 +133,20 @@ pub fn identify(packets: &[(&[u8], u64)]) -> Result<Identified, String> {
             && hz >= m.rotation_hz.0 * 0.9
             && hz <= m.rotation_hz.1 * 1.1
     };
-    let candidates: Vec<&'static SensorModel> =
-        MODELS.iter().copied().filter(|m| fits(m)).collect();
-    let named = super::by_product(product);
-    let product_name = match named {
-        Some(m) => m.name,
-        None => crate::hdl32e::packet::product_name(product),
+    let candidates: Vec<&'static SensorModel> = MODELS
+        .iter()
+        .copied()
+        .filter(|m| m.layout == layout && fits(m))
+        .collect();
+    let product_name = match (layout.product_at, super::by_product(product)) {
+        (None, _) => "none: status bytes",
+        (_, Some(m)) => m.name,
+        _ => crate::hdl32e::packet::product_name(product),
     };
     let Some(&first) = candidates.first() else {
         let expected: Vec<String> = MODELS
             .iter()
+            .filter(|m| m.layout == layout)
             .map(|m| {
                 format!(
                     "{} {:.0} us and {:.2} to {:.2} deg per block",
@@ -143,6 +165,7 @@ pub fn identify(packets: &[(&[u8], u64)]) -> Result<Identified, String> {
         ));
     };
     let (model, agrees) = match candidates.iter().find(|m| m.product_id == product) {
+        _ if layout.product_at.is_none() => (first, true),
         Some(&m) => (m, true),
         None => (first, false),
     };

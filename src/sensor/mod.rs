@@ -1,6 +1,6 @@
 //! One description of a spinning Velodyne sensor (issue 31): lasers, firing timing,
-//! packet layout, return modes and rotation, with the HDL-32E, VLP-16, Puck LITE and
-//! Puck Hi-Res as instances.
+//! packet layout, return modes and rotation, with the HDL-32E, VLP-16, Puck LITE, Puck
+//! Hi-Res, VLP-32C and HDL-64E S2/S3 as instances.
 //!
 //! Sources:
 //! - HDL-32E: the constants of `src/hdl32e/packet.rs` and the built-in table of
@@ -21,14 +21,25 @@
 //!   both sequences of a block (azimuth + gap * (2.304 * k + 55.296 * s) / 110.592) are
 //!   those of the ROS velodyne driver (`rawdata.cc`, `VLP16_BLOCK_TDURATION`,
 //!   `VLP16_DSR_TOFFSET`, `VLP16_FIRING_TOFFSET`) and Tier IV's nebula (`vlp16.hpp`).
+//! - VLP-32C: VLP-32C user manual 63-9325, Table 9-1 (elevation and azimuth offset by
+//!   laser id; the same numbers as velodyne_decoder's `calib_db.cpp` and bundled
+//!   `VLP-32C.yml`), 9.5 (lasers fired in pairs every 2.304 us, 55.296 us a sequence,
+//!   one sequence per block), 4 mm distance units (`distance_resolution: 0.004` in the
+//!   ROS and velodyne_decoder tables).
+//! - HDL-64E S2/S3: packet layout of the HDL-64E S2 and S3 manuals (upper block 0xEEFF,
+//!   lower block 0xDDFF, status type and value bytes after the timestamp); firing timing
+//!   from their "laser firing time table" as velodyne_decoder 3 (`buildTimings`,
+//!   `unpack_hdl64e`) applies it, with its dual-mode block order and mode detection;
+//!   default angles from VeloView's `HDL-64.xml` (the manuals print no table).
 
+pub mod calibration;
 pub mod decode;
 pub mod identify;
 
 pub use crate::hdl32e::packet::ReturnMode;
 
-/// The data packet layout shared by the HDL-32E and the VLP-16 family (1206-byte UDP
-/// payload: 12 blocks of flag, azimuth and 32 channels; timestamp; two factory bytes).
+/// The data packet layout of these sensors (1206-byte UDP payload: 12 blocks of flag,
+/// azimuth and 32 channels; timestamp; two factory or status bytes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PacketLayout {
     /// UDP payload size of a data packet.
@@ -37,16 +48,21 @@ pub struct PacketLayout {
     pub blocks: usize,
     /// Bytes per data block.
     pub block_bytes: usize,
-    /// Block flag read as a little-endian u16 (bytes FF EE).
+    /// Block flag read as a little-endian u16 (bytes FF EE); the flag of bank 0.
     pub block_flag: u16,
+    /// Flag of each laser bank in block order (`[0xEEFF]` for the single-bank sensors;
+    /// the HDL-64E alternates upper-bank blocks 0xEEFF, lasers 0-31, and lower-bank
+    /// blocks 0xDDFF, lasers 32-63): block `b` carries bank `b % bank_flags.len()`.
+    pub bank_flags: &'static [u16],
     /// Channels (distance u16 + intensity u8) per block.
     pub channels: usize,
     /// Byte offset of the little-endian u32 timestamp (us past the hour).
     pub timestamp_at: usize,
-    /// Byte offset of the return mode byte.
-    pub return_mode_at: usize,
-    /// Byte offset of the product id byte.
-    pub product_at: usize,
+    /// Byte offset of the return mode byte (`None`: the HDL-64E writes a status cycle
+    /// there; its mode shows in the block azimuths).
+    pub return_mode_at: Option<usize>,
+    /// Byte offset of the product id byte (`None` on the HDL-64E).
+    pub product_at: Option<usize>,
 }
 
 /// The 1206-byte layout of the HDL-32E and VLP-16 data packets.
@@ -55,20 +71,60 @@ pub const LAYOUT_1206: PacketLayout = PacketLayout {
     blocks: 12,
     block_bytes: 100,
     block_flag: 0xEEFF,
+    bank_flags: &[0xEEFF],
     channels: 32,
     timestamp_at: 1200,
-    return_mode_at: 1204,
-    product_at: 1205,
+    return_mode_at: Some(1204),
+    product_at: Some(1205),
+};
+
+/// The 1206-byte layout of the HDL-64E S2 and S3: blocks alternate upper bank (bytes
+/// FF EE) and lower bank (bytes FF DD); bytes 1204-1205 are the status type and value
+/// of the status cycle, not a return mode or product id.
+pub const LAYOUT_HDL64E: PacketLayout = PacketLayout {
+    bank_flags: &[0xEEFF, 0xDDFF],
+    return_mode_at: None,
+    product_at: None,
+    ..LAYOUT_1206
 };
 
 impl PacketLayout {
     /// True when a payload has the size and every block flag of this layout.
     pub fn is_data_packet(&self, payload: &[u8]) -> bool {
-        payload.len() == self.payload_bytes
-            && (0..self.blocks).all(|b| {
-                let at = b * self.block_bytes;
-                u16::from_le_bytes([payload[at], payload[at + 1]]) == self.block_flag
-            })
+        payload.len() == self.payload_bytes && self.bad_flag(payload).is_none()
+    }
+
+    /// Number of laser banks (blocks of one firing with different lasers).
+    pub fn banks(&self) -> usize {
+        self.bank_flags.len()
+    }
+
+    /// The first block whose flag is not its bank's (the payload must be long enough).
+    pub fn bad_flag(&self, payload: &[u8]) -> Option<usize> {
+        (0..self.blocks).find(|&b| {
+            let at = b * self.block_bytes;
+            u16::from_le_bytes([payload[at], payload[at + 1]])
+                != self.bank_flags[b % self.bank_flags.len()]
+        })
+    }
+
+    /// Return mode of a data packet: its mode byte, or for layouts without one (the
+    /// HDL-64E) dual when the first block of the second bank group repeats the first
+    /// block's azimuth (velodyne_decoder's rule: in dual mode the blocks run strongest
+    /// upper, strongest lower, last upper, last lower of one firing). `Err` carries the
+    /// unknown byte.
+    pub fn return_mode(&self, payload: &[u8]) -> Result<ReturnMode, u8> {
+        match self.return_mode_at {
+            Some(at) => ReturnMode::from_byte(payload[at]).ok_or(payload[at]),
+            None => {
+                let banks = self.banks();
+                if self.block_azimuth(payload, 0) == self.block_azimuth(payload, banks) {
+                    Ok(ReturnMode::Dual)
+                } else {
+                    Ok(ReturnMode::Strongest)
+                }
+            }
+        }
     }
 
     /// Azimuth of a block in hundredths of a degree, as written (may be 36000 or more).
@@ -104,9 +160,9 @@ pub enum TimestampMark {
 pub struct SensorModel {
     /// Model name as users write it ("HDL-32E", "VLP-16").
     pub name: &'static str,
-    /// Product id byte the sensor writes (byte 1205).
+    /// Product id byte the sensor writes (byte 1205; 0 where the layout has none).
     pub product_id: u8,
-    /// Number of lasers (16 or 32).
+    /// Number of lasers (16, 32 or 64).
     pub lasers: usize,
     /// Default elevation of each laser id in degrees (the manual's table).
     pub elevation_deg: &'static [f64],
@@ -118,8 +174,18 @@ pub struct SensorModel {
     pub vertical_offset_mm: &'static [f64],
     /// Size of one raw distance unit in metres.
     pub distance_resolution_m: f64,
-    /// Time between two consecutive lasers of a firing sequence in microseconds.
+    /// Time between two consecutive firing groups of a sequence in microseconds (one
+    /// laser a group on the HDL-32E and VLP-16, a pair on the VLP-32C, four on the
+    /// HDL-64E).
     pub laser_us: f64,
+    /// Lasers fired in one group (1, 2 on the VLP-32C, 4 on the HDL-64E).
+    pub lasers_per_group: usize,
+    /// Firing time of each laser of a group after the group's first, in microseconds
+    /// (`lasers_per_group` values: all 0 except on the HDL-64E).
+    pub group_pattern_us: &'static [f64],
+    /// In dual return mode the strongest return's blocks come first (HDL-64E); else the
+    /// last return's (HDL-32E, VLP-16, VLP-32C: even blocks last, odd strongest).
+    pub dual_strongest_first: bool,
     /// Duration of one firing sequence (all lasers fired and recharged) in microseconds.
     pub sequence_us: f64,
     /// Firing sequences per block in single return mode (1 for the HDL-32E, 2 for the
@@ -174,6 +240,9 @@ pub const HDL32E: SensorModel = SensorModel {
     vertical_offset_mm: &[],
     distance_resolution_m: 0.002,
     laser_us: 1.152,
+    lasers_per_group: 1,
+    group_pattern_us: &[0.0],
+    dual_strongest_first: false,
     sequence_us: 46.08,
     sequences_per_block: 1,
     timestamp_mark: TimestampMark::LastFiring,
@@ -192,6 +261,9 @@ pub const VLP16: SensorModel = SensorModel {
     vertical_offset_mm: &VLP16_VERTICAL_MM,
     distance_resolution_m: 0.002,
     laser_us: 2.304,
+    lasers_per_group: 1,
+    group_pattern_us: &[0.0],
+    dual_strongest_first: false,
     sequence_us: 55.296,
     sequences_per_block: 2,
     timestamp_mark: TimestampMark::FirstFiring,
@@ -209,9 +281,114 @@ pub const PUCK_HI_RES: SensorModel = SensorModel {
     ..VLP16
 };
 
+/// Elevations of the VLP-32C by laser id (VLP-32C user manual 63-9325, Table 9-1).
+const VLP32C_ELEVATION_DEG: [f64; 32] = [
+    -25.0, -1.0, -1.667, -15.639, -11.31, 0.0, -0.667, -8.843, -7.254, 0.333, -0.333, -6.148,
+    -5.333, 1.333, 0.667, -4.0, -4.667, 1.667, 1.0, -3.667, -3.333, 3.333, 2.333, -2.667, -3.0,
+    7.0, 4.667, -2.333, -2.0, 15.0, 10.333, -1.333,
+];
+
+/// Azimuth offsets of the VLP-32C by laser id in degrees (VLP-32C user manual, Table
+/// 9-1: added to the block azimuth).
+const VLP32C_AZIMUTH_OFFSET_DEG: [f64; 32] = [
+    1.4, -4.2, 1.4, -1.4, 1.4, -1.4, 4.2, -1.4, 1.4, -4.2, 1.4, -1.4, 4.2, -1.4, 4.2, -1.4, 1.4,
+    -4.2, 1.4, -4.2, 4.2, -1.4, 1.4, -1.4, 1.4, -1.4, 1.4, -4.2, 4.2, -1.4, 1.4, -1.4,
+];
+
+/// Velodyne VLP-32C: 32 lasers fired in 16 pairs 2.304 us apart, one 55.296 us firing
+/// sequence per block, 4 mm distance units (VLP-32C user manual 63-9325: 9.3 packet
+/// format, 9.5 firing timing: time offset = 55.296 us * sequence + 2.304 us *
+/// floor(channel / 2), as velodyne_decoder's `buildTimings` cites it; timestamp = first
+/// firing of the packet; product id 0x28).
+pub const VLP32C: SensorModel = SensorModel {
+    name: "VLP-32C",
+    product_id: 0x28,
+    lasers: 32,
+    elevation_deg: &VLP32C_ELEVATION_DEG,
+    azimuth_offset_deg: &VLP32C_AZIMUTH_OFFSET_DEG,
+    vertical_offset_mm: &[],
+    distance_resolution_m: 0.004,
+    laser_us: 2.304,
+    lasers_per_group: 2,
+    group_pattern_us: &[0.0, 0.0],
+    dual_strongest_first: false,
+    sequence_us: 55.296,
+    sequences_per_block: 1,
+    timestamp_mark: TimestampMark::FirstFiring,
+    layout: LAYOUT_1206,
+    return_modes: &MODES,
+    rotation_hz: (5.0, 20.0),
+};
+
+/// Default elevations of the HDL-64E by laser id (0-31 upper bank, 32-63 lower bank).
+/// The HDL-64E manuals print no beam table (each unit ships its own `db.xml`); these are
+/// the angles of VeloView's default `HDL-64.xml` (Kitware LidarView, as bundled in
+/// velodyne_decoder's `HDL-64E_S3-VeloView.yml`), to two decimals. Other units differ by
+/// up to about 2.5 deg per laser: read the unit's calibration where it matters.
+const HDL64E_ELEVATION_DEG: [f64; 64] = [
+    -6.29, -5.89, 1.15, 1.52, -5.61, -5.29, -7.63, -7.26, -4.96, -4.57, -7.0, -6.64, -2.22, -1.84,
+    -4.26, -3.84, -1.55, -1.18, -3.58, -3.2, -0.88, -0.52, -2.91, -2.53, 1.86, 2.19, -0.15, 0.23,
+    2.51, 2.81, 0.48, 0.89, -21.77, -21.28, -10.67, -9.99, -20.91, -20.34, -23.95, -23.44, -19.74,
+    -19.14, -22.82, -22.27, -15.58, -15.15, -18.72, -18.19, -14.72, -14.16, -17.77, -17.3, -13.73,
+    -13.13, -16.71, -16.2, -9.37, -9.15, -12.37, -12.05, -8.65, -8.11, -11.59, -11.12,
+];
+
+/// Default azimuth offsets of the HDL-64E in degrees (same source as the elevations; the
+/// negated `rotCorrection_`, so point azimuth = block azimuth + offset).
+const HDL64E_AZIMUTH_OFFSET_DEG: [f64; 64] = [
+    4.55, 2.46, -3.3, -5.52, 0.23, -2.05, 1.01, -1.22, -4.05, -6.29, -3.26, -5.54, 4.55, 2.28,
+    5.31, 3.09, 0.26, -2.01, 1.04, -1.21, -4.01, -6.23, -3.23, -5.46, 4.58, 2.32, 5.35, 3.09, 0.28,
+    -1.95, 1.1, -1.18, 7.45, 3.99, -5.01, -8.21, 0.51, -2.96, 1.82, -1.69, -6.43, -9.79, -5.23,
+    -8.7, 7.27, 3.8, 8.63, 5.1, 0.46, -2.86, 1.75, -1.69, -6.13, -9.49, -5.01, -8.43, 7.0, 3.76,
+    8.3, 4.98, 0.45, -2.65, 1.71, -1.54,
+];
+
+/// Velodyne HDL-64E S2: upper and lower bank fire together, one firing per block pair
+/// every 48 us, lasers in groups of 4 (6 us apart, 0/1.26/2.46/3.66 us within a group):
+/// the "laser firing time table" of the HDL-64E S2 manual as velodyne_decoder 3 applies
+/// it; timestamp = first firing of the packet (velodyne_decoder); 6 firings a packet in
+/// single return mode (288 us), 3 in dual.
+pub const HDL64E_S2: SensorModel = SensorModel {
+    name: "HDL-64E S2",
+    product_id: 0,
+    lasers: 64,
+    elevation_deg: &HDL64E_ELEVATION_DEG,
+    azimuth_offset_deg: &HDL64E_AZIMUTH_OFFSET_DEG,
+    vertical_offset_mm: &[],
+    distance_resolution_m: 0.002,
+    laser_us: 6.0,
+    lasers_per_group: 4,
+    group_pattern_us: &[0.0, 1.26, 2.46, 3.66],
+    dual_strongest_first: true,
+    sequence_us: 48.0,
+    sequences_per_block: 1,
+    timestamp_mark: TimestampMark::FirstFiring,
+    layout: LAYOUT_HDL64E,
+    return_modes: &[ReturnMode::Strongest, ReturnMode::Dual],
+    rotation_hz: (5.0, 15.0),
+};
+
+/// Velodyne HDL-64E S3: as the S2 with a 57.6 us firing, groups 7.2 us apart and
+/// 0/1.3/2.5/3.7 us within a group (HDL-64E S3 manual's firing time table, as
+/// velodyne_decoder 3 applies it); 345.6 us per packet in single return mode.
+pub const HDL64E_S3: SensorModel = SensorModel {
+    name: "HDL-64E S3",
+    laser_us: 7.2,
+    group_pattern_us: &[0.0, 1.3, 2.5, 3.7],
+    sequence_us: 57.6,
+    ..HDL64E_S2
+};
+
 /// Every described sensor; the Puck LITE is the VLP-16 (same product id, same angles:
 /// manual 9.3.1.7).
-pub const MODELS: [&SensorModel; 3] = [&HDL32E, &VLP16, &PUCK_HI_RES];
+pub const MODELS: [&SensorModel; 6] = [
+    &HDL32E,
+    &VLP16,
+    &PUCK_HI_RES,
+    &VLP32C,
+    &HDL64E_S2,
+    &HDL64E_S3,
+];
 
 impl SensorModel {
     /// Duration of one block in microseconds (all its firing sequences).
@@ -219,46 +396,74 @@ impl SensorModel {
         self.sequence_us * self.sequences_per_block as f64
     }
 
-    /// Firing sequences per packet in a return mode (dual mode repeats each block).
-    pub fn sequences_per_packet(&self, mode: ReturnMode) -> usize {
-        let blocks = if mode == ReturnMode::Dual {
-            self.layout.blocks / 2
+    /// Packet blocks of one firing: one per bank, twice that in dual mode.
+    pub fn blocks_per_firing(&self, mode: ReturnMode) -> usize {
+        let banks = self.layout.banks();
+        if mode == ReturnMode::Dual {
+            2 * banks
         } else {
-            self.layout.blocks
-        };
-        blocks * self.sequences_per_block
+            banks
+        }
     }
 
-    /// Nominal time between data packets in microseconds (553 us for the HDL-32E and
-    /// 1327 us for the VLP-16 in single return mode, half in dual mode).
+    /// Lasers of one bank (the lasers a block carries per firing sequence).
+    pub fn lasers_per_bank(&self) -> usize {
+        self.lasers / self.layout.banks()
+    }
+
+    /// Firing sequences per packet in a return mode (dual mode repeats each block).
+    pub fn sequences_per_packet(&self, mode: ReturnMode) -> usize {
+        self.layout.blocks / self.blocks_per_firing(mode) * self.sequences_per_block
+    }
+
+    /// Nominal time between data packets in microseconds (553 us for the HDL-32E,
+    /// 1327 us for the VLP-16, 664 us for the VLP-32C, 288 and 346 us for the HDL-64E
+    /// S2 and S3 in single return mode, half in dual mode).
     pub fn packet_period_us(&self, mode: ReturnMode) -> f64 {
         self.sequences_per_packet(mode) as f64 * self.sequence_us
     }
 
-    /// Firing sequence and laser id of channel `channel` of a block.
+    /// Firing sequence and laser id of channel `channel` of a bank-0 block.
     pub fn channel_laser(&self, channel: usize) -> (usize, usize) {
-        (channel / self.lasers, channel % self.lasers)
+        self.block_laser(0, channel)
+    }
+
+    /// Firing sequence and laser id of channel `channel` of packet block `block` (the
+    /// HDL-64E's lower-bank blocks carry lasers 32-63).
+    pub fn block_laser(&self, block: usize, channel: usize) -> (usize, usize) {
+        let per = self.lasers_per_bank();
+        let bank = block % self.layout.banks();
+        (channel / per, bank * per + channel % per)
+    }
+
+    /// Time of a laser's firing after the start of its firing sequence, in microseconds
+    /// (lasers of different banks with the same index fire together).
+    pub fn laser_offset_us(&self, laser: usize) -> f64 {
+        let j = laser % self.lasers_per_bank();
+        let g = self.lasers_per_group;
+        (j / g) as f64 * self.laser_us + self.group_pattern_us[j % g]
     }
 
     /// Firing sequence index within the packet of sequence `sequence` of block `block`
     /// (VLP-16 manual 9.5: dual-return block pairs share their sequences).
     pub fn sequence_index(&self, mode: ReturnMode, block: usize, sequence: usize) -> usize {
-        let firing_block = if mode == ReturnMode::Dual {
-            block / 2
-        } else {
-            block
-        };
-        firing_block * self.sequences_per_block + sequence
+        block / self.blocks_per_firing(mode) * self.sequences_per_block + sequence
+    }
+
+    /// True when packet block `block` of a dual-mode packet holds strongest returns.
+    pub fn dual_block_is_strongest(&self, block: usize) -> bool {
+        let second = (block / self.layout.banks()) % 2 == 1;
+        second != self.dual_strongest_first
     }
 
     /// Time of one laser's firing relative to the packet timestamp, in microseconds.
     pub fn firing_offset_us(&self, mode: ReturnMode, sequence_index: usize, laser: usize) -> f64 {
-        let from_first = sequence_index as f64 * self.sequence_us + laser as f64 * self.laser_us;
+        let from_first = sequence_index as f64 * self.sequence_us + self.laser_offset_us(laser);
         match self.timestamp_mark {
             TimestampMark::FirstFiring => from_first,
             TimestampMark::LastFiring => {
                 let last = (self.sequences_per_packet(mode) - 1) as f64 * self.sequence_us
-                    + (self.lasers - 1) as f64 * self.laser_us;
+                    + self.laser_offset_us(self.lasers - 1);
                 from_first - last
             }
         }
@@ -266,13 +471,14 @@ impl SensorModel {
 
     /// The `Return::block` value of a return: the index of its 1-sequence half block in
     /// firing order, with dual returns adjacent. Single mode: `sequence_index` (0..11 on
-    /// the HDL-32E, 0..23 on the VLP-16). Dual mode: `2 * sequence_index + (block & 1)`,
-    /// so `block & !1` names the firing as the spurious-return slots expect and the even
-    /// value is the last return. For the HDL-32E this is the packet block, as before.
+    /// the HDL-32E, 0..23 on the VLP-16, 0..5 on the HDL-64E, whose laser ids tell the
+    /// banks apart). Dual mode: `2 * sequence_index + strongest`, so `block & !1` names
+    /// the firing as the spurious-return slots expect and the even value is the last
+    /// return. For the HDL-32E this is the packet block, as before.
     pub fn return_block(&self, mode: ReturnMode, block: usize, sequence: usize) -> usize {
         let s = self.sequence_index(mode, block, sequence);
         if mode == ReturnMode::Dual {
-            2 * s + (block & 1)
+            2 * s + usize::from(self.dual_block_is_strongest(block))
         } else {
             s
         }
@@ -287,13 +493,21 @@ impl SensorModel {
         laser: usize,
     ) -> (usize, usize) {
         let per = self.sequences_per_block;
-        let (block, sequence) = if mode == ReturnMode::Dual {
-            let s = return_block / 2;
-            (2 * (s / per) + (return_block & 1), s % per)
+        let banks = self.layout.banks();
+        let lanes = self.lasers_per_bank();
+        let (bank, lane) = (laser / lanes, laser % lanes);
+        let (s, group) = if mode == ReturnMode::Dual {
+            let strongest = return_block & 1 == 1;
+            (
+                return_block / 2,
+                usize::from(strongest != self.dual_strongest_first),
+            )
         } else {
-            (return_block / per, return_block % per)
+            (return_block, 0)
         };
-        (block, sequence * self.lasers + laser)
+        let firing = s / per;
+        let block = firing * self.blocks_per_firing(mode) + group * banks + bank;
+        (block, (s % per) * lanes + lane)
     }
 
     /// Ring of each laser id: ids sorted by elevation, 0 lowest (ties in id order).
@@ -310,7 +524,10 @@ impl SensorModel {
 
 /// The described model writing a product id byte, if any.
 pub fn by_product(product: u8) -> Option<&'static SensorModel> {
-    MODELS.iter().copied().find(|m| m.product_id == product)
+    MODELS
+        .iter()
+        .copied()
+        .find(|m| m.layout.product_at.is_some() && m.product_id == product)
 }
 
 #[cfg(test)]
@@ -347,9 +564,12 @@ mod tests {
         for model in MODELS {
             for mode in MODES {
                 let mut seen = std::collections::HashSet::new();
+                if !model.return_modes.contains(&mode) {
+                    continue;
+                }
                 for block in 0..12 {
                     for channel in 0..32 {
-                        let (sequence, laser) = model.channel_laser(channel);
+                        let (sequence, laser) = model.block_laser(block, channel);
                         let rb = model.return_block(mode, block, sequence);
                         assert!(seen.insert((rb, laser)), "{} {mode:?}", model.name);
                         assert_eq!(model.packet_position(mode, rb, laser), (block, channel));
@@ -400,8 +620,11 @@ mod hdl32e_constants {
             *b = (i * 7 % 251) as u8;
         }
         assert_eq!(l.timestamp_us(&payload), p::timestamp_us(&payload));
-        assert_eq!(payload[l.return_mode_at], p::return_mode_byte(&payload));
-        assert_eq!(payload[l.product_at], p::product_byte(&payload));
+        assert_eq!(
+            payload[l.return_mode_at.unwrap()],
+            p::return_mode_byte(&payload)
+        );
+        assert_eq!(payload[l.product_at.unwrap()], p::product_byte(&payload));
         for b in 0..12 {
             assert_eq!(l.block_azimuth(&payload, b), p::block_azimuth(&payload, b));
         }

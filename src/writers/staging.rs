@@ -729,8 +729,12 @@ fn list_files(dir: &Path, prefix: &str, owns: &dyn Fn(&str) -> bool, out: &mut V
             }
             list_files(&e.path(), &format!("{rel}/"), owns, out);
         } else if temporary_of(&name)
-            .is_some_and(|f| f == MANIFEST || owns(&format!("{prefix}{f}")))
+            .is_some_and(|f| f == MANIFEST || owns(&format!("{prefix}{f}")) || owns(&rel))
         {
+            // A temporary file is a leftover when its target is ours or it proves by
+            // its own content that we wrote it (a streamed file killed before its
+            // target first existed: `unlisted` reads it); no name pattern of ours ends
+            // in `.tmp`.
             continue;
         } else {
             out.push(rel);

@@ -17,7 +17,7 @@ use crate::frame::Frame;
 use crate::hdl32e::frames::{DecoderOptions, FrameReader};
 use crate::hdl32e::index::FrameSeek;
 use crate::pipeline::{FrameResult, Pipeline};
-use crate::synth::labels::{check_frame, read_labels_file, LabelRow};
+use crate::synth::labels::{check_frame, read_labels_file, LabelRow, LabelRows};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
@@ -205,10 +205,95 @@ struct Truth {
     objects: Vec<i32>,
 }
 
-/// Ground-truth labels of a capture: rows per frame and object classes by id.
+/// Ground-truth labels of a capture: where its rows come from and object classes by id.
 struct Labels {
-    frames: HashMap<u32, Vec<LabelRow>>,
+    rows: LabelSource,
     classes: BTreeMap<i32, String>,
+}
+
+/// The label rows of a capture's frames.
+enum LabelSource {
+    /// A file in frame order (as the synthesizer writes it: capture order), read again
+    /// a frame at a time by every pass over the capture: memory does not grow with it.
+    InOrder(PathBuf),
+    /// Rows of a file not in frame order, grouped by frame (held whole).
+    Grouped(HashMap<u32, Vec<LabelRow>>),
+}
+
+impl Labels {
+    /// Reads (checks) the labels file `path`; its rows are held only when they are not
+    /// in frame order.
+    fn open(path: &Path) -> Result<Labels> {
+        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let mut last = 0u32;
+        let mut in_order = true;
+        for row in LabelRows::new(file, path)? {
+            let row = row?;
+            in_order &= row.frame >= last;
+            last = row.frame;
+        }
+        let rows = if in_order {
+            LabelSource::InOrder(path.to_path_buf())
+        } else {
+            LabelSource::Grouped(group_labels(read_labels_file(path)?))
+        };
+        Ok(Labels {
+            rows,
+            classes: read_classes(path)?,
+        })
+    }
+
+    /// A reader of the rows of frames asked for in increasing order.
+    fn cursor(&self) -> Result<LabelCursor<'_>> {
+        Ok(match &self.rows {
+            LabelSource::InOrder(path) => {
+                let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+                LabelCursor::Stream {
+                    rows: LabelRows::new(file, path)?,
+                    next: None,
+                }
+            }
+            LabelSource::Grouped(frames) => LabelCursor::Grouped(frames),
+        })
+    }
+}
+
+/// The label rows of one frame after another (see [`Labels::cursor`]).
+enum LabelCursor<'a> {
+    Stream {
+        rows: LabelRows<'static>,
+        /// The first row of a later frame, read ahead.
+        next: Option<LabelRow>,
+    },
+    Grouped(&'a HashMap<u32, Vec<LabelRow>>),
+}
+
+impl LabelCursor<'_> {
+    /// The rows of frame `index` (frames asked for in increasing order).
+    fn frame(&mut self, index: u32) -> Result<Vec<LabelRow>> {
+        match self {
+            LabelCursor::Grouped(frames) => Ok(frames.get(&index).cloned().unwrap_or_default()),
+            LabelCursor::Stream { rows, next } => {
+                let mut out = Vec::new();
+                loop {
+                    let row = match next.take() {
+                        Some(r) => r,
+                        None => match rows.next() {
+                            Some(r) => r?,
+                            None => return Ok(out),
+                        },
+                    };
+                    if row.frame > index {
+                        *next = Some(row);
+                        return Ok(out);
+                    }
+                    if row.frame == index {
+                        out.push(row);
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// Which cells a call computes and whether it reads the rows back.
@@ -403,10 +488,7 @@ pub fn run_mode(
         outcome.loaded += loaded;
         if n_pending > 0 {
             let truth = match &capture.labels {
-                Some(p) => Some(Labels {
-                    frames: group_labels(read_labels_file(p)?),
-                    classes: read_classes(p)?,
-                }),
+                Some(p) => Some(Labels::open(p)?),
                 None => None,
             };
             let chunk = (4 * rayon::current_num_threads()).max(8);
@@ -749,8 +831,7 @@ fn read_classes(labels: &Path) -> Result<BTreeMap<i32, String>> {
     Ok(out)
 }
 
-fn truth_of(frame: &Frame, labels: &HashMap<u32, Vec<LabelRow>>, origin: &Path) -> Result<Truth> {
-    let rows = labels.get(&frame.index).map_or(&[][..], Vec::as_slice);
+fn truth_of(frame: &Frame, rows: &[LabelRow], origin: &Path) -> Result<Truth> {
     check_frame(rows, frame, origin)?;
     Ok(Truth {
         ground: rows.iter().map(|l| l.label == 0).collect(),
@@ -994,19 +1075,20 @@ fn compute_chunk(
         .map(|c| CellWriter::create(&c.path, &c.settings, protected))
         .collect::<Result<_>>()?;
     let mut n_frames = 0u64;
+    let mut cursor = labels.map(Labels::cursor).transpose()?;
     loop {
         let batch = reader.next_batch(batch_size, &s.frames)?;
         if batch.is_empty() {
             break;
         }
         n_frames += batch.len() as u64;
-        let truths: Vec<Option<Truth>> = match labels {
-            Some(l) => batch
+        let truths: Vec<Option<Truth>> = match &mut cursor {
+            Some(c) => batch
                 .iter()
                 .map(|f| {
                     truth_of(
                         f,
-                        &l.frames,
+                        &c.frame(f.index)?,
                         capture.labels.as_deref().unwrap_or(Path::new("")),
                     )
                     .map(Some)

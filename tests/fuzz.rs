@@ -1,7 +1,9 @@
 //! Stable-Rust fuzzing: a seeded mutation loop over the checked-in corpus
 //! (`fuzz/corpus/<target>/`, plus the shared capture when present) for the capture reader
 //! and decoder, the configuration parser with `--set`, the calibration readers, the
-//! labels reader and the point-cloud readers (`cloud-bin`: KITTI and nuScenes `.bin`,
+//! labels reader, the sensor identification and decoders of the other Velodyne models
+//! (`sensor`: VLP-16 and Puck Hi-Res, strongest, last and dual) and the point-cloud
+//! readers (`cloud-bin`: KITTI and nuScenes `.bin`,
 //! `cloud-pcd`, `cloud-csv`). Every input must give `Ok` or an `Err` whose message names the file;
 //! nothing may panic. A panicking input is saved under `target/fuzz-findings/` and the
 //! test fails naming it; findings become regression tests.
@@ -374,4 +376,146 @@ fn fuzz_cloud_csv_reader() {
     fuzz("cloud-csv", &[], |bytes| {
         check_cloud(bytes, "fuzzed.txt", &[Format::Csv])
     });
+}
+
+/// The packets of a `sensor` input: an option byte, then records of capture time (u64
+/// LE, ns), payload length (u16 LE) and payload, the last one cut where the input ends
+/// (see scripts/make-sensor-corpus.py, which writes the seeds from the documented
+/// layout).
+fn sensor_packets(bytes: &[u8]) -> (u8, Vec<(&[u8], u64)>) {
+    let Some((&options, mut rest)) = bytes.split_first() else {
+        return (0, Vec::new());
+    };
+    let mut packets = Vec::new();
+    while rest.len() >= 10 {
+        let ns = u64::from_le_bytes(rest[..8].try_into().unwrap());
+        let len = usize::from(u16::from_le_bytes([rest[8], rest[9]]));
+        let end = (10 + len).min(rest.len());
+        packets.push((&rest[10..end], ns));
+        rest = &rest[end..];
+    }
+    (options, packets)
+}
+
+/// Identification of the sensor from a packet sequence and the decoder of every
+/// described model (HDL-32E, VLP-16, Puck Hi-Res) with the selection, interpolation and
+/// vertical offsets the option byte picks: each packet decodes to returns that are all
+/// finite and within the model's lasers, as many as counted, or is refused with a
+/// message saying which byte; identification gives a described model with a finite
+/// period and rate, or says why not. Nothing may panic.
+fn check_sensor(bytes: &[u8]) -> Result<(), String> {
+    use lidar_noise::sensor::decode::{DualSelect, ModelDecoder};
+    use lidar_noise::sensor::{identify::identify, MODELS};
+    let (options, packets) = sensor_packets(bytes);
+    match identify(&packets) {
+        Ok(id) => {
+            if !MODELS.iter().any(|m| **m == *id.model) {
+                return Err(format!("identified an undescribed model {}", id.model.name));
+            }
+            let finite = id.packet_period_us.is_finite() && id.rotation_hz.is_finite();
+            if !(finite && id.packet_period_us > 0.0) {
+                return Err(format!(
+                    "period {} us, rotation {} Hz",
+                    id.packet_period_us, id.rotation_hz
+                ));
+            }
+        }
+        Err(why) if why.is_empty() => return Err("identification failed silently".into()),
+        Err(_) => {}
+    }
+    let dual =
+        [DualSelect::Strongest, DualSelect::Last, DualSelect::Both][usize::from(options & 3) % 3];
+    for model in MODELS {
+        let decoder = ModelDecoder::new(model, options & 4 != 0, dual)
+            .with_vertical_offsets(options & 8 != 0);
+        let mut out = Vec::new();
+        for (k, (payload, _)) in packets.iter().enumerate() {
+            let before = out.len();
+            match decoder.decode_packet(payload, k as u32, 0.0, &mut out) {
+                Ok(counts) => {
+                    let new = &out[before..];
+                    if counts.returns != new.len() as u64 {
+                        return Err(format!(
+                            "{}: {} returns counted, {} given",
+                            model.name,
+                            counts.returns,
+                            new.len()
+                        ));
+                    }
+                    if new.len() > 12 * 32 {
+                        return Err(format!(
+                            "{}: {} returns of one packet",
+                            model.name,
+                            new.len()
+                        ));
+                    }
+                    if let Some(r) = new.iter().find(|r| {
+                        ![r.x, r.y, r.z, r.range, r.azimuth, r.elevation]
+                            .iter()
+                            .all(|v| v.is_finite())
+                            || !r.time.is_finite()
+                            || usize::from(r.laser) >= model.lasers
+                            || usize::from(r.ring) >= model.lasers
+                            || !(0.0..360.0).contains(&r.azimuth)
+                    }) {
+                        return Err(format!("{}: packet {k}: bad return {r:?}", model.name));
+                    }
+                }
+                Err(why) if !why.contains("byte") => {
+                    return Err(format!("{}: the error names no byte: {why}", model.name))
+                }
+                Err(_) => {
+                    if !out[before..].is_empty() {
+                        return Err(format!("{}: a refused packet gave returns", model.name));
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+#[test]
+fn fuzz_sensor_identification_and_decoders() {
+    fuzz("sensor", &[], check_sensor);
+}
+
+/// The seeds of the `sensor` target are what their names say: identified as their model
+/// and mode, and decoded by it into returns (so mutations start from packets the
+/// decoders accept, not from noise they refuse at the first byte).
+#[test]
+fn sensor_seeds_are_the_packets_they_name() {
+    use lidar_noise::sensor::decode::{DualSelect, ModelDecoder};
+    use lidar_noise::sensor::identify::identify;
+    use lidar_noise::sensor::ReturnMode;
+    let expected = [
+        ("hdl32e-strongest.bin", "HDL-32E", ReturnMode::Strongest),
+        (
+            "puck-hi-res-dual-strongest.bin",
+            "Puck Hi-Res",
+            ReturnMode::Dual,
+        ),
+        ("vlp16-dual.bin", "VLP-16", ReturnMode::Dual),
+        ("vlp16-last.bin", "VLP-16", ReturnMode::Last),
+        ("vlp16-strongest.bin", "VLP-16", ReturnMode::Strongest),
+    ];
+    for (name, model, mode) in expected {
+        let bytes = std::fs::read(files("corpus", "sensor")[0].with_file_name(name)).unwrap();
+        let (_, packets) = sensor_packets(&bytes);
+        let id = identify(&packets).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!((id.model.name, id.mode), (model, mode), "{name}");
+        let decoder = ModelDecoder::new(id.model, true, DualSelect::Both);
+        let mut out = Vec::new();
+        for (k, (p, _)) in packets.iter().enumerate() {
+            decoder.decode_packet(p, k as u32, 0.0, &mut out).unwrap();
+        }
+        // Channel j of a packet (block * 32 + channel) is empty when j % 7 == 3.
+        let per_packet = (0..12 * 32).filter(|j| j % 7 != 3).count();
+        assert_eq!(out.len(), packets.len() * per_packet, "{name}");
+    }
+    // The mixed capture is refused, naming the packet where the product changes.
+    let bytes = std::fs::read(files("corpus", "sensor")[0].with_file_name("hdl32e-then-vlp16.bin"))
+        .unwrap();
+    let e = identify(&sensor_packets(&bytes).1).unwrap_err();
+    assert!(e.contains("data packet 3"), "{e}");
 }

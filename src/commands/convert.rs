@@ -187,7 +187,7 @@ fn convert_one(
 ) -> Result<u32> {
     let mut reader = super::open_capture(capture, options)?;
     let source = super::capture_label(capture);
-    let progress = super::progress(global, "frames");
+    let progress = super::frames_progress(global, capture, options, range);
     let mut written = 0u32;
     // Decoding on this thread, PLY encoding and writing on the workers, overlapped
     // (see `run::stream_frames`); the frame's buffer comes back for the decoder to reuse.

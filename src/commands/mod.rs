@@ -123,6 +123,50 @@ pub fn progress(global: Global, unit: &'static str) -> indicatif::ProgressBar {
     bar
 }
 
+/// Frames of `capture` in `range` that `run` and `convert` process, counted from the
+/// frame index without decoding returns (as `sweep` counts its frames): the total of
+/// their progress bars. None for standard input and other files that are not regular
+/// (a FIFO can be read only once), and when the count fails (the run then reports why).
+pub fn frames_total(
+    capture: &Path,
+    options: &crate::hdl32e::frames::DecoderOptions,
+    range: &std::ops::RangeInclusive<u32>,
+) -> Option<u64> {
+    if is_stdin(capture) || !std::fs::metadata(capture).is_ok_and(|m| m.is_file()) {
+        return None;
+    }
+    let scan = crate::hdl32e::index::FrameScan::open(capture, options).ok()?;
+    let (_, _, n) =
+        crate::sweep::chunks::chunk_plan(scan, range, options.keep_partial, u32::MAX).ok()?;
+    Some(n as u64)
+}
+
+/// The progress of the frames of `capture` in `range` on stderr: a bar with the total
+/// and the time left when [`frames_total`] knows it, else a spinner; hidden (and nothing
+/// counted) when quiet or when stderr is not a terminal.
+pub fn frames_progress(
+    global: Global,
+    capture: &Path,
+    options: &crate::hdl32e::frames::DecoderOptions,
+    range: &std::ops::RangeInclusive<u32>,
+) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if global.quiet || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let Some(total) = frames_total(capture, options, range) else {
+        return progress(global, "frames");
+    };
+    let bar = indicatif::ProgressBar::new(total);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{bar:30} {pos}/{len} frames {elapsed} elapsed, {eta} left {msg}",
+    ) {
+        bar.set_style(style);
+    }
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    bar
+}
+
 /// The capture path that stands for standard input.
 pub const STDIN: &str = "-";
 

@@ -522,7 +522,10 @@ fn run_capture(
     inputs: &[&Path],
     global: Global,
 ) -> Result<String> {
-    let progress = super::progress(global, "frames");
+    let progress = match capture {
+        Some(path) => super::frames_progress(global, path, &plan.decoder, &plan.frames),
+        None => super::progress(global, "frames"),
+    };
     progress.set_message(source.to_string());
     // Per-frame reports are streamed to spool files and joined at the end, so memory
     // does not grow with the capture's length.

@@ -62,9 +62,11 @@ pub struct Args {
     /// make an SVG of tens of megabytes.
     #[arg(long, value_enum, value_name = "FORMAT", default_value = "png")]
     pub figure_format: crate::writers::png::FigureFormat,
-    /// Replace the results of another sweep (other captures, configuration, --vary,
-    /// seeds, frames, bands or figure) in the folder as a whole; cells of this sweep are
-    /// kept. Files lidar-noise did not write are never deleted (the sweep is refused).
+    /// Replace the results of another sweep (other captures, configuration, --vary keys,
+    /// fewer values or seeds, frames, bands or figure) in the folder as a whole; cells of
+    /// this sweep are kept. Not needed to grow a sweep by new --vary values or seeds: its
+    /// finished cells are reused. Files lidar-noise did not write are never deleted (the
+    /// sweep is refused).
     #[arg(long, conflicts_with_all = ["shard", "merge"])]
     pub force: bool,
     /// Compute only the cells that fall to shard K of N (K from 0, round-robin over the
@@ -247,13 +249,17 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     inputs.extend(args.config.as_deref());
     inputs.extend(args.decoder.calibration.as_deref());
     let is_cell = |f: &str| is_cell_file(&args.output, f);
+    // A sweep given new values or seeds grows the folder's sweep without --force: its
+    // finished cells are reused, the manifest records the earlier plan.
+    let grown_from = staging::read_manifest(&args.output)
+        .filter(|m| m.command == "sweep" && m.settings != plan && grows(&m.settings, &plan));
     let old = match staging::check_replace(
         &args.output,
         "sweep",
         &plan,
         &is_sweep_output,
         &is_cell,
-        args.force,
+        args.force || grown_from.is_some(),
         &inputs,
     ) {
         Ok(old) => old,
@@ -272,12 +278,30 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     if fresh {
         staging::write_manifest(&args.output, "sweep", &plan, Vec::new())?;
     }
+    // The plans the results grew from: kept over reruns of the same plan, one more
+    // when this one grows, none when --force replaces another plan.
+    let growth = match (&earlier, &grown_from) {
+        (Some(m), Some(_)) => {
+            let mut g = m.growth.clone();
+            g.push(growth_entry(&m.settings));
+            g
+        }
+        (Some(m), None) if m.command == "sweep" && m.settings == plan => m.growth.clone(),
+        _ => Vec::new(),
+    };
+    if let (Some(m), false) = (&grown_from, global.quiet) {
+        eprintln!(
+            "sweep: the plan grows (new values or seeds; before: {}); finished cells are \
+             reused",
+            growth_entry(&m.settings)
+        );
+    }
     let result = sweep_into(
         &args,
         &settings,
         &captures,
         &folder,
-        (&plan, &old, earlier.as_ref()),
+        (&plan, &old, earlier.as_ref(), growth),
         global,
     );
     if result.is_err() && args.shard.is_none() && fresh {
@@ -304,7 +328,12 @@ fn sweep_into(
     settings: &SweepSettings,
     captures: &[CaptureInput],
     folder: &staging::OutputFolder,
-    (plan, old, earlier): (&serde_json::Value, &[String], Option<&staging::Manifest>),
+    (plan, old, earlier, growth): (
+        &serde_json::Value,
+        &[String],
+        Option<&staging::Manifest>,
+        Vec<serde_json::Value>,
+    ),
     global: Global,
 ) -> Result<()> {
     let n_cells = crate::sweep::plan::cells(&settings.varies, &settings.seeds).len();
@@ -409,7 +438,7 @@ fn sweep_into(
         .filter_map(|p| p.strip_prefix(stage.path()).ok())
         .map(|p| p.to_string_lossy().replace('\\', "/"))
         .collect();
-    staging::write_manifest(stage.path(), "sweep", plan, files.clone())?;
+    staging::write_manifest_grown(stage.path(), "sweep", plan, files.clone(), growth)?;
     // Of the earlier results: the files of its record that the new ones do not replace
     // and, with --force, the cells of another plan. Cells of this plan stay.
     let listed = |f: &String| earlier.is_some_and(|m| m.files.contains(f));
@@ -473,6 +502,41 @@ fn plan_settings(
         "figure_frame": args.figure_frame,
         "figure_extent": args.figure_extent,
     }))
+}
+
+/// True when the sweep plan `new` grows `old`: everything equal but the values of each
+/// varied key (same keys, in the same order) and the seeds, of which `new` holds all of
+/// `old`'s and more. Its cells include all of `old`'s (a cell's file is named by its own
+/// values and seed), so they are reused; a removed value, another key, base
+/// configuration, capture, frame range, band or figure is another sweep.
+fn grows(old: &serde_json::Value, new: &serde_json::Value) -> bool {
+    use serde_json::Value;
+    let (Value::Object(a), Value::Object(b)) = (old, new) else {
+        return false;
+    };
+    let superset = |x: Option<&Value>, y: Option<&Value>| match (x, y) {
+        (Some(Value::Array(x)), Some(Value::Array(y))) => x.iter().all(|v| y.contains(v)),
+        _ => false,
+    };
+    let same_but = |k: &str| k == "varies" || k == "seeds";
+    let keys_equal = a.len() == b.len()
+        && a.iter()
+            .all(|(k, v)| same_but(k) || b.get(k).is_some_and(|w| w == v));
+    let varies_grow = match (a.get("varies"), b.get("varies")) {
+        (Some(Value::Array(x)), Some(Value::Array(y))) => {
+            x.len() == y.len()
+                && x.iter().zip(y).all(|(p, q)| {
+                    p.get("key") == q.get("key") && superset(p.get("values"), q.get("values"))
+                })
+        }
+        _ => false,
+    };
+    keys_equal && varies_grow && superset(a.get("seeds"), b.get("seeds"))
+}
+
+/// What the manifest records of a plan a sweep grew from: its varied values and seeds.
+fn growth_entry(plan: &serde_json::Value) -> serde_json::Value {
+    serde_json::json!({ "varies": plan["varies"], "seeds": plan["seeds"] })
 }
 
 /// True for the files `sweep` writes (for folders without a manifest): tables, page,

@@ -192,19 +192,61 @@ pub const ALL_CAPTURES: &str = "all captures";
 /// The name of the band row that pools every distance.
 pub const ALL_DISTANCES: &str = "all distances";
 
+/// What the interaction table needs of the rows, gathered a row at a time: objects and
+/// detected objects summed over frames per capture, value and seed, per band of the
+/// first row's layout and over all distances (last).
+#[derive(Clone, Debug, Default)]
+pub struct Pooled {
+    bands: Option<Vec<String>>,
+    counts: BTreeMap<(String, usize, u64), Vec<Counts>>,
+}
+
+impl Pooled {
+    /// Adds a row of a sweep over `vary`.
+    pub fn add(&mut self, r: &Row, vary: &Vary) {
+        let bands = self
+            .bands
+            .get_or_insert_with(|| r.metrics.bands.iter().map(band_title).collect())
+            .len();
+        let Some(v) = r
+            .values
+            .first()
+            .and_then(|x| vary.values.iter().position(|y| y == x))
+        else {
+            return;
+        };
+        let c = self
+            .counts
+            .entry((r.capture.clone(), v, r.seed))
+            .or_insert_with(|| vec![Counts::default(); bands + 1]);
+        for (i, b) in r.metrics.bands.iter().enumerate().take(bands) {
+            c[i].objects += b.objects;
+            c[i].detected += b.detected;
+        }
+        c[bands].objects += r.metrics.objects;
+        c[bands].detected += r.metrics.detected;
+    }
+}
+
 /// The interaction table of an `--interactions` sweep: per capture (then, with several,
 /// all captures pooled per seed), pair and band (the sweep's bands, then all distances
 /// pooled). Empty when `vary` is not `--interactions`.
 pub fn table(rows: &[Row], vary: &Vary, captures: &[String]) -> Vec<InteractionRow> {
+    let mut pooled = Pooled::default();
+    for r in rows {
+        pooled.add(r, vary);
+    }
+    table_of(&pooled, vary, captures)
+}
+
+/// [`table`] of rows gathered in `pooled`.
+pub fn table_of(pooled: &Pooled, vary: &Vary, captures: &[String]) -> Vec<InteractionRow> {
     let pairs = pairs(vary);
     let mut out = Vec::new();
     let Some(none) = vary.values.iter().position(|v| v == super::plan::NO_STAGES) else {
         return out;
     };
-    let bands: Vec<String> = rows
-        .first()
-        .map(|r| r.metrics.bands.iter().map(band_title).collect())
-        .unwrap_or_default();
+    let bands: Vec<String> = pooled.bands.clone().unwrap_or_default();
     // Each capture, then (with several) all captures pooled per seed.
     let mut groups: Vec<(String, Vec<&String>)> =
         captures.iter().map(|c| (c.clone(), vec![c])).collect();
@@ -214,23 +256,17 @@ pub fn table(rows: &[Row], vary: &Vary, captures: &[String]) -> Vec<InteractionR
     for (capture, members) in &groups {
         // (value, seed) -> counts per band, then all distances last.
         let mut counts: BTreeMap<(usize, u64), Vec<Counts>> = BTreeMap::new();
-        for r in rows.iter().filter(|r| members.contains(&&r.capture)) {
-            let Some(v) = r
-                .values
-                .first()
-                .and_then(|x| vary.values.iter().position(|y| y == x))
-            else {
+        for ((c, v, seed), per_band) in &pooled.counts {
+            if !members.contains(&c) {
                 continue;
-            };
-            let c = counts
-                .entry((v, r.seed))
-                .or_insert_with(|| vec![Counts::default(); bands.len() + 1]);
-            for (i, b) in r.metrics.bands.iter().enumerate().take(bands.len()) {
-                c[i].objects += b.objects;
-                c[i].detected += b.detected;
             }
-            c[bands.len()].objects += r.metrics.objects;
-            c[bands.len()].detected += r.metrics.detected;
+            let sum = counts
+                .entry((*v, *seed))
+                .or_insert_with(|| vec![Counts::default(); bands.len() + 1]);
+            for (s, p) in sum.iter_mut().zip(per_band) {
+                s.objects += p.objects;
+                s.detected += p.detected;
+            }
         }
         let mut seeds: Vec<u64> = counts.keys().map(|k| k.1).collect();
         seeds.sort_unstable();
@@ -438,7 +474,7 @@ pub fn write_outputs(
     dir: &std::path::Path,
     vary: &Vary,
     captures: &[String],
-    rows: &[Row],
+    pooled: &Pooled,
     protected: &[&std::path::Path],
     format: crate::writers::png::FigureFormat,
 ) -> crate::error::Result<Option<(Vec<std::path::PathBuf>, crate::writers::html::Section)>> {
@@ -447,7 +483,7 @@ pub fn write_outputs(
     if !matches!(vary.kind, VaryKind::Stages { .. }) {
         return Ok(None);
     }
-    let table = table(rows, vary, captures);
+    let table = table_of(pooled, vary, captures);
     let mut written = Vec::new();
     let mut put = |name: &str, bytes: &[u8]| -> crate::error::Result<()> {
         let path = dir.join(name);

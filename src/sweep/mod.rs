@@ -5,6 +5,7 @@
 //! - [`metrics`]: pure metric functions (the object matching rule is documented there);
 //! - [`run`]: parallel, resumable execution writing one result file per cell;
 //! - [`chunks`]: frame ranges of long captures as units of sharded sweeps;
+//! - [`stream`]: cell files and the tidy JSON written and read a frame at a time;
 //! - [`tables`]: tidy CSV/JSON and the aggregate CSV;
 //! - [`outputs`]: every final file (tables, plots, bird's-eye figure, `index.html`).
 //!
@@ -18,4 +19,5 @@ pub mod metrics;
 pub mod outputs;
 pub mod plan;
 pub mod run;
+pub mod stream;
 pub mod tables;

@@ -2,7 +2,7 @@
 //! bird's-eye figure and `index.html`. Nothing here depends on timing or thread count.
 
 use super::plan::{Vary, VaryKind};
-use super::run::{Panel, Row};
+use super::run::{Panel, Row, Rows};
 use super::tables::{self, Group};
 use crate::error::{Error, Result};
 use crate::writers::html::{Figure, Link, LinkGroup, Page, Section};
@@ -620,7 +620,7 @@ fn plot_sections(
     dir: &Path,
     varies: &[Vary],
     captures: &[String],
-    rows: &[Row],
+    first: Option<&Row>,
     metrics: &[tables::Metric],
     groups: &[Group],
     protected: &[&Path],
@@ -632,7 +632,7 @@ fn plot_sections(
         return Ok(Vec::new());
     };
     let xv = &varies[xi];
-    let bands: Vec<(String, String)> = rows.first().map_or_else(Vec::new, |r| {
+    let bands: Vec<(String, String)> = first.map_or_else(Vec::new, |r| {
         r.metrics
             .bands
             .iter()
@@ -837,40 +837,80 @@ fn plot_sections(
 
 /// Writes every output file into `dir` (a staging folder: it holds only what this call
 /// writes) and returns the paths written; `cells` are the cell files of the sweep
-/// (relative paths, in the final folder), which the page lists too.
+/// (relative paths, in the final folder), which the page lists too. The rows are read
+/// once, a row at a time: the tidy tables are written as they come and only sums per
+/// group and seed are kept, so memory does not grow with the frames.
 #[allow(clippy::too_many_arguments)]
 pub fn write_outputs(
     dir: &Path,
     varies: &[Vary],
     captures: &[String],
-    rows: &[Row],
+    rows: &dyn Rows,
     figure: Option<&BirdsEye>,
     protected: &[&Path],
     cells: &[String],
     format: FigureFormat,
 ) -> Result<Vec<PathBuf>> {
+    use crate::writers::atomic::AtomicFile;
     let keys: Vec<String> = varies.iter().map(|v| v.key.clone()).collect();
     let mut written = Vec::new();
-    let mut put = |name: &str, bytes: &[u8]| -> Result<()> {
-        let path = dir.join(name);
-        crate::writers::atomic::write_atomically(&path, protected, |o| o.write_all(bytes))?;
-        written.push(path);
-        Ok(())
+    let (csv_path, json_path) = (dir.join(TIDY_CSV), dir.join(TIDY_JSON));
+    let mut csv = tables::TidyCsv::new(AtomicFile::create(&csv_path, protected)?, &keys);
+    let mut json = tables::TidyJson::new(AtomicFile::create(&json_path, protected)?, &keys)
+        .map_err(|e| Error::io(&json_path, e))?;
+    let interactions = match varies {
+        [vary] if matches!(vary.kind, VaryKind::Stages { .. }) => Some(vary),
+        _ => None,
     };
-    put(TIDY_CSV, &tables::tidy_csv(&keys, rows))?;
-    let json = serde_json::to_vec_pretty(&tables::tidy_json(&keys, rows))
-        .map_err(|e| Error::Invalid(format!("sweep.json: {e}")))?;
-    put(TIDY_JSON, &json)?;
-    let metrics = tables::metrics(rows);
-    let groups = tables::aggregate(rows, &metrics);
-    put(
-        AGGREGATE_CSV,
-        &tables::aggregate_csv(&keys, &groups, &metrics),
-    )?;
-    put(
-        AGGREGATE_COLUMNS_CSV,
-        &tables::aggregate_columns_csv(&keys, &metrics),
-    )?;
+    let mut set: Option<tables::MetricSet> = None;
+    let mut first: Option<Row> = None;
+    let mut aggregate = tables::Aggregate::default();
+    let mut pooled = super::interactions::Pooled::default();
+    let mut failed: Option<Error> = None;
+    rows.each(&mut |r| {
+        if failed.is_some() {
+            return;
+        }
+        first.get_or_insert_with(|| r.clone());
+        let set = set.get_or_insert_with(|| tables::MetricSet::new(Some(r)));
+        set.see(r);
+        aggregate.add(r, &set.metrics);
+        if let Some(vary) = interactions {
+            pooled.add(r, vary);
+        }
+        if let Err(e) = csv.row(r) {
+            failed = Some(Error::io(&csv_path, e));
+        } else if let Err(e) = json.row(r) {
+            failed = Some(Error::io(&json_path, e));
+        }
+    })?;
+    if let Some(e) = failed {
+        return Err(e);
+    }
+    csv.finish()
+        .map_err(|e| Error::io(&csv_path, e))?
+        .commit()?;
+    written.push(csv_path);
+    json.finish()
+        .map_err(|e| Error::io(&json_path, e))?
+        .commit()?;
+    written.push(json_path);
+    let (metrics, order) = set.unwrap_or_else(|| tables::MetricSet::new(None)).finish();
+    let groups = aggregate.groups(&order, &metrics);
+    for (name, bytes) in [
+        (
+            AGGREGATE_CSV,
+            tables::aggregate_csv(&keys, &groups, &metrics),
+        ),
+        (
+            AGGREGATE_COLUMNS_CSV,
+            tables::aggregate_columns_csv(&keys, &metrics),
+        ),
+    ] {
+        let path = dir.join(name);
+        crate::writers::atomic::write_atomically(&path, protected, |o| o.write_all(&bytes))?;
+        written.push(path);
+    }
 
     let mut page = Page {
         title: "lidar-noise sweep".into(),
@@ -976,7 +1016,7 @@ pub fn write_outputs(
         dir,
         varies,
         captures,
-        rows,
+        first.as_ref(),
         &metrics,
         &groups,
         protected,
@@ -1048,7 +1088,7 @@ pub fn write_outputs(
         column_notes: notes,
         ..Section::default()
     });
-    if let Some(first) = rows.first() {
+    if let Some(first) = &first {
         let mut by_band = Vec::new();
         for b in &first.metrics.bands {
             let name = tables::band_name(b);
@@ -1073,7 +1113,7 @@ pub fn write_outputs(
     }
     if let [vary] = varies {
         if let Some((files, section)) =
-            super::interactions::write_outputs(dir, vary, captures, rows, protected, format)?
+            super::interactions::write_outputs(dir, vary, captures, &pooled, protected, format)?
         {
             written.extend(files);
             page.sections.insert(1, section);

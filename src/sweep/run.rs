@@ -17,9 +17,9 @@ use crate::frame::Frame;
 use crate::hdl32e::frames::{DecoderOptions, FrameReader};
 use crate::hdl32e::index::FrameSeek;
 use crate::pipeline::{FrameResult, Pipeline};
-use crate::synth::labels::{check_frame, read_labels_file, LabelRow};
+use crate::synth::labels::{check_frame, read_labels_file, LabelRow, LabelRows};
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
@@ -98,16 +98,82 @@ pub struct Outcome {
     pub computed: usize,
     /// Cells loaded from earlier runs.
     pub loaded: usize,
-    /// Every row, read back from the cell files, in canonical order.
-    pub rows: Vec<Row>,
+    /// Every row, read back from the cell files (a frame at a time) in canonical order.
+    pub rows: CellRows,
     /// Units (cells, or cells x chunks) of the whole sweep.
     pub total: usize,
     /// Units that fall to this call (all but for a shard, none for a merge).
     pub owned: usize,
 }
 
-/// A cell result file.
-#[derive(Serialize, Deserialize)]
+/// The rows of a sweep, each time they are asked for read again from its cell files a
+/// frame at a time: memory does not grow with the frames (issue 30).
+#[derive(Clone, Debug, Default)]
+pub struct CellRows {
+    /// Capture name, varied values, seed and file of each cell, in canonical order.
+    cells: Vec<(String, Vec<String>, u64, PathBuf)>,
+    /// Rows (frames) of all the cells.
+    rows: usize,
+}
+
+impl CellRows {
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.rows
+    }
+
+    /// True without rows.
+    pub fn is_empty(&self) -> bool {
+        self.rows == 0
+    }
+}
+
+/// Rows given one at a time, in canonical order: read from the cell files
+/// ([`CellRows`]) or held in memory (a slice of rows, for tests).
+pub trait Rows {
+    /// Calls `f` with every row in order.
+    fn each(&self, f: &mut dyn FnMut(&Row)) -> Result<()>;
+}
+
+impl Rows for CellRows {
+    fn each(&self, f: &mut dyn FnMut(&Row)) -> Result<()> {
+        for (capture, values, seed, path) in &self.cells {
+            let mut row = Row {
+                capture: capture.clone(),
+                values: values.clone(),
+                seed: *seed,
+                metrics: FrameMetrics::default(),
+            };
+            let read = stream::scan_cell(path, &mut |m| {
+                row.metrics = m;
+                f(&row);
+            });
+            if !matches!(read, Some(Ok(_))) {
+                return Err(Error::Invalid(format!(
+                    "{}: cell result missing or unreadable",
+                    path.display()
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Rows for [Row] {
+    fn each(&self, f: &mut dyn FnMut(&Row)) -> Result<()> {
+        self.iter().for_each(f);
+        Ok(())
+    }
+}
+
+impl Rows for Vec<Row> {
+    fn each(&self, f: &mut dyn FnMut(&Row)) -> Result<()> {
+        self.as_slice().each(f)
+    }
+}
+
+/// A cell result file (written by [`CellWriter`], read by [`stream::scan_cell`]).
+#[derive(Serialize)]
 struct CellFile {
     tool: String,
     settings: serde_json::Value,
@@ -118,8 +184,7 @@ struct CellFile {
     checksum: String,
 }
 
-/// What `checksum` holds while the checksum is computed.
-const CHECKSUM_PLACEHOLDER: &str = "0000000000000000";
+use super::stream::{self, CHECKSUM_PLACEHOLDER};
 
 /// The baseline of one frame, reduced to what the metrics need.
 struct Reference {
@@ -140,10 +205,95 @@ struct Truth {
     objects: Vec<i32>,
 }
 
-/// Ground-truth labels of a capture: rows per frame and object classes by id.
+/// Ground-truth labels of a capture: where its rows come from and object classes by id.
 struct Labels {
-    frames: HashMap<u32, Vec<LabelRow>>,
+    rows: LabelSource,
     classes: BTreeMap<i32, String>,
+}
+
+/// The label rows of a capture's frames.
+enum LabelSource {
+    /// A file in frame order (as the synthesizer writes it: capture order), read again
+    /// a frame at a time by every pass over the capture: memory does not grow with it.
+    InOrder(PathBuf),
+    /// Rows of a file not in frame order, grouped by frame (held whole).
+    Grouped(HashMap<u32, Vec<LabelRow>>),
+}
+
+impl Labels {
+    /// Reads (checks) the labels file `path`; its rows are held only when they are not
+    /// in frame order.
+    fn open(path: &Path) -> Result<Labels> {
+        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let mut last = 0u32;
+        let mut in_order = true;
+        for row in LabelRows::new(file, path)? {
+            let row = row?;
+            in_order &= row.frame >= last;
+            last = row.frame;
+        }
+        let rows = if in_order {
+            LabelSource::InOrder(path.to_path_buf())
+        } else {
+            LabelSource::Grouped(group_labels(read_labels_file(path)?))
+        };
+        Ok(Labels {
+            rows,
+            classes: read_classes(path)?,
+        })
+    }
+
+    /// A reader of the rows of frames asked for in increasing order.
+    fn cursor(&self) -> Result<LabelCursor<'_>> {
+        Ok(match &self.rows {
+            LabelSource::InOrder(path) => {
+                let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+                LabelCursor::Stream {
+                    rows: LabelRows::new(file, path)?,
+                    next: None,
+                }
+            }
+            LabelSource::Grouped(frames) => LabelCursor::Grouped(frames),
+        })
+    }
+}
+
+/// The label rows of one frame after another (see [`Labels::cursor`]).
+enum LabelCursor<'a> {
+    Stream {
+        rows: LabelRows<'static>,
+        /// The first row of a later frame, read ahead.
+        next: Option<LabelRow>,
+    },
+    Grouped(&'a HashMap<u32, Vec<LabelRow>>),
+}
+
+impl LabelCursor<'_> {
+    /// The rows of frame `index` (frames asked for in increasing order).
+    fn frame(&mut self, index: u32) -> Result<Vec<LabelRow>> {
+        match self {
+            LabelCursor::Grouped(frames) => Ok(frames.get(&index).cloned().unwrap_or_default()),
+            LabelCursor::Stream { rows, next } => {
+                let mut out = Vec::new();
+                loop {
+                    let row = match next.take() {
+                        Some(r) => r,
+                        None => match rows.next() {
+                            Some(r) => r?,
+                            None => return Ok(out),
+                        },
+                    };
+                    if row.frame > index {
+                        *next = Some(row);
+                        return Ok(out);
+                    }
+                    if row.frame == index {
+                        out.push(row);
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// Which cells a call computes and whether it reads the rows back.
@@ -256,7 +406,7 @@ pub fn run_mode(
                             n
                         }
                     };
-                    if f.frames.len() == expected {
+                    if f.frames == expected {
                         loaded += 1;
                         continue;
                     }
@@ -264,7 +414,7 @@ pub fn run_mode(
                         "{}: the cell has {} frames where its settings give {expected}; \
                          recomputing it",
                         path.display(),
-                        f.frames.len()
+                        f.frames
                     ));
                 }
                 Some(Err(why)) => {
@@ -295,9 +445,9 @@ pub fn run_mode(
                 let done = match read_cell(part) {
                     Some(Ok(f)) if f.settings == want.1 => {
                         // The part holds exactly its chunk's frames, in order.
-                        f.frames.len() <= m as usize
-                            && f.frames.first().map(|x| x.frame) == Some(*want.0.start())
-                            && f.frames.last().map(|x| x.frame) == Some(*want.0.end())
+                        f.frames <= m as usize
+                            && f.first == Some(*want.0.start())
+                            && f.last == Some(*want.0.end())
                     }
                     Some(Err(why)) => {
                         observer.warn(&format!("{}: {why}; recomputing it", part.display()));
@@ -338,10 +488,7 @@ pub fn run_mode(
         outcome.loaded += loaded;
         if n_pending > 0 {
             let truth = match &capture.labels {
-                Some(p) => Some(Labels {
-                    frames: group_labels(read_labels_file(p)?),
-                    classes: read_classes(p)?,
-                }),
+                Some(p) => Some(Labels::open(p)?),
                 None => None,
             };
             let chunk = (4 * rayon::current_num_threads()).max(8);
@@ -388,18 +535,18 @@ pub fn run_mode(
         }
         for cell in &canonical {
             let path = dir.join(cell.file_name(&s.varies));
-            let file = read_cell(&path).and_then(Result::ok).ok_or_else(|| {
-                Error::Invalid(format!(
+            // Checked here, read again a frame at a time when the tables are written.
+            let Some(Ok(head)) = read_cell(&path) else {
+                return Err(Error::Invalid(format!(
                     "{}: cell result missing or unreadable",
                     path.display()
-                ))
-            })?;
-            outcome.rows.extend(file.frames.into_iter().map(|m| Row {
-                capture: capture.name.clone(),
-                values: cell.values.clone(),
-                seed: cell.seed,
-                metrics: m,
-            }));
+                )));
+            };
+            outcome.rows.rows += head.frames;
+            outcome
+                .rows
+                .cells
+                .push((capture.name.clone(), cell.values.clone(), cell.seed, path));
         }
     }
     if !missing.is_empty() {
@@ -438,44 +585,19 @@ fn join_parts(
 ) -> Result<()> {
     const OPEN: &str = "\n  \"frames\": [\n";
     const CLOSE: &str = "\n  ],\n  \"checksum\"";
-    let mut elements = Vec::new();
+    let mut out = CellWriter::create(path, &settings, protected)?;
     for part in parts {
         let bad = || Error::Invalid(format!("{}: part missing or unreadable", part.display()));
-        let bytes = std::fs::read(part).map_err(|_| bad())?;
-        verify_cell(&bytes).map_err(|_| bad())?;
-        let text = String::from_utf8(bytes).map_err(|_| bad())?;
+        // A part holds one chunk's frames: read whole, it is bounded by --chunk-frames.
+        let Some(Ok(head)) = read_cell(part) else {
+            return Err(bad());
+        };
+        let text = std::fs::read_to_string(part).map_err(|_| bad())?;
         let start = text.find(OPEN).ok_or_else(bad)? + OPEN.len();
         let end = text.rfind(CLOSE).filter(|&e| e >= start).ok_or_else(bad)?;
-        elements.push(text[start..end].to_string());
+        out.push_indented(&text[start..end], head.frames as u64)?;
     }
-    let mut file = CellFile {
-        tool: format!("lidar-noise {}", env!("CARGO_PKG_VERSION")),
-        settings,
-        frames: Vec::new(),
-        checksum: CHECKSUM_PLACEHOLDER.into(),
-    };
-    let head = serde_json::to_string_pretty(&file).map_err(|e| Error::Invalid(e.to_string()))?;
-    let empty = "\n  \"frames\": [],\n";
-    let at = head
-        .rfind(empty)
-        .ok_or_else(|| Error::Invalid("internal: the cell file has no frames array".into()))?;
-    let text = format!(
-        "{}{OPEN}{}\n  ],\n{}\n",
-        &head[..at],
-        elements.join(",\n"),
-        &head[at + empty.len()..]
-    );
-    let mut bytes = text.into_bytes();
-    let sum = format!("{:016x}", xxhash_rust::xxh3::xxh3_64(&bytes));
-    let field = format!("\"checksum\": \"{CHECKSUM_PLACEHOLDER}\"");
-    let value_at = String::from_utf8_lossy(&bytes).rfind(&field).unwrap_or(0) + field.len()
-        - 1
-        - CHECKSUM_PLACEHOLDER.len();
-    bytes[value_at..value_at + sum.len()].copy_from_slice(sum.as_bytes());
-    file.checksum = sum;
-    verify_cell(&bytes)
-        .map_err(|e| Error::Invalid(format!("internal: {}: {e}", path.display())))?;
-    crate::writers::atomic::write_atomically(path, protected, |out| out.write_all(&bytes))?;
+    out.commit()?;
     for part in parts {
         let _ = std::fs::remove_file(part);
     }
@@ -612,47 +734,71 @@ fn cell_settings(
     })
 }
 
-/// The cell file at `path`: None when there is none, Err(why) when it does not verify.
-fn read_cell(path: &Path) -> Option<std::result::Result<CellFile, String>> {
-    let bytes = std::fs::read(path).ok()?;
-    Some(verify_cell(&bytes))
+/// The cell file at `path`, its frames read and dropped: None when there is none,
+/// Err(why) when it does not verify.
+fn read_cell(path: &Path) -> Option<std::result::Result<stream::CellHead, String>> {
+    stream::scan_cell(path, &mut |_| ())
 }
 
-fn verify_cell(bytes: &[u8]) -> std::result::Result<CellFile, String> {
-    let file: CellFile =
-        serde_json::from_slice(bytes).map_err(|e| format!("the cell file cannot be read ({e})"))?;
-    let text = std::str::from_utf8(bytes).map_err(|_| "the cell file is not UTF-8")?;
-    let field = format!("\"checksum\": \"{}\"", file.checksum);
-    let at = text
-        .rfind(&field)
-        .filter(|_| file.checksum.len() == CHECKSUM_PLACEHOLDER.len())
-        .ok_or("the cell file has no checksum")?;
-    let mut zeroed = text.as_bytes().to_vec();
-    let value_at = at + field.len() - 1 - file.checksum.len();
-    zeroed[value_at..value_at + file.checksum.len()]
-        .copy_from_slice(CHECKSUM_PLACEHOLDER.as_bytes());
-    let sum = format!("{:016x}", xxhash_rust::xxh3::xxh3_64(&zeroed));
-    if sum != file.checksum {
-        return Err(format!(
-            "the cell file was changed after it was written (checksum {sum}, recorded {})",
-            file.checksum
-        ));
+/// A cell file written a frame at a time, in the layout of `serde_json::to_vec_pretty`
+/// of a [`CellFile`] and a line break, its checksum computed as the bytes go; it appears
+/// at its path only once committed.
+struct CellWriter {
+    array: stream::ArrayWriter<crate::writers::atomic::AtomicFile>,
+    path: PathBuf,
+}
+
+impl CellWriter {
+    /// Buffer of each cell file: the cells of a batch are written side by side.
+    const BUFFER_BYTES: usize = 64 << 10;
+
+    fn create(path: &Path, settings: &serde_json::Value, protected: &[&Path]) -> Result<Self> {
+        let file =
+            crate::writers::atomic::AtomicFile::with_buffer(path, protected, Self::BUFFER_BYTES)?;
+        let doc = CellFile {
+            tool: format!("lidar-noise {}", env!("CARGO_PKG_VERSION")),
+            settings: settings.clone(),
+            frames: Vec::new(),
+            checksum: CHECKSUM_PLACEHOLDER.into(),
+        };
+        let mut array =
+            stream::ArrayWriter::start(file, &doc, "frames").map_err(|e| Error::io(path, e))?;
+        // The head on disk at once: a kill leaves a temporary file that says by its
+        // content that a sweep wrote it, which the next run cleans up.
+        array.flush().map_err(|e| Error::io(path, e))?;
+        Ok(CellWriter {
+            array,
+            path: path.to_path_buf(),
+        })
     }
-    Ok(file)
-}
 
-/// The cell file's bytes, checksum included.
-fn cell_bytes(file: &mut CellFile) -> serde_json::Result<Vec<u8>> {
-    file.checksum = CHECKSUM_PLACEHOLDER.into();
-    let mut bytes = serde_json::to_vec_pretty(&*file)?;
-    bytes.push(b'\n');
-    let sum = format!("{:016x}", xxhash_rust::xxh3::xxh3_64(&bytes));
-    let field = format!("\"checksum\": \"{CHECKSUM_PLACEHOLDER}\"");
-    let text = String::from_utf8_lossy(&bytes).into_owned();
-    let at = text.rfind(&field).unwrap_or(0) + field.len() - 1 - CHECKSUM_PLACEHOLDER.len();
-    bytes[at..at + sum.len()].copy_from_slice(sum.as_bytes());
-    file.checksum = sum;
-    Ok(bytes)
+    fn push(&mut self, m: &FrameMetrics) -> Result<()> {
+        self.array.push(m).map_err(|e| Error::io(&self.path, e))
+    }
+
+    fn push_indented(&mut self, text: &str, n: u64) -> Result<()> {
+        self.array
+            .push_indented(text, n)
+            .map_err(|e| Error::io(&self.path, e))
+    }
+
+    /// Writes the checksum (of the bytes with it written as zeros) and renames the file
+    /// into place.
+    fn commit(self) -> Result<()> {
+        let (mut file, mut tail, mut hasher) = self.array.into_tail();
+        tail.push('\n');
+        hasher.update(tail.as_bytes());
+        let sum = format!("{:016x}", hasher.digest());
+        let field = format!("\"checksum\": \"{CHECKSUM_PLACEHOLDER}\"");
+        let at = tail.rfind(&field).ok_or_else(|| {
+            Error::Invalid("internal: the cell file has no checksum field".into())
+        })? + field.len()
+            - 1
+            - CHECKSUM_PLACEHOLDER.len();
+        tail.replace_range(at..at + sum.len(), &sum);
+        file.write_all(tail.as_bytes())?;
+        file.commit()
+    }
 }
 
 fn group_labels(rows: Vec<LabelRow>) -> HashMap<u32, Vec<LabelRow>> {
@@ -685,8 +831,7 @@ fn read_classes(labels: &Path) -> Result<BTreeMap<i32, String>> {
     Ok(out)
 }
 
-fn truth_of(frame: &Frame, labels: &HashMap<u32, Vec<LabelRow>>, origin: &Path) -> Result<Truth> {
-    let rows = labels.get(&frame.index).map_or(&[][..], Vec::as_slice);
+fn truth_of(frame: &Frame, rows: &[LabelRow], origin: &Path) -> Result<Truth> {
     check_frame(rows, frame, origin)?;
     Ok(Truth {
         ground: rows.iter().map(|l| l.label == 0).collect(),
@@ -922,21 +1067,28 @@ fn compute_chunk(
         None => FrameReader::open(&capture.path, &s.decoder)?,
     };
     let batch_size = (2 * rayon::current_num_threads()).max(4);
-    let mut results: Vec<Vec<FrameMetrics>> = vec![Vec::new(); cells.len()];
+    // Each cell's frames go to its file as their batch is done (kept until then only):
+    // memory does not grow with the capture. Dropped uncommitted (an error), the files
+    // are deleted.
+    let mut files: Vec<CellWriter> = cells
+        .iter()
+        .map(|c| CellWriter::create(&c.path, &c.settings, protected))
+        .collect::<Result<_>>()?;
     let mut n_frames = 0u64;
+    let mut cursor = labels.map(Labels::cursor).transpose()?;
     loop {
         let batch = reader.next_batch(batch_size, &s.frames)?;
         if batch.is_empty() {
             break;
         }
         n_frames += batch.len() as u64;
-        let truths: Vec<Option<Truth>> = match labels {
-            Some(l) => batch
+        let truths: Vec<Option<Truth>> = match &mut cursor {
+            Some(c) => batch
                 .iter()
                 .map(|f| {
                     truth_of(
                         f,
-                        &l.frames,
+                        &c.frame(f.index)?,
                         capture.labels.as_deref().unwrap_or(Path::new("")),
                     )
                     .map(Some)
@@ -971,8 +1123,8 @@ fn compute_chunk(
                 Ok(m)
             })
             .collect::<Result<_>>()?;
-        for (i, m) in rows.into_iter().enumerate() {
-            results[i / batch.len()].push(m);
+        for (i, m) in rows.iter().enumerate() {
+            files[i / batch.len()].push(m)?;
         }
     }
     if n_frames == 0 {
@@ -986,17 +1138,8 @@ fn compute_chunk(
         observer.frames_total(n_frames);
         *first = false;
     }
-    for (cell, frames) in cells.iter().zip(results) {
-        let mut file = CellFile {
-            tool: format!("lidar-noise {}", env!("CARGO_PKG_VERSION")),
-            settings: cell.settings.clone(),
-            frames,
-            checksum: String::new(),
-        };
-        let bytes = cell_bytes(&mut file).map_err(|e| Error::Invalid(e.to_string()))?;
-        crate::writers::atomic::write_atomically(&cell.path, protected, |out| {
-            out.write_all(&bytes)
-        })?;
+    for file in files {
+        file.commit()?;
         observer.cell_done();
     }
     Ok(())

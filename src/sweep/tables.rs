@@ -138,6 +138,60 @@ pub fn band_title(b: &BandMetrics) -> String {
 /// Every aggregated metric of `rows`, in column order: the fixed ones, then per distance
 /// band (layout of the first row) and per object class (every class seen).
 pub fn metrics(rows: &[Row]) -> Vec<Metric> {
+    let mut set = MetricSet::new(rows.first());
+    for r in rows {
+        set.see(r);
+    }
+    set.finish().0
+}
+
+/// The metrics of rows seen one at a time: the fixed ones and those of the first row's
+/// bands from the start, one per object class as classes appear (appended: rows before
+/// had none, so their sums stay right); [`MetricSet::finish`] puts the classes in name
+/// order, as [`metrics`] lists them.
+pub struct MetricSet {
+    /// The metrics so far, classes in the order they appeared.
+    pub metrics: Vec<Metric>,
+    fixed: usize,
+    kinds: Vec<String>,
+}
+
+impl MetricSet {
+    /// The fixed metrics and those of the bands of `first` (the first row).
+    pub fn new(first: Option<&Row>) -> MetricSet {
+        let metrics = fixed_metrics(first);
+        MetricSet {
+            fixed: metrics.len(),
+            metrics,
+            kinds: Vec::new(),
+        }
+    }
+
+    /// Adds a metric for each object class of `r` not seen before.
+    pub fn see(&mut self, r: &Row) {
+        for c in &r.metrics.classes {
+            if !self.kinds.contains(&c.kind) {
+                self.kinds.push(c.kind.clone());
+                self.metrics.push(class_metric(&c.kind));
+            }
+        }
+    }
+
+    /// The metrics in column order (classes by name) and, for each, its index in
+    /// [`MetricSet::metrics`] (where sums gathered with it hold it).
+    pub fn finish(self) -> (Vec<Metric>, Vec<usize>) {
+        let mut order: Vec<usize> = (0..self.fixed).collect();
+        let mut classes: Vec<usize> = (0..self.kinds.len()).collect();
+        classes.sort_by(|&a, &b| self.kinds[a].cmp(&self.kinds[b]));
+        order.extend(classes.iter().map(|&k| self.fixed + k));
+        let mut slots: Vec<Option<Metric>> = self.metrics.into_iter().map(Some).collect();
+        let metrics = order.iter().filter_map(|&i| slots[i].take()).collect();
+        (metrics, order)
+    }
+}
+
+/// The metrics every sweep has, and those of the bands of `first`.
+fn fixed_metrics(first: Option<&Row>) -> Vec<Metric> {
     macro_rules! int {
         ($f:ident, $l:expr) => {
             plain(stringify!($f), $l, |m| Some(m.$f as f64))
@@ -223,7 +277,7 @@ pub fn metrics(rows: &[Row]) -> Vec<Metric> {
         m.share = true;
         out.push(m);
     }
-    if let Some(first) = rows.first() {
+    if let Some(first) = first {
         for (k, b) in first.metrics.bands.iter().enumerate() {
             let (name, title) = (band_name(b), band_title(b));
             out.push(plain(
@@ -250,34 +304,30 @@ pub fn metrics(rows: &[Row]) -> Vec<Metric> {
             }
         }
     }
-    let mut kinds: Vec<&str> = rows
-        .iter()
-        .flat_map(|r| r.metrics.classes.iter().map(|c| c.kind.as_str()))
-        .collect();
-    kinds.sort_unstable();
-    kinds.dedup();
-    for kind in kinds {
-        let (k1, k2) = (kind.to_string(), kind.to_string());
-        let mut m = share(
-            format!("detected_share_{}", safe_name(kind)),
-            format!("{kind} objects detected (share)"),
-            move |m| {
-                m.classes
-                    .iter()
-                    .find(|c| c.kind == k1)
-                    .map(|c| c.counts.detected)
-            },
-            move |m| {
-                m.classes
-                    .iter()
-                    .find(|c| c.kind == k2)
-                    .map(|c| c.counts.objects)
-            },
-        );
-        m.needs_labels = true;
-        out.push(m);
-    }
     out
+}
+
+/// The detected share of the labelled objects of class `kind`.
+fn class_metric(kind: &str) -> Metric {
+    let (k1, k2) = (kind.to_string(), kind.to_string());
+    let mut m = share(
+        format!("detected_share_{}", safe_name(kind)),
+        format!("{kind} objects detected (share)"),
+        move |m| {
+            m.classes
+                .iter()
+                .find(|c| c.kind == k1)
+                .map(|c| c.counts.detected)
+        },
+        move |m| {
+            m.classes
+                .iter()
+                .find(|c| c.kind == k2)
+                .map(|c| c.counts.objects)
+        },
+    );
+    m.needs_labels = true;
+    m
 }
 
 fn safe_name(s: &str) -> String {
@@ -294,16 +344,6 @@ fn safe_name(s: &str) -> String {
 
 fn fmt_opt(v: Option<f64>) -> String {
     v.map_or_else(String::new, |x| x.to_string())
-}
-
-fn csv_bytes(header: Vec<String>, rows: Vec<Vec<String>>) -> Vec<u8> {
-    let mut w = csv::Writer::from_writer(Vec::new());
-    // Writing into memory cannot fail.
-    let _ = w.write_record(&header);
-    for r in rows {
-        let _ = w.write_record(&r);
-    }
-    w.into_inner().unwrap_or_default()
 }
 
 /// Every per-frame column of the tidy table, in order.
@@ -404,27 +444,66 @@ fn frame_values(m: &FrameMetrics) -> Vec<String> {
 /// The tidy CSV: capture, frame, one column per varied key, seed, then the metrics and
 /// the per-band counts (`objects_0_5m`, `detected_0_5m`, ...; band layout of the first row).
 pub fn tidy_csv(keys: &[String], rows: &[Row]) -> Vec<u8> {
-    let mut header = vec!["capture".to_string(), "frame".to_string()];
-    header.extend(keys.iter().cloned());
-    header.push("seed".into());
-    header.extend(FRAME_COLUMNS.iter().map(|s| s.to_string()));
-    if let Some(first) = rows.first() {
-        for b in &first.metrics.bands {
-            let name = band_name(b);
-            header.extend(BAND_COLUMNS.iter().map(|c| format!("{c}_{name}")));
+    let mut t = TidyCsv::new(Vec::new(), keys);
+    // Writing into memory cannot fail.
+    for r in rows {
+        let _ = t.row(r);
+    }
+    t.finish().unwrap_or_default()
+}
+
+/// The tidy CSV written a row at a time (see [`tidy_csv`]); the header, which takes the
+/// band layout of the first row, goes out with it.
+pub struct TidyCsv<W: std::io::Write> {
+    out: csv::Writer<W>,
+    keys: Vec<String>,
+    header: bool,
+}
+
+impl<W: std::io::Write> TidyCsv<W> {
+    /// A table of the varied `keys` into `out`.
+    pub fn new(out: W, keys: &[String]) -> Self {
+        TidyCsv {
+            out: csv::Writer::from_writer(out),
+            keys: keys.to_vec(),
+            header: false,
         }
     }
-    let body = rows
-        .iter()
-        .map(|r| {
-            let mut v = vec![r.capture.clone(), r.metrics.frame.to_string()];
-            v.extend(r.values.iter().cloned());
-            v.push(r.seed.to_string());
-            v.extend(frame_values(&r.metrics));
-            v
-        })
-        .collect();
-    csv_bytes(header, body)
+
+    fn header(&mut self, first: Option<&Row>) -> std::io::Result<()> {
+        let mut header = vec!["capture".to_string(), "frame".to_string()];
+        header.extend(self.keys.iter().cloned());
+        header.push("seed".into());
+        header.extend(FRAME_COLUMNS.iter().map(|s| s.to_string()));
+        if let Some(first) = first {
+            for b in &first.metrics.bands {
+                let name = band_name(b);
+                header.extend(BAND_COLUMNS.iter().map(|c| format!("{c}_{name}")));
+            }
+        }
+        self.header = true;
+        Ok(self.out.write_record(&header)?)
+    }
+
+    /// Appends a row (after the header, on the first).
+    pub fn row(&mut self, r: &Row) -> std::io::Result<()> {
+        if !self.header {
+            self.header(Some(r))?;
+        }
+        let mut v = vec![r.capture.clone(), r.metrics.frame.to_string()];
+        v.extend(r.values.iter().cloned());
+        v.push(r.seed.to_string());
+        v.extend(frame_values(&r.metrics));
+        Ok(self.out.write_record(&v)?)
+    }
+
+    /// Writes what is left (the header of a table without rows) and returns the output.
+    pub fn finish(mut self) -> std::io::Result<W> {
+        if !self.header {
+            self.header(None)?;
+        }
+        self.out.into_inner().map_err(|e| e.into_error())
+    }
 }
 
 #[derive(Serialize)]
@@ -436,31 +515,66 @@ struct JsonRow<'a> {
     metrics: &'a FrameMetrics,
 }
 
-/// The tidy table as JSON: `{"tool", "keys", "rows": [...]}`.
-pub fn tidy_json(keys: &[String], rows: &[Row]) -> serde_json::Value {
-    let rows: Vec<serde_json::Value> = rows
+/// A row of the tidy JSON.
+fn json_row(keys: &[String], r: &Row) -> serde_json::Value {
+    let parameters = keys
         .iter()
-        .map(|r| {
-            let parameters = keys
-                .iter()
-                .zip(&r.values)
-                .map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone())))
-                .collect();
-            serde_json::to_value(JsonRow {
-                capture: &r.capture,
-                frame: r.metrics.frame,
-                parameters,
-                seed: r.seed,
-                metrics: &r.metrics,
-            })
-            .unwrap_or(serde_json::Value::Null)
-        })
+        .zip(&r.values)
+        .map(|(k, v)| (k.clone(), serde_json::Value::String(v.clone())))
         .collect();
+    serde_json::to_value(JsonRow {
+        capture: &r.capture,
+        frame: r.metrics.frame,
+        parameters,
+        seed: r.seed,
+        metrics: &r.metrics,
+    })
+    .unwrap_or(serde_json::Value::Null)
+}
+
+/// The tidy JSON document without its rows.
+fn tidy_json_head(keys: &[String], rows: Vec<serde_json::Value>) -> serde_json::Value {
     serde_json::json!({
         "tool": format!("lidar-noise {}", env!("CARGO_PKG_VERSION")),
         "keys": keys,
         "rows": rows,
     })
+}
+
+/// The tidy table as JSON: `{"tool", "keys", "rows": [...]}`.
+pub fn tidy_json(keys: &[String], rows: &[Row]) -> serde_json::Value {
+    tidy_json_head(keys, rows.iter().map(|r| json_row(keys, r)).collect())
+}
+
+/// The tidy JSON written a row at a time, as `serde_json::to_vec_pretty` of
+/// [`tidy_json`] would write it.
+pub struct TidyJson<W: std::io::Write> {
+    array: super::stream::ArrayWriter<W>,
+    keys: Vec<String>,
+}
+
+impl<W: std::io::Write> TidyJson<W> {
+    /// Starts the document of the varied `keys` in `out`.
+    pub fn new(out: W, keys: &[String]) -> std::io::Result<Self> {
+        Ok(TidyJson {
+            array: super::stream::ArrayWriter::start(
+                out,
+                &tidy_json_head(keys, Vec::new()),
+                "rows",
+            )?,
+            keys: keys.to_vec(),
+        })
+    }
+
+    /// Appends a row.
+    pub fn row(&mut self, r: &Row) -> std::io::Result<()> {
+        self.array.push(&json_row(&self.keys, r))
+    }
+
+    /// Closes the document; returns the output.
+    pub fn finish(self) -> std::io::Result<W> {
+        self.array.finish()
+    }
 }
 
 /// Mean and 95 % interval of one metric over a group's seeds.
@@ -558,26 +672,106 @@ pub fn bootstrap_interval(values: &[f64]) -> Option<Interval> {
 
 /// One value per seed: the metric's mean over the seed's frames (weighted for shares).
 pub fn per_seed(metric: &Metric, rows: &[&Row]) -> Vec<f64> {
-    let mut seeds: Vec<u64> = rows.iter().map(|r| r.seed).collect();
-    seeds.sort_unstable();
-    seeds.dedup();
-    seeds
-        .into_iter()
-        .filter_map(|seed| {
-            let (mut sum, mut weight) = (0.0, 0.0);
-            for r in rows.iter().filter(|r| r.seed == seed) {
-                let Some(v) = (metric.get)(&r.metrics) else {
-                    continue;
-                };
-                let w = metric.weight.as_ref().map_or(Some(1.0), |w| w(&r.metrics));
-                if let Some(w) = w.filter(|&w| w > 0.0) {
-                    sum += v * w;
-                    weight += w;
-                }
+    let mut sums = SeedSums::default();
+    for r in rows {
+        sums.add(r, std::slice::from_ref(metric));
+    }
+    sums.values(0)
+}
+
+/// Per seed and metric, the weighted sum of the rows' values and the sum of their
+/// weights (a seed's value is their ratio), gathered a row at a time.
+#[derive(Clone, Debug, Default)]
+pub struct SeedSums {
+    seeds: std::collections::BTreeMap<u64, Vec<(f64, f64)>>,
+}
+
+impl SeedSums {
+    /// Adds a row's value of each metric (metrics may have been appended since the
+    /// last row: rows before had no value of them).
+    pub fn add(&mut self, r: &Row, metrics: &[Metric]) {
+        let sums = self.seeds.entry(r.seed).or_default();
+        if sums.len() < metrics.len() {
+            sums.resize(metrics.len(), (0.0, 0.0));
+        }
+        for (metric, (sum, weight)) in metrics.iter().zip(sums.iter_mut()) {
+            let Some(v) = (metric.get)(&r.metrics) else {
+                continue;
+            };
+            let w = metric.weight.as_ref().map_or(Some(1.0), |w| w(&r.metrics));
+            if let Some(w) = w.filter(|&w| w > 0.0) {
+                *sum += v * w;
+                *weight += w;
             }
-            (weight > 0.0).then(|| sum / weight)
-        })
-        .collect()
+        }
+    }
+
+    /// The value of metric `i` of each seed with a weight, in seed order.
+    pub fn values(&self, i: usize) -> Vec<f64> {
+        self.seeds
+            .values()
+            .filter_map(|s| s.get(i).filter(|(_, w)| *w > 0.0).map(|(s, w)| s / w))
+            .collect()
+    }
+
+    /// Seeds seen.
+    pub fn seeds(&self) -> usize {
+        self.seeds.len()
+    }
+}
+
+/// The aggregate table gathered a row at a time: groups (capture, varied values) in
+/// the order of their first row, each with its rows and [`SeedSums`].
+#[derive(Clone, Debug, Default)]
+pub struct Aggregate {
+    groups: Vec<(String, Vec<String>, usize, SeedSums)>,
+    last: usize,
+}
+
+impl Aggregate {
+    /// Adds a row, with the values of `metrics`.
+    pub fn add(&mut self, r: &Row, metrics: &[Metric]) {
+        let same = |g: &(String, Vec<String>, usize, SeedSums)| g.0 == r.capture && g.1 == r.values;
+        // Rows come cell by cell: most often in the group of the row before.
+        let i = match self.groups.get(self.last).filter(|g| same(g)) {
+            Some(_) => self.last,
+            None => match self.groups.iter().position(same) {
+                Some(i) => i,
+                None => {
+                    self.groups
+                        .push((r.capture.clone(), r.values.clone(), 0, SeedSums::default()));
+                    self.groups.len() - 1
+                }
+            },
+        };
+        self.last = i;
+        self.groups[i].2 += 1;
+        self.groups[i].3.add(r, metrics);
+    }
+
+    /// The groups; metric `k` of each is the one gathered at index `order[k]`.
+    pub fn groups(&self, order: &[usize], metrics: &[Metric]) -> Vec<Group> {
+        self.groups
+            .iter()
+            .map(|(capture, values, rows, sums)| Group {
+                capture: capture.clone(),
+                values: values.clone(),
+                rows: *rows,
+                seeds: sums.seeds(),
+                metrics: order
+                    .iter()
+                    .zip(metrics)
+                    .map(|(&i, m)| {
+                        let values = sums.values(i);
+                        match m.method() {
+                            IntervalMethod::Bootstrap => bootstrap_interval(&values),
+                            IntervalMethod::StudentT => interval(&values),
+                        }
+                    })
+                    .collect(),
+            })
+            .collect()
+    }
 }
 
 /// One group of the aggregate table: a capture and a combination of varied values.
@@ -597,43 +791,11 @@ pub struct Group {
 
 /// Aggregates rows per seed, then over seeds, keeping the rows' order of first appearance.
 pub fn aggregate(rows: &[Row], metrics: &[Metric]) -> Vec<Group> {
-    let mut order: Vec<(String, Vec<String>)> = Vec::new();
-    let mut members: Vec<Vec<&Row>> = Vec::new();
+    let mut a = Aggregate::default();
     for r in rows {
-        let key = (r.capture.clone(), r.values.clone());
-        match order.iter().position(|k| *k == key) {
-            Some(i) => members[i].push(r),
-            None => {
-                order.push(key);
-                members.push(vec![r]);
-            }
-        }
+        a.add(r, metrics);
     }
-    order
-        .into_iter()
-        .zip(members)
-        .map(|((capture, values), rs)| {
-            let mut seeds: Vec<u64> = rs.iter().map(|r| r.seed).collect();
-            seeds.sort_unstable();
-            seeds.dedup();
-            Group {
-                capture,
-                values,
-                rows: rs.len(),
-                seeds: seeds.len(),
-                metrics: metrics
-                    .iter()
-                    .map(|m| {
-                        let values = per_seed(m, &rs);
-                        match m.method() {
-                            IntervalMethod::Bootstrap => bootstrap_interval(&values),
-                            IntervalMethod::StudentT => interval(&values),
-                        }
-                    })
-                    .collect(),
-            }
-        })
-        .collect()
+    a.groups(&(0..metrics.len()).collect::<Vec<_>>(), metrics)
 }
 
 /// The aggregate CSV: capture, varied keys, rows, seeds, then `<metric>_mean,_lo,_hi` each
@@ -648,22 +810,30 @@ pub fn aggregate_csv(keys: &[String], groups: &[Group], metrics: &[Metric]) -> V
             header.push(format!("{}_{s}", m.name));
         }
     }
-    let body = groups
-        .iter()
-        .map(|g| {
-            let mut v = vec![g.capture.clone()];
-            v.extend(g.values.iter().cloned());
-            v.push(g.rows.to_string());
-            v.push(g.seeds.to_string());
-            for i in &g.metrics {
-                v.push(fmt_opt(i.map(|i| i.mean)));
-                v.push(fmt_opt(i.and_then(|i| i.lo)));
-                v.push(fmt_opt(i.and_then(|i| i.hi)));
-            }
-            v
-        })
-        .collect();
+    let body = groups.iter().map(|g| {
+        let mut v = vec![g.capture.clone()];
+        v.extend(g.values.iter().cloned());
+        v.push(g.rows.to_string());
+        v.push(g.seeds.to_string());
+        for i in &g.metrics {
+            v.push(fmt_opt(i.map(|i| i.mean)));
+            v.push(fmt_opt(i.and_then(|i| i.lo)));
+            v.push(fmt_opt(i.and_then(|i| i.hi)));
+        }
+        v
+    });
     csv_bytes(header, body)
+}
+
+/// A CSV document in memory.
+fn csv_bytes(header: Vec<String>, rows: impl IntoIterator<Item = Vec<String>>) -> Vec<u8> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    // Writing into memory cannot fail.
+    let _ = w.write_record(&header);
+    for r in rows {
+        let _ = w.write_record(&r);
+    }
+    w.into_inner().unwrap_or_default()
 }
 
 /// The aggregate table's column dictionary: one row per column of [`aggregate_csv`]

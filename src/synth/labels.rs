@@ -177,40 +177,61 @@ fn bounded_lines(mut reader: impl BufRead) -> impl Iterator<Item = std::io::Resu
 
 /// Reads a labels file (gzip-compressed or plain CSV); `origin` names it in errors.
 pub fn read_labels<R: Read>(input: R, origin: &Path) -> Result<Vec<LabelRow>> {
-    let mut reader = BufReader::new(input);
-    let gz = reader
-        .fill_buf()
-        .map_err(|e| Error::io(origin, e))?
-        .starts_with(&[0x1f, 0x8b]);
-    let reader: Box<dyn BufRead> = if gz {
-        Box::new(BufReader::new(MultiGzDecoder::new(reader)))
-    } else {
-        Box::new(reader)
-    };
-    let bad = |line: usize, message: String| {
-        Error::Invalid(format!("{}: line {line}: {message}", origin.display()))
-    };
-    let mut rows = Vec::new();
-    let mut old: Option<bool> = None;
-    let mut firings = Firings::default();
-    for (i, line) in bounded_lines(reader).enumerate() {
-        let line = line.map_err(|e| Error::io(origin, e))?;
-        let n = i + 1;
-        if n == 1 {
-            old = match line.trim_end() {
-                HEADER => Some(false),
-                OLD_HEADER => Some(true),
-                _ => return Err(bad(n, format!("expected the header `{HEADER}`"))),
-            };
-            continue;
-        }
-        if line.is_empty() {
-            continue;
-        }
+    LabelRows::new(input, origin)?.collect()
+}
+
+/// The rows of a labels file read one at a time, in file order (memory does not grow
+/// with the file): the reader of [`read_labels`]. After an error it ends.
+pub struct LabelRows<'a> {
+    lines: std::iter::Enumerate<Box<dyn Iterator<Item = std::io::Result<String>> + 'a>>,
+    origin: std::path::PathBuf,
+    old: bool,
+    firings: Firings,
+    done: bool,
+}
+
+impl<'a> LabelRows<'a> {
+    /// Starts reading `input` (gzip-compressed or plain CSV): checks the header line.
+    pub fn new<R: Read + 'a>(input: R, origin: &Path) -> Result<Self> {
+        let mut reader = BufReader::new(input);
+        let gz = reader
+            .fill_buf()
+            .map_err(|e| Error::io(origin, e))?
+            .starts_with(&[0x1f, 0x8b]);
+        let reader: Box<dyn BufRead + 'a> = if gz {
+            Box::new(BufReader::new(MultiGzDecoder::new(reader)))
+        } else {
+            Box::new(reader)
+        };
+        let lines: Box<dyn Iterator<Item = std::io::Result<String>> + 'a> =
+            Box::new(bounded_lines(reader));
+        let mut rows = LabelRows {
+            lines: lines.enumerate(),
+            origin: origin.to_path_buf(),
+            old: false,
+            firings: Firings::default(),
+            done: false,
+        };
+        rows.old = match rows.lines.next() {
+            None => return Err(rows.bad(1, format!("empty file: expected the header `{HEADER}`"))),
+            Some((_, line)) => match line.map_err(|e| Error::io(origin, e))?.trim_end() {
+                HEADER => false,
+                OLD_HEADER => true,
+                _ => return Err(rows.bad(1, format!("expected the header `{HEADER}`"))),
+            },
+        };
+        Ok(rows)
+    }
+
+    fn bad(&self, line: usize, message: String) -> Error {
+        Error::Invalid(format!("{}: line {line}: {message}", self.origin.display()))
+    }
+
+    fn row(&mut self, n: usize, line: &str) -> Result<LabelRow> {
         let fields: Vec<&str> = line.trim_end().split(',').collect();
-        let width = if old == Some(true) { 5 } else { 4 };
+        let width = if self.old { 5 } else { 4 };
         if fields.len() != width {
-            return Err(bad(
+            return Err(self.bad(
                 n,
                 format!("expected {width} fields, found {}", fields.len()),
             ));
@@ -218,7 +239,8 @@ pub fn read_labels<R: Read>(input: R, origin: &Path) -> Result<Vec<LabelRow>> {
         fn num<T: std::str::FromStr>(s: &str) -> Option<T> {
             s.parse().ok()
         }
-        let row = if old == Some(true) {
+        let firings = &mut self.firings;
+        if self.old {
             (|| {
                 let frame = num(fields[0])?;
                 let packet = num(fields[1])?;
@@ -240,16 +262,33 @@ pub fn read_labels<R: Read>(input: R, origin: &Path) -> Result<Vec<LabelRow>> {
                 })
             })()
         }
-        .ok_or_else(|| bad(n, format!("invalid row `{line}`")))?;
-        rows.push(row);
+        .ok_or_else(|| self.bad(n, format!("invalid row `{line}`")))
     }
-    if old.is_none() {
-        return Err(bad(
-            1,
-            format!("empty file: expected the header `{HEADER}`"),
-        ));
+}
+
+impl Iterator for LabelRows<'_> {
+    type Item = Result<LabelRow>;
+    fn next(&mut self) -> Option<Result<LabelRow>> {
+        if self.done {
+            return None;
+        }
+        loop {
+            let (i, line) = self.lines.next()?;
+            let line = match line {
+                Ok(l) => l,
+                Err(e) => {
+                    self.done = true;
+                    return Some(Err(Error::io(&self.origin, e)));
+                }
+            };
+            if line.is_empty() {
+                continue;
+            }
+            let row = self.row(i + 1, &line);
+            self.done = row.is_err();
+            return Some(row);
+        }
     }
-    Ok(rows)
 }
 
 /// Reads a labels file from disk.

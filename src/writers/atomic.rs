@@ -85,6 +85,12 @@ pub struct AtomicFile {
 impl AtomicFile {
     /// Starts writing `path`, refusing to overwrite any of `protected_inputs`.
     pub fn create(path: &Path, protected_inputs: &[&Path]) -> Result<Self> {
+        Self::with_buffer(path, protected_inputs, BUFFER_BYTES)
+    }
+
+    /// [`AtomicFile::create`] with a write buffer of `bytes` (files written side by
+    /// side, as a sweep's cells, each keep one).
+    pub fn with_buffer(path: &Path, protected_inputs: &[&Path], bytes: usize) -> Result<Self> {
         refuse_inputs(path, protected_inputs)?;
         refuse_special(path)?;
         let tmp = crate::signals::critical(|g| {
@@ -94,7 +100,7 @@ impl AtomicFile {
         })?;
         Ok(AtomicFile {
             tmp_path: tmp.path().to_path_buf(),
-            out: Some(BufWriter::with_capacity(BUFFER_BYTES, tmp)),
+            out: Some(BufWriter::with_capacity(bytes, tmp)),
             path: path.to_path_buf(),
         })
     }
@@ -119,6 +125,19 @@ impl AtomicFile {
         tmp.persist(&self.path)
             .map_err(|e| Error::io(&self.path, e.error))?;
         Ok(())
+    }
+}
+
+/// Streams bytes into the file (errors do not name it: see [`AtomicFile::write_all`]).
+impl Write for AtomicFile {
+    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+        self.out
+            .as_mut()
+            .ok_or_else(|| std::io::Error::other("written after commit"))?
+            .write(bytes)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.out.as_mut().map_or(Ok(()), Write::flush)
     }
 }
 

@@ -656,6 +656,11 @@ pub struct Manifest {
     pub settings: serde_json::Value,
     /// The files written (a sweep's cells are named by pattern instead).
     pub files: Vec<String>,
+    /// Earlier plans this folder's results grew from, oldest first (a sweep given new
+    /// values or seeds reuses its finished cells: each entry holds the earlier varied
+    /// values and seeds); absent when none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub growth: Vec<serde_json::Value>,
 }
 
 /// A refused output folder: it holds another run's results (without `--force`) or files
@@ -682,7 +687,18 @@ pub fn write_manifest(
     dir: &Path,
     command: &str,
     settings: &serde_json::Value,
+    files: Vec<String>,
+) -> Result<()> {
+    write_manifest_grown(dir, command, settings, files, Vec::new())
+}
+
+/// [`write_manifest`] of results that grew from earlier plans ([`Manifest::growth`]).
+pub fn write_manifest_grown(
+    dir: &Path,
+    command: &str,
+    settings: &serde_json::Value,
     mut files: Vec<String>,
+    growth: Vec<serde_json::Value>,
 ) -> Result<()> {
     files.sort();
     files.dedup();
@@ -692,6 +708,7 @@ pub fn write_manifest(
         command: command.into(),
         settings: settings.clone(),
         files,
+        growth,
     };
     let mut bytes = serde_json::to_vec_pretty(&manifest)
         .map_err(|e| Error::Invalid(format!("{}: {e}", dir.join(MANIFEST).display())))?;
@@ -729,8 +746,12 @@ fn list_files(dir: &Path, prefix: &str, owns: &dyn Fn(&str) -> bool, out: &mut V
             }
             list_files(&e.path(), &format!("{rel}/"), owns, out);
         } else if temporary_of(&name)
-            .is_some_and(|f| f == MANIFEST || owns(&format!("{prefix}{f}")))
+            .is_some_and(|f| f == MANIFEST || owns(&format!("{prefix}{f}")) || owns(&rel))
         {
+            // A temporary file is a leftover when its target is ours or it proves by
+            // its own content that we wrote it (a streamed file killed before its
+            // target first existed: `unlisted` reads it); no name pattern of ours ends
+            // in `.tmp`.
             continue;
         } else {
             out.push(rel);

@@ -323,6 +323,37 @@ fn fuzz_labels_reader() {
     });
 }
 
+#[test]
+fn fuzz_dataset_label_readers() {
+    // SemanticKITTI .label, nuScenes-lidarseg and nuScenes-panoptic (.npz) seeds written
+    // with NumPy (`tofile`, `savez_compressed`, `savez`): every reader on every input, with
+    // the point count the file implies and a wrong one.
+    use lidar_noise::cloud::labels::{parse, LabelFormat};
+    fuzz("dataset-labels", &[], |bytes| {
+        for (format, name, points) in [
+            (LabelFormat::SemanticKitti, "fuzzed.label", bytes.len() / 4),
+            (
+                LabelFormat::NuScenesLidarseg,
+                "fuzzed_lidarseg.bin",
+                bytes.len(),
+            ),
+            (LabelFormat::NuScenesPanoptic, "fuzzed_panoptic.npz", 6),
+            (LabelFormat::NuScenesPanoptic, "fuzzed_panoptic.npz", 3),
+        ] {
+            match parse(bytes, Path::new(name), format, points) {
+                Ok(l) => {
+                    let t = l.truth();
+                    if t.ground.len() != points || t.objects.len() != points {
+                        return Err(format!("{name}: truth of another length"));
+                    }
+                }
+                Err(e) => names(&e, name)?,
+            }
+        }
+        Ok(())
+    });
+}
+
 /// Reads `bytes` as the point cloud `name`, by its name and by each `formats` forced, with
 /// a 32-laser sensor (so the ring check runs too): `Ok` with as many points as it says, or
 /// an error naming the file.
@@ -346,7 +377,25 @@ fn check_cloud(
                     c.info.points
                 ))
             }
-            Ok(_) => {}
+            // What was read becomes HDL-32E returns, as `run` does with a scan.
+            Ok(c) => {
+                use lidar_noise::cloud::returns::{to_returns, ReturnsOptions};
+                let options = ReturnsOptions {
+                    intensity_scale: c.info.intensity_scale,
+                    ..ReturnsOptions::default()
+                };
+                match to_returns(&c.points, &lidar_noise::sensor::HDL32E, &options, name) {
+                    Ok(r) if r.returns.len() != c.points.len() => {
+                        return Err(format!(
+                            "{} returns of {} points",
+                            r.returns.len(),
+                            c.points.len()
+                        ))
+                    }
+                    Ok(_) => {}
+                    Err(e) => names(&e, name)?,
+                }
+            }
             Err(e) => names(&e, name)?,
         }
     }

@@ -547,6 +547,14 @@ fn sensor_seeds_are_the_packets_they_name() {
         ("vlp16-dual.bin", "VLP-16", ReturnMode::Dual),
         ("vlp16-last.bin", "VLP-16", ReturnMode::Last),
         ("vlp16-strongest.bin", "VLP-16", ReturnMode::Strongest),
+        ("vlp32c-strongest.bin", "VLP-32C", ReturnMode::Strongest),
+        ("vlp32c-dual.bin", "VLP-32C", ReturnMode::Dual),
+        (
+            "hdl64e-s2-strongest.bin",
+            "HDL-64E S2",
+            ReturnMode::Strongest,
+        ),
+        ("hdl64e-s3-dual.bin", "HDL-64E S3", ReturnMode::Dual),
     ];
     for (name, model, mode) in expected {
         let bytes = std::fs::read(files("corpus", "sensor")[0].with_file_name(name)).unwrap();

@@ -19,36 +19,12 @@ fn frames_run(path: &Path, options: &DecoderOptions, range: std::ops::RangeInclu
         .count() as u64
 }
 
-/// Writes the classic pcap `src` repeated `n` times, record times shifted so that each
-/// copy follows the last.
-fn repeated(src: &Path, n: u32, dst: &Path) {
-    let data = std::fs::read(src).unwrap();
-    let (header, body) = data.split_at(24);
-    let mut records = Vec::new();
-    let mut at = 0;
-    while at + 16 <= body.len() {
-        let len = u32::from_le_bytes(body[at + 8..at + 12].try_into().unwrap()) as usize;
-        records.push(&body[at..at + 16 + len]);
-        at += 16 + len;
-    }
-    let secs = |r: &[u8]| u32::from_le_bytes(r[..4].try_into().unwrap());
-    let span = secs(records[records.len() - 1]) - secs(records[0]) + 1;
-    let mut out = header.to_vec();
-    for k in 0..n {
-        for r in &records {
-            out.extend_from_slice(&(secs(r) + k * span).to_le_bytes());
-            out.extend_from_slice(&r[4..]);
-        }
-    }
-    std::fs::write(dst, out).unwrap();
-}
-
 #[test]
 fn the_total_is_the_frames_processed() {
     let crossroad = common::crossroad();
     let dir = tempfile::tempdir().unwrap();
     let long = dir.path().join("long.pcap");
-    repeated(&crossroad, 5, &long);
+    common::repeated(&crossroad, 5, &long);
     let partial = DecoderOptions {
         keep_partial: true,
         ..DecoderOptions::default()
@@ -127,7 +103,7 @@ fn the_bars_show_their_totals_in_a_terminal() {
     let dir = tempfile::tempdir().unwrap();
     let long = dir.path().join("long.pcap");
     // 30 copies of the fixture: 60 full frames (the partial one is the last copy's).
-    repeated(&common::crossroad(), 30, &long);
+    common::repeated(&common::crossroad(), 30, &long);
     let total = frames_total(&long, &DecoderOptions::default(), &(0..=u32::MAX)).unwrap();
     let exe = assert_cmd::cargo::cargo_bin("lidar-noise");
     for (what, args) in [

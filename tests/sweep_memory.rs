@@ -64,30 +64,6 @@ static ALLOCATOR: Counting = Counting;
 /// Held by each test: the counts are process-wide.
 static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
-/// Writes the classic pcap `src` repeated `n` times, record times shifted so that each
-/// copy follows the last (payloads unchanged: frames repeat).
-fn repeated(src: &Path, n: u32, dst: &Path) {
-    let data = std::fs::read(src).unwrap();
-    let (header, body) = data.split_at(24);
-    let mut records = Vec::new();
-    let mut at = 0;
-    while at + 16 <= body.len() {
-        let len = u32::from_le_bytes(body[at + 8..at + 12].try_into().unwrap()) as usize;
-        records.push(&body[at..at + 16 + len]);
-        at += 16 + len;
-    }
-    let secs = |r: &[u8]| u32::from_le_bytes(r[..4].try_into().unwrap());
-    let span = secs(records[records.len() - 1]) - secs(records[0]) + 1;
-    let mut out = header.to_vec();
-    for k in 0..n {
-        for r in &records {
-            out.extend_from_slice(&(secs(r) + k * span).to_le_bytes());
-            out.extend_from_slice(&r[4..]);
-        }
-    }
-    std::fs::write(dst, out).unwrap();
-}
-
 /// Peak heap (bytes above those live at the start) of a whole sweep, tables, plots and
 /// page included, over `capture`; and the rows it wrote.
 fn sweep_peak(capture: PathBuf, labels: Option<PathBuf>, out: &Path) -> (usize, usize) {
@@ -141,7 +117,7 @@ fn sweep_memory_does_not_grow_with_the_capture() {
     let mut peaks = Vec::new();
     for n in [4, 24] {
         let capture = tmp.path().join(format!("c{n}.pcap"));
-        repeated(&crossroad, n, &capture);
+        common::repeated(&crossroad, n, &capture);
         let (peak, rows) = sweep_peak(capture, None, &tmp.path().join(format!("out{n}")));
         eprintln!("{n}x: {rows} rows, peak heap {peak} bytes");
         peaks.push((peak, rows));

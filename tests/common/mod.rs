@@ -233,3 +233,27 @@ pub fn echo_byte(power: f64, range: f32) -> u8 {
     let rho = (power / 1e-3 * 0.1 * q * q).clamp(0.0, 1.0);
     (rho * 100.0).round() as u8
 }
+
+/// Writes the classic pcap `src` repeated `n` times, record times shifted so that each
+/// copy follows the last (payloads unchanged: frames repeat).
+pub fn repeated(src: &std::path::Path, n: u32, dst: &std::path::Path) {
+    let data = std::fs::read(src).unwrap();
+    let (header, body) = data.split_at(24);
+    let mut records = Vec::new();
+    let mut at = 0;
+    while at + 16 <= body.len() {
+        let len = u32::from_le_bytes(body[at + 8..at + 12].try_into().unwrap()) as usize;
+        records.push(&body[at..at + 16 + len]);
+        at += 16 + len;
+    }
+    let secs = |r: &[u8]| u32::from_le_bytes(r[..4].try_into().unwrap());
+    let span = secs(records[records.len() - 1]) - secs(records[0]) + 1;
+    let mut out = header.to_vec();
+    for k in 0..n {
+        for r in &records {
+            out.extend_from_slice(&(secs(r) + k * span).to_le_bytes());
+            out.extend_from_slice(&r[4..]);
+        }
+    }
+    std::fs::write(dst, out).unwrap();
+}

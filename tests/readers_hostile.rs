@@ -521,4 +521,15 @@ fn alternating_azimuths_are_reported_as_short_frames() {
         )) && err.contains("azimuths jump back"),
         "{err}"
     );
+    // `info` says it too; the reproducer kept in fuzz/findings/capture/ is such a capture.
+    let kept = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fuzz/findings/capture/alternating-azimuths.pcap");
+    for capture in [path.as_path(), kept.as_path()] {
+        let o = bin().arg("info").arg(capture).output().unwrap();
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            o.status.success() && text.contains("short frames"),
+            "{text}"
+        );
+    }
 }

@@ -122,6 +122,14 @@ fn write_text(out: &mut impl Write, path: &std::path::Path, s: &CaptureSummary) 
             crate::hdl32e::frames::DUPLICATE_WINDOW
         )?;
     }
+    if s.short_frames > 0 {
+        writeln!(
+            out,
+            "  short frames  {} between the first and the last cover under nine tenths of a \
+             turn: the azimuths jump back (interleaved or reordered packets, two sensors)",
+            s.short_frames
+        )?;
+    }
     match s.capture.truncated_at {
         Some(offset) => writeln!(out, "  truncated     at byte offset {offset}")?,
         None => writeln!(out, "  truncated     no")?,

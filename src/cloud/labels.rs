@@ -222,17 +222,7 @@ pub fn read_labels_file(
                  files in _lidarseg.bin, nuScenes-panoptic files in .npz",
             )),
         };
-    let file = std::fs::File::open(path).map_err(|e| crate::error::Error::io(path, e))?;
-    let mut bytes = Vec::new();
-    file.take(MAX_LABEL_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(|e| crate::error::Error::io(path, e))?;
-    if bytes.len() as u64 > MAX_LABEL_BYTES {
-        return Err(invalid(
-            path,
-            format!("larger than {MAX_LABEL_BYTES} bytes: not a label file of one scan"),
-        ));
-    }
+    let bytes = super::read_at_most(path, MAX_LABEL_BYTES, "not a label file of one scan")?;
     parse(&bytes, path, format, points)
 }
 

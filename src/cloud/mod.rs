@@ -212,22 +212,29 @@ pub fn detect(path: &Path, head: &[u8]) -> Result<Format> {
 
 /// Reads the whole of `path`, refusing more than [`MAX_CLOUD_BYTES`].
 pub fn read_cloud_bytes(path: &Path) -> Result<Vec<u8>> {
+    read_at_most(
+        path,
+        MAX_CLOUD_BYTES,
+        "more than a point-cloud file read here may be",
+    )
+}
+
+/// The bytes of `path`, refused (naming the file, the bound and `what` it means) when it
+/// holds more than `max` bytes, which are never read past.
+pub(crate) fn read_at_most(path: &Path, max: u64, what: &str) -> Result<Vec<u8>> {
     use std::io::Read;
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     // The real size (when the file has one) sizes the buffer once: a 2 MB scan is read in
     // one allocation and one copy.
     let hint = file.metadata().map(|m| m.len()).unwrap_or(0);
-    let mut bytes = Vec::with_capacity(hint.min(MAX_CLOUD_BYTES) as usize + 1);
-    file.take(MAX_CLOUD_BYTES + 1)
+    let mut bytes = Vec::with_capacity(hint.min(max) as usize + 1);
+    file.take(max + 1)
         .read_to_end(&mut bytes)
         .map_err(|e| Error::io(path, e))?;
-    if bytes.len() as u64 > MAX_CLOUD_BYTES {
+    if bytes.len() as u64 > max {
         return Err(invalid(
             path,
-            format!(
-                "larger than {} MiB, more than a point-cloud file read here may be",
-                MAX_CLOUD_BYTES >> 20
-            ),
+            format!("larger than {} MiB, {what}", max >> 20),
         ));
     }
     Ok(bytes)

@@ -597,47 +597,36 @@ fn run_capture(
         }
     }
     progress.finish_and_clear();
-    let mut reader = match reader {
-        Source::Capture(r) => *r,
+    // Messages name the capture by the path as given, as `convert`'s do; the outputs name
+    // it by `source`, its file name, so that they do not depend on the working folder.
+    let shown = capture.map_or_else(|| source.to_string(), super::capture_shown);
+    let capture_summary;
+    let source_summary = match &mut reader {
+        Source::Capture(r) => {
+            capture_summary = r.summary();
+            super::warn_truncation(global, Path::new(&shown), &capture_summary);
+            super::warn_capture(
+                global,
+                Path::new(&shown),
+                &capture_summary,
+                plan.config.sensor.intensity == crate::config::IntensityMode::Reflectivity,
+            );
+            if spool.frames == 0 {
+                return Err(no_frame_error(&shown, &plan.frames, r));
+            }
+            SourceSummary::Capture(&capture_summary)
+        }
         Source::Cloud(r) => {
-            let shown = capture.map_or_else(|| source.to_string(), super::capture_shown);
             if spool.frames == 0 {
                 anyhow::bail!(
                     "{shown}: no frame to process in {}: a point-cloud scan is one frame, 0",
                     crate::options::frames_phrase(&plan.frames)
                 );
             }
-            let (summary, _) = documents(
-                plan,
-                source,
-                SourceSummary::Cloud(r.summary()),
-                spool.totals.clone(),
-            );
-            let frames = spool.frames;
-            spool.finish(&summary, dir, inputs)?;
-            return Ok(report_line(&shown, frames, &summary.totals));
+            SourceSummary::Cloud(r.summary())
         }
     };
-    let capture_summary = reader.summary();
-    // Messages name the capture by the path as given, as `convert`'s do; the outputs name
-    // it by `source`, its file name, so that they do not depend on the working folder.
-    let shown = capture.map_or_else(|| source.to_string(), super::capture_shown);
-    super::warn_truncation(global, Path::new(&shown), &capture_summary);
-    super::warn_capture(
-        global,
-        Path::new(&shown),
-        &capture_summary,
-        plan.config.sensor.intensity == crate::config::IntensityMode::Reflectivity,
-    );
-    if spool.frames == 0 {
-        return Err(no_frame_error(&shown, &plan.frames, &mut reader));
-    }
-    let (summary, _) = documents(
-        plan,
-        source,
-        SourceSummary::Capture(&capture_summary),
-        spool.totals.clone(),
-    );
+    let (summary, _) = documents(plan, source, source_summary, spool.totals.clone());
     let frames = spool.frames;
     if let Some(p) = pcap {
         let name = p.file_name();

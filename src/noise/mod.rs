@@ -545,38 +545,13 @@ impl NoisyFrame {
             moved,
             ..
         } = self;
-        // The rule in place on the recorded bytes, free of branches so it vectorises.
         let existing = moved.intensity.as_deref();
-        // The rule's byte of return i whose recorded byte is `v`, or `cur` unless kept.
-        let byte = |v: u8, p: f64, p0: f64, fate: Fate, cur: u8| {
-            // A zero ideal power (reflectance floor 0 and byte 0) has byte 0 anyway.
-            let f = if p0 > 0.0 { g * (p / p0) } else { g };
-            let new = round_byte(f64::from(v) * f);
-            if fate == Fate::Kept {
-                new
-            } else {
-                cur
-            }
-        };
-        let mut any = false;
-        let parts = power[..n].iter().zip(&ideal[..n]).zip(&fate[..n]);
-        match existing {
-            // One loop per case, so neither tests an `Option` per return.
-            None => {
-                for (v, ((&p, &p0), &fate)) in col[..n].iter_mut().zip(parts) {
-                    let out = byte(*v, p, p0, fate, *v);
-                    any |= out != *v;
-                    *v = out;
-                }
-            }
-            Some(c) => {
-                for ((v, &cur), ((&p, &p0), &fate)) in col[..n].iter_mut().zip(c).zip(parts) {
-                    let out = byte(*v, p, p0, fate, cur);
-                    any |= out != cur;
-                    *v = out;
-                }
-            }
-        }
+        let any = intensity_bytes(
+            &mut col[..n],
+            existing.map(|c| &c[..n.min(c.len())]),
+            (&power[..n], &ideal[..n], &fate[..n]),
+            g,
+        );
         if !any {
             return;
         }
@@ -761,12 +736,91 @@ impl<'a> View<'a> {
 /// `x` rounded half up and clamped to a byte, the value of
 /// [`sensor::scale_byte`]`(1, x)` (`round(x).clamp(0, 255)`) without its branch: the cast
 /// saturates (a negative x gives 0, NaN gives 0 and then x - t is NaN, so no step up) and
-/// `x - t` is exact for t <= 255 <= x or 0 <= x - t < 1.
+/// `x - t` is exact for t <= 255 <= x or 0 <= x - t < 1. The clamp comes first, in
+/// floating point, so the conversion is a plain one that vectorises.
 #[inline(always)]
 fn round_byte(x: f64) -> u8 {
-    let t = (x as u32).min(255);
-    let up = u32::from(x - f64::from(t) >= 0.5);
+    // max(NaN, 0) is 0, so `c` is never NaN (`clamp` would pass a NaN through).
+    #[allow(clippy::manual_clamp)]
+    let c = x.max(0.0).min(255.0);
+    // SAFETY: c is finite and in [0, 255], so its integer part fits an i32.
+    let t = unsafe { c.to_int_unchecked::<i32>() };
+    let up = i32::from(x - f64::from(t) >= 0.5);
     (t + up).min(255) as u8
+}
+
+/// The intensity rule on recorded bytes `bytes` in place (module documentation,
+/// "Intensity"): each kept return's byte times g P / P_i, rounded once and clamped;
+/// other returns get their current byte (`current`, else their recorded one). True when
+/// some byte differs from the current one. Free of branches so it vectorises, with AVX2
+/// where the processor has it (see [`transmission::wide`]).
+fn intensity_bytes(
+    bytes: &mut [u8],
+    current: Option<&[u8]>,
+    columns: (&[f64], &[f64], &[Fate]),
+    g: f64,
+) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2 (checked on the line above).
+            return unsafe { intensity_bytes_avx2(bytes, current, columns, g) };
+        }
+    }
+    intensity_bytes_body(bytes, current, columns, g)
+}
+
+/// [`intensity_bytes`] compiled with AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn intensity_bytes_avx2(
+    bytes: &mut [u8],
+    current: Option<&[u8]>,
+    columns: (&[f64], &[f64], &[Fate]),
+    g: f64,
+) -> bool {
+    intensity_bytes_body(bytes, current, columns, g)
+}
+
+/// The loops of [`intensity_bytes`].
+#[inline(always)]
+fn intensity_bytes_body(
+    bytes: &mut [u8],
+    current: Option<&[u8]>,
+    (power, ideal, fate): (&[f64], &[f64], &[Fate]),
+    g: f64,
+) -> bool {
+    // The rule's byte of a return whose recorded byte is `v`, or `cur` unless kept.
+    let byte = |v: u8, p: f64, p0: f64, fate: Fate, cur: u8| {
+        // A zero ideal power (reflectance floor 0 and byte 0) has byte 0 anyway.
+        let f = if p0 > 0.0 { g * (p / p0) } else { g };
+        let new = round_byte(f64::from(v) * f);
+        if fate == Fate::Kept {
+            new
+        } else {
+            cur
+        }
+    };
+    let parts = power.iter().zip(ideal).zip(fate);
+    let mut any = false;
+    match current {
+        // One loop per case, so neither tests an `Option` per return.
+        None => {
+            for (v, ((&p, &p0), &fate)) in bytes.iter_mut().zip(parts) {
+                let out = byte(*v, p, p0, fate, *v);
+                any |= out != *v;
+                *v = out;
+            }
+        }
+        Some(c) => {
+            for ((v, &cur), ((&p, &p0), &fate)) in bytes.iter_mut().zip(c).zip(parts) {
+                let out = byte(*v, p, p0, fate, cur);
+                any |= out != cur;
+                *v = out;
+            }
+        }
+    }
+    any
 }
 
 /// `a.rem_euclid(360.0)` without the `fmod` call for the angles sensor stages produce
@@ -1009,6 +1063,74 @@ mod tests {
             }
         }
         assert_eq!(small_sin_cos(0.5), 0.5f64.sin_cos());
+    }
+
+    /// Bytes, powers, ideal powers, fates, ranges and draws.
+    type Columns = (Vec<u8>, Vec<f64>, Vec<f64>, Vec<Fate>, Vec<f32>, Vec<f64>);
+
+    /// Columns of mixed fates, powers (zero, tiny, large, NaN) and bytes, from a fixed seed.
+    fn mixed_columns(n: usize) -> Columns {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let fates = [
+            Fate::Kept,
+            Fate::Occluded,
+            Fate::BelowPower,
+            Fate::Replaced,
+            Fate::Added,
+        ];
+        let mut cols = (vec![], vec![], vec![], vec![], vec![], vec![]);
+        for i in 0..n {
+            cols.0.push(rng.random::<u8>());
+            let p = match i % 7 {
+                0 => 0.0,
+                1 => f64::NAN,
+                2 => 1e-300,
+                _ => rng.random::<f64>() * 3.0,
+            };
+            cols.1.push(p);
+            cols.2.push(if i % 11 == 0 {
+                0.0
+            } else {
+                rng.random::<f64>() * 2.0
+            });
+            cols.3.push(fates[rng.random_range(0..fates.len())]);
+            cols.4.push(rng.random::<f32>() * 120.0);
+            cols.5.push(rng.random::<f64>() * 2.0 - 1.0);
+        }
+        cols
+    }
+
+    #[test]
+    fn the_wide_intensity_loop_gives_the_plain_loops_bits() {
+        // The AVX2 build (where this machine has it) against the loop compiled for the
+        // baseline: the same bytes, with and without current bytes.
+        let (bytes, power, ideal, fate, _, _) = mixed_columns(10_007);
+        let current: Vec<u8> = bytes.iter().map(|b| b.wrapping_mul(3)).collect();
+        for cur in [None, Some(&current[..])] {
+            for g in [1.0, 0.37, 2.5] {
+                let (mut a, mut b) = (bytes.clone(), bytes.clone());
+                let any_a = intensity_bytes(&mut a, cur, (&power, &ideal, &fate), g);
+                let any_b = intensity_bytes_body(&mut b, cur, (&power, &ideal, &fate), g);
+                assert_eq!((a, any_a), (b, any_b));
+            }
+        }
+    }
+
+    #[test]
+    fn the_wide_attenuation_gives_the_plain_loops_bits() {
+        let (_, power, _, fate, range, _) = mixed_columns(10_007);
+        let mut wide = power.clone();
+        transmission::attenuate(&mut wide, &range, &fate, 0.013);
+        for i in 0..power.len() {
+            let t = transmission::exp_nonpositive(-0.013 * f64::from(range[i]));
+            let want = if fate[i].is_alive() {
+                power[i] * t
+            } else {
+                power[i]
+            };
+            assert_eq!(wide[i].to_bits(), want.to_bits(), "{i}");
+        }
     }
 
     #[test]

@@ -147,8 +147,17 @@ impl Slots {
             _ if has(ReturnKind::Last) => SlotMode::Last,
             _ => SlotMode::Strongest,
         };
-        let mut firings: Vec<Firing> = Vec::new();
-        let mut occupants: Vec<[u32; 2]> = Vec::new();
+        // Room for the firings a capture's packets can hold (12 blocks each, at most one
+        // firing per return), so the tables are not copied as they grow.
+        let expected = if lo <= hi {
+            ((hi - lo) as usize + 1)
+                .saturating_mul(12)
+                .min(returns.len())
+        } else {
+            0
+        };
+        let mut firings: Vec<Firing> = Vec::with_capacity(expected);
+        let mut occupants: Vec<[u32; 2]> = Vec::with_capacity(expected * LASERS);
         let mut slot_of = Vec::with_capacity(returns.len());
         let mut index = FiringIndex::new(lo, hi, returns.len());
         let mut last_key = None;

@@ -316,38 +316,15 @@ impl ReturnColumns {
     }
 }
 
-/// Every return of a noisy frame as `run --keep-dropped` writes it: the survivor (noisy)
-/// where the sensor reports it, the clean return where it was dropped. Holds the
-/// survivors and, per return, its place among them, rather than a patched copy of all
-/// returns (a copy of the whole frame per call, 48 bytes a return).
-struct Reported<'a> {
-    noisy: &'a NoisyFrame,
-    survivors: Vec<Return>,
-    /// Index into `survivors` of each return the sensor reports (unused for the others).
-    at: Vec<u32>,
-}
-
-impl<'a> Reported<'a> {
-    fn of(noisy: &'a NoisyFrame) -> Self {
-        let survivors = noisy.survivors();
-        let mut at = vec![0u32; noisy.len()];
-        for (s, &k) in noisy.kept_indices().iter().enumerate() {
-            at[k as usize] = s as u32;
-        }
-        Reported {
-            noisy,
-            survivors,
-            at,
-        }
-    }
-
-    /// Return `i` as reported (noisy) or as recorded (dropped).
-    fn get(&self, i: usize) -> &Return {
-        if self.noisy.fate[i].is_alive() {
-            &self.survivors[self.at[i] as usize]
-        } else {
-            &self.noisy.clean[i]
-        }
+/// Return `i` of a noisy frame as `run --keep-dropped` writes it: noisy where the sensor
+/// reports it (the library's `noisy_return`, what `survivors` gives for it), as recorded
+/// where it was dropped. Per row, rather than the survivors collected first and a map
+/// to them: no copy of the frame's returns a call.
+fn reported(noisy: &NoisyFrame, i: usize) -> Return {
+    if noisy.fate[i].is_alive() {
+        noisy.noisy_return(i)
+    } else {
+        noisy.clean[i]
     }
 }
 
@@ -416,7 +393,6 @@ impl RecordLayout {
     /// The records of `rows` (indices into the noisy frame), written straight into the
     /// bytes numpy will view as the structured array (no column copies).
     fn records(&self, noisy: &NoisyFrame, rows: &[u32]) -> Vec<u8> {
-        let all = Reported::of(noisy);
         if self.itemsize == ALIGNED_ITEMSIZE && self.at == ALIGNED_AT {
             // numpy's aligned layout of APPLIED_DTYPE (what the package passes): offsets
             // known at compile time, each record built on the stack and appended, where
@@ -424,14 +400,14 @@ impl RecordLayout {
             let mut buf = Vec::with_capacity(rows.len() * ALIGNED_ITEMSIZE);
             for &i in rows {
                 let mut rec = [0u8; ALIGNED_ITEMSIZE];
-                fill_record(&mut rec, &ALIGNED_AT, noisy, &all, i as usize);
+                fill_record(&mut rec, &ALIGNED_AT, noisy, i as usize);
                 buf.extend_from_slice(&rec);
             }
             return buf;
         }
         let mut buf = vec![0u8; rows.len() * self.itemsize];
         for (rec, &i) in buf.chunks_exact_mut(self.itemsize).zip(rows) {
-            fill_record(rec, &self.at, noisy, &all, i as usize);
+            fill_record(rec, &self.at, noisy, i as usize);
         }
         buf
     }
@@ -446,8 +422,8 @@ const ALIGNED_ITEMSIZE: usize = 64;
 
 /// Writes the record of return `i` into `rec`, field j at byte `at[j]` (little-endian).
 #[inline(always)]
-fn fill_record(rec: &mut [u8], at: &[usize; 19], noisy: &NoisyFrame, all: &Reported, i: usize) {
-    let r = all.get(i);
+fn fill_record(rec: &mut [u8], at: &[usize; 19], noisy: &NoisyFrame, i: usize) {
+    let r = reported(noisy, i);
     let mut put = |j: usize, b: &[u8]| rec[at[j]..at[j] + b.len()].copy_from_slice(b);
     put(0, &r.x.to_le_bytes());
     put(1, &r.y.to_le_bytes());
@@ -485,10 +461,10 @@ struct Applied {
 impl Applied {
     /// Rows in `rows` order (indices into the noisy frame).
     fn of(noisy: &NoisyFrame, rows: &[u32]) -> Self {
-        let all = Reported::of(noisy);
+        let all: Vec<Return> = rows.iter().map(|&i| reported(noisy, i as usize)).collect();
         let clean_range = |i: usize| clean_range(noisy, i);
         Applied {
-            returns: ReturnColumns::of(rows.iter().map(|&i| all.get(i as usize))),
+            returns: ReturnColumns::of(all.iter()),
             range_clean: rows.iter().map(|&i| clean_range(i as usize)).collect(),
             power: rows.iter().map(|&i| noisy.power[i as usize]).collect(),
             fate: rows.iter().map(|&i| noisy.fate[i as usize] as u8).collect(),

@@ -282,6 +282,7 @@ def main():
         pts = load_scan(args.scan)
     else:
         sys.path.insert(0, HERE)
+        sys.dont_write_bytecode = True  # no __pycache__ left in scripts/
         from python_bench import synthetic_scan
 
         pts = synthetic_scan()

@@ -178,7 +178,8 @@ def _columns(points: Any) -> "tuple[str, Dict[str, np.ndarray]]":
         for i, n in enumerate(("x", "y", "z", "intensity"))
     }
     if points.shape[1] == 5:
-        cols["ring"] = _whole_rings(points[:, 4])
+        # Checked (whole, in range, by point index) by the compiled side as it reads it.
+        cols["ring"] = points[:, 4].astype(np.float32, copy=False)
     return "points", {n: _strided_ok(c) for n, c in cols.items()}
 
 

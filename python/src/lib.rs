@@ -17,12 +17,22 @@ use lidar_noise::error::Error;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::noise::{stage_rng, stage_tags, NoiseChain, NoisyFrame};
 use lidar_noise::pipeline::Pipeline;
+use numpy::ndarray::Zip;
 use numpy::{Element, PyArray1, PyReadonlyArray1};
 use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
+
+/// The extension's allocator. `apply` allocates a few megabytes a call (the returns, the
+/// noisy frame, the records); glibc's malloc hands blocks that large back to the kernel
+/// when freed, so every call faulted its pages in again: a third of the time of an
+/// `apply` without noise stages on a 35k-point scan went to page faults (perf). mimalloc
+/// keeps freed memory for the next call. Only this module's Rust allocations use it;
+/// Python and numpy keep their own.
+#[global_allocator]
+static ALLOC: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 /// A library error as the Python exception the package documents.
 fn py_err(e: Error) -> PyErr {
@@ -149,6 +159,35 @@ fn returns_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<Return>> {
     Ok(out)
 }
 
+/// A ring column as given: whole numbers as float32 (the fifth column of an (N, 5) array,
+/// read in place and checked here, where numpy needed four passes and two temporary
+/// arrays) or int64 (a structured array's field, checked by the Python side).
+enum RingColumn<'py> {
+    Float(PyReadonlyArray1<'py, f32>),
+    Int(PyReadonlyArray1<'py, i64>),
+}
+
+/// Ring `v` of point `i` as the library's ring number. Whole and in range is one
+/// round trip through an integer (NaN and infinities do not come back equal), without
+/// the libm call `fract` makes on the wheel's baseline x86-64.
+fn ring_of(i: usize, v: f32) -> PyResult<u16> {
+    let out_of_range = || {
+        PyValueError::new_err(format!(
+            "points: point {i} (0-based): ring {v} is out of range"
+        ))
+    };
+    if v.abs() > 65536.0 && v.is_finite() {
+        return Err(out_of_range());
+    }
+    let k = v as i32;
+    if k as f32 != v {
+        return Err(PyValueError::new_err(format!(
+            "points: point {i} (0-based): ring {v} is not a whole number"
+        )));
+    }
+    u16::try_from(k).map_err(|_| out_of_range())
+}
+
 /// Plain points (x y z intensity, optional ring) of a column dictionary.
 fn cloud_points_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<CloudPoint>> {
     let x = column::<f32>(cols, "x", None)?;
@@ -157,7 +196,10 @@ fn cloud_points_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<CloudPoint>> {
     let z = column::<f32>(cols, "z", Some(n))?;
     let intensity = column::<f32>(cols, "intensity", Some(n))?;
     let ring = match cols.get_item("ring")? {
-        Some(_) => Some(column::<i64>(cols, "ring", Some(n))?),
+        Some(r) if r.extract::<PyReadonlyArray1<'_, f32>>().is_ok() => {
+            Some(RingColumn::Float(column::<f32>(cols, "ring", Some(n))?))
+        }
+        Some(_) => Some(RingColumn::Int(column::<i64>(cols, "ring", Some(n))?)),
         None => None,
     };
     let (x, y, z, intensity) = (
@@ -166,26 +208,44 @@ fn cloud_points_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<CloudPoint>> {
         z.as_array(),
         intensity.as_array(),
     );
-    let ring = ring.as_ref().map(|r| r.as_array());
+    // ndarray's Zip rather than indexing or zipped iterators: the columns are strided
+    // views of the (N, 5) array, and Zip walks them with one stride each (an index per
+    // value cost a bounds check and a stride multiply, zipped iterators about 140
+    // instructions a point, callgrind). Rings are checked in a pass of their own first,
+    // so that the loop that builds the points has no early exit.
+    let point = |x, y, z, intensity, ring| CloudPoint {
+        x,
+        y,
+        z,
+        intensity,
+        ring,
+        time: None,
+    };
     let mut out = Vec::with_capacity(n);
-    for i in 0..n {
-        let ring = match &ring {
-            Some(r) => Some(u16::try_from(r[i]).map_err(|_| {
-                PyValueError::new_err(format!(
-                    "points: point {i} (0-based): ring {} is out of range",
-                    r[i]
-                ))
-            })?),
-            None => None,
-        };
-        out.push(CloudPoint {
-            x: x[i],
-            y: y[i],
-            z: z[i],
-            intensity: intensity[i],
-            ring,
-            time: None,
-        });
+    let xyzi = Zip::from(&x).and(&y).and(&z).and(&intensity);
+    match &ring {
+        None => xyzi.for_each(|&x, &y, &z, &i| out.push(point(x, y, z, i, None))),
+        Some(RingColumn::Float(r)) => {
+            let r = r.as_array();
+            if let Some(e) = r.iter().enumerate().find_map(|(i, &v)| ring_of(i, v).err()) {
+                return Err(e);
+            }
+            // Checked above: the casts below are exact.
+            xyzi.and(&r)
+                .for_each(|&x, &y, &z, &i, &r| out.push(point(x, y, z, i, Some(r as u16))));
+        }
+        Some(RingColumn::Int(r)) => {
+            let r = r.as_array();
+            for (i, &v) in r.iter().enumerate() {
+                if u16::try_from(v).is_err() {
+                    return Err(PyValueError::new_err(format!(
+                        "points: point {i} (0-based): ring {v} is out of range"
+                    )));
+                }
+            }
+            xyzi.and(&r)
+                .for_each(|&x, &y, &z, &i, &r| out.push(point(x, y, z, i, Some(r as u16))));
+        }
     }
     Ok(out)
 }
@@ -266,15 +326,16 @@ impl ReturnColumns {
     }
 }
 
-/// Every return of a noisy frame as `run --keep-dropped` writes it: the survivor (noisy)
-/// where the sensor reports it, the clean return where it was dropped.
-fn reported(noisy: &NoisyFrame) -> Vec<Return> {
-    let mut all = noisy.clean.clone();
-    let survivors = noisy.survivors();
-    for (s, &k) in noisy.kept_indices().iter().enumerate() {
-        all[k as usize] = survivors[s];
+/// Return `i` of a noisy frame as `run --keep-dropped` writes it: noisy where the sensor
+/// reports it (the library's `noisy_return`, what `survivors` gives for it), as recorded
+/// where it was dropped. Per row, rather than the survivors collected first and a map
+/// to them: no copy of the frame's returns a call.
+fn reported(noisy: &NoisyFrame, i: usize) -> Return {
+    if noisy.fate[i].is_alive() {
+        noisy.noisy_return(i)
+    } else {
+        noisy.clean[i]
     }
-    all
 }
 
 /// Range of return `i` before noise: 0 for a return a stage added.
@@ -342,35 +403,57 @@ impl RecordLayout {
     /// The records of `rows` (indices into the noisy frame), written straight into the
     /// bytes numpy will view as the structured array (no column copies).
     fn records(&self, noisy: &NoisyFrame, rows: &[u32]) -> Vec<u8> {
-        let all = reported(noisy);
+        if self.itemsize == ALIGNED_ITEMSIZE && self.at == ALIGNED_AT {
+            // numpy's aligned layout of APPLIED_DTYPE (what the package passes): offsets
+            // known at compile time, each record built on the stack and appended, where
+            // the general path zeroes the whole buffer first and computes every offset.
+            let mut buf = Vec::with_capacity(rows.len() * ALIGNED_ITEMSIZE);
+            for &i in rows {
+                let mut rec = [0u8; ALIGNED_ITEMSIZE];
+                fill_record(&mut rec, &ALIGNED_AT, noisy, i as usize);
+                buf.extend_from_slice(&rec);
+            }
+            return buf;
+        }
         let mut buf = vec![0u8; rows.len() * self.itemsize];
-        let a = &self.at;
         for (rec, &i) in buf.chunks_exact_mut(self.itemsize).zip(rows) {
-            let i = i as usize;
-            let r = &all[i];
-            let mut put = |j: usize, b: &[u8]| rec[a[j]..a[j] + b.len()].copy_from_slice(b);
-            put(0, &r.x.to_le_bytes());
-            put(1, &r.y.to_le_bytes());
-            put(2, &r.z.to_le_bytes());
-            put(3, &r.range.to_le_bytes());
-            put(4, &r.azimuth.to_le_bytes());
-            put(5, &r.elevation.to_le_bytes());
-            put(6, &r.time.to_le_bytes());
-            put(7, &r.packet.to_le_bytes());
-            put(8, &r.raw_distance.to_le_bytes());
-            put(9, &[r.intensity]);
-            put(10, &[r.laser]);
-            put(11, &[r.ring]);
-            put(12, &[r.block]);
-            put(13, &[r.kind as u8]);
-            put(14, &clean_range(noisy, i).to_le_bytes());
-            put(15, &noisy.power[i].to_le_bytes());
-            put(16, &[noisy.fate[i] as u8]);
-            put(17, &[noisy.cause[i]]);
-            put(18, &[u8::from(noisy.fate[i].is_alive())]);
+            fill_record(rec, &self.at, noisy, i as usize);
         }
         buf
     }
+}
+
+/// Offsets of [`RECORD_FIELDS`] in numpy's aligned layout of `APPLIED_DTYPE`.
+const ALIGNED_AT: [usize; 19] = [
+    0, 4, 8, 12, 16, 20, 24, 32, 36, 38, 39, 40, 41, 42, 44, 48, 56, 57, 58,
+];
+/// Size of a record in numpy's aligned layout of `APPLIED_DTYPE`.
+const ALIGNED_ITEMSIZE: usize = 64;
+
+/// Writes the record of return `i` into `rec`, field j at byte `at[j]` (little-endian).
+#[inline(always)]
+fn fill_record(rec: &mut [u8], at: &[usize; 19], noisy: &NoisyFrame, i: usize) {
+    let r = reported(noisy, i);
+    let mut put = |j: usize, b: &[u8]| rec[at[j]..at[j] + b.len()].copy_from_slice(b);
+    put(0, &r.x.to_le_bytes());
+    put(1, &r.y.to_le_bytes());
+    put(2, &r.z.to_le_bytes());
+    put(3, &r.range.to_le_bytes());
+    put(4, &r.azimuth.to_le_bytes());
+    put(5, &r.elevation.to_le_bytes());
+    put(6, &r.time.to_le_bytes());
+    put(7, &r.packet.to_le_bytes());
+    put(8, &r.raw_distance.to_le_bytes());
+    put(9, &[r.intensity]);
+    put(10, &[r.laser]);
+    put(11, &[r.ring]);
+    put(12, &[r.block]);
+    put(13, &[r.kind as u8]);
+    put(14, &clean_range(noisy, i).to_le_bytes());
+    put(15, &noisy.power[i].to_le_bytes());
+    put(16, &[noisy.fate[i] as u8]);
+    put(17, &[noisy.cause[i]]);
+    put(18, &[u8::from(noisy.fate[i].is_alive())]);
 }
 
 /// What `apply` hands back: the returns after the chain, each at its noisy position when
@@ -388,10 +471,10 @@ struct Applied {
 impl Applied {
     /// Rows in `rows` order (indices into the noisy frame).
     fn of(noisy: &NoisyFrame, rows: &[u32]) -> Self {
-        let all = reported(noisy);
+        let all: Vec<Return> = rows.iter().map(|&i| reported(noisy, i as usize)).collect();
         let clean_range = |i: usize| clean_range(noisy, i);
         Applied {
-            returns: ReturnColumns::of(rows.iter().map(|&i| &all[i as usize])),
+            returns: ReturnColumns::of(all.iter()),
             range_clean: rows.iter().map(|&i| clean_range(i as usize)).collect(),
             power: rows.iter().map(|&i| noisy.power[i as usize]).collect(),
             fate: rows.iter().map(|&i| noisy.fate[i as usize] as u8).collect(),

@@ -200,7 +200,23 @@ def test_nan_and_bad_rings_name_the_point():
     with pytest.raises(ValueError, match=r"point 7 \(0-based\): ring 32 is out of range"):
         chain.apply(pts)
     pts[7, 4] = 1.5
-    with pytest.raises(ValueError, match=r"point 7 \(0-based\): ring 1.5"):
+    with pytest.raises(ValueError, match=r"point 7 \(0-based\): ring 1.5 is not a whole number"):
+        chain.apply(pts)
+    pts[7, 4] = 3
+    pts[11, 4] = np.nan
+    with pytest.raises(ValueError, match=r"point 11 \(0-based\): ring NaN is not a whole number"):
+        chain.apply(pts)
+    pts[11, 4] = -1
+    with pytest.raises(ValueError, match=r"point 11 \(0-based\): ring -1 is out of range"):
+        chain.apply(pts)
+    pts[11, 4] = 70000
+    with pytest.raises(ValueError, match=r"point 11 \(0-based\): ring 70000 is out of range"):
+        chain.apply(pts.astype(np.float64))
+    pts[11, 4] = 3e9
+    with pytest.raises(ValueError, match=r"point 11 \(0-based\): ring 3000000000 is out of range"):
+        chain.apply(pts)
+    pts[11, 4] = np.inf
+    with pytest.raises(ValueError, match=r"point 11 \(0-based\): ring inf is not a whole number"):
         chain.apply(pts)
     ret = ln.read(FIXTURES / "crossroad.pcap")[0].points.copy()
     ret["range"][5] = np.inf
@@ -418,3 +434,30 @@ def test_altered_returns_raise_or_run_never_panic():
                 chain.apply(p, frame=int(rng.integers(0, 1000)))
             except ValueError:
                 pass
+
+
+def test_records_in_any_layout_match_the_aligned_one():
+    """The compiled side writes APPLIED_DTYPE's aligned layout by a fast path and any
+    other layout it is given by the general one: both must give the same values (here a
+    layout with the fields reversed, 8-byte slots and 16 spare bytes)."""
+    chain = ln.Chain.from_toml(RAIN)
+    pts = scan(3000, ring=True)
+    want = chain.apply(pts, seed=4, frame=2)
+    names = list(ln.APPLIED_DTYPE.names)
+    layout = {n: 8 * k for k, n in enumerate(reversed(names))}
+    layout["__itemsize__"] = 8 * len(names) + 16
+    dtype = np.dtype(
+        {
+            "names": names,
+            "formats": [ln.APPLIED_DTYPE[n] for n in names],
+            "offsets": [layout[n] for n in names],
+            "itemsize": layout["__itemsize__"],
+        }
+    )
+    _kind, cols = ln._columns(pts)
+    raw = chain._core.apply_points(cols, 4, 2, 10.0, "byte", None, layout)
+    got = raw.view(dtype)
+    assert len(got) == len(want) == len(pts)
+    assert (want["range"] != want["range_clean"]).any()  # the rain moved points
+    for n in names:
+        assert np.array_equal(got[n], want[n], equal_nan=True), n

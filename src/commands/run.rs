@@ -18,8 +18,9 @@ pub const DEFAULT_OUTPUT: &str = "lidar-noise-out";
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Capture files (pcap or pcapng), `-` for standard input, or point-cloud scans
-    /// (nuScenes .pcd.bin, KITTI .bin, PCD, CSV: one frame each); none runs the built-in
-    /// crossroad fixture.
+    /// (nuScenes .pcd.bin, KITTI .bin, PCD, CSV: one frame each), or one dataset folder (a
+    /// KITTI sequence with velodyne/*.bin, a nuScenes samples/LIDAR_TOP with *.pcd.bin:
+    /// written back in its own layout); none runs the built-in crossroad fixture.
     #[arg(value_name = "CAPTURE")]
     pub captures: Vec<PathBuf>,
     /// Sensor that recorded the point-cloud scans given (captures name their sensor
@@ -66,7 +67,8 @@ pub struct Args {
     #[arg(long)]
     pub force: bool,
     /// Run only the captures that fall to shard K of N (K from 0, round-robin over the
-    /// captures in the order given), e.g. --shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT.
+    /// captures in the order given; over a dataset folder's scans sorted by name), e.g.
+    /// --shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT.
     #[arg(long, value_name = "K/N", value_parser = crate::options::Shard::parse)]
     pub shard: Option<crate::options::Shard>,
     /// Split each capture into chunks of M frames, so that the units shards deal are

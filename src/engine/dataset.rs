@@ -100,7 +100,7 @@ fn files_ending(dir: &Path, ext: &str) -> Result<Vec<PathBuf>> {
 }
 
 impl Dataset {
-    /// Finds the layout of `dir`: a KITTI sequence (it holds `velodyne/`), a nuScenes root
+    /// Finds the layout of `dir`: a KITTI sequence (it holds `velodyne/`, or is it), a nuScenes root
     /// or `samples` folder (it holds `samples/LIDAR_TOP/` or `LIDAR_TOP/`), or the
     /// `LIDAR_TOP` folder itself (it holds `*.pcd.bin`); anything else is refused naming
     /// the folder and what was expected.
@@ -126,6 +126,10 @@ impl Dataset {
         }
         if dir.join("velodyne").is_dir() {
             return of(Layout::Kitti, dir.join("velodyne"));
+        }
+        // The sequence's velodyne folder itself.
+        if dir.file_name().is_some_and(|n| n == "velodyne") {
+            return of(Layout::Kitti, dir.to_path_buf());
         }
         for sub in ["samples/LIDAR_TOP", "LIDAR_TOP"] {
             if dir.join(sub).is_dir() {
@@ -367,7 +371,15 @@ fn run_file(
         .map_err(|e| anyhow::anyhow!("{}: {e:#}", path.display()))?;
     let rows = super::frame_files::scan_points(&result);
     let kept = rows.len();
-    super::frame_files::write_scan_files(format, &order, rows, scan_out, fate_out, inputs)?;
+    let written =
+        super::frame_files::write_scan_files(format, &order, rows, scan_out, fate_out, inputs);
+    if written.is_err() {
+        // The sidecar went first: without its scan it is no output of this file.
+        if !scan_out.exists() {
+            std::fs::remove_file(fate_out).ok();
+        }
+    }
+    written?;
     Ok(FileDone { points, kept })
 }
 

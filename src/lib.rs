@@ -13,6 +13,7 @@ pub mod cluster;
 pub mod commands;
 pub mod compare;
 pub mod config;
+pub mod engine;
 pub mod error;
 pub mod frame;
 pub mod ground;

@@ -1,7 +1,7 @@
 //! Fork points inside one frame's work: `run` processes frames on the threads of one
 //! rayon pool, so that a worker with no frame left takes the second half of a fork in
 //! another worker's frame instead of idling at the end of a capture (see
-//! `commands::run::stream_frames`).
+//! `engine::stream_frames`).
 
 /// Runs `a` and `b` and returns both results. On a thread of a rayon pool it is a
 /// `rayon::join`: `a` runs here and `b` waits to be taken by an idle thread of the pool,

@@ -91,6 +91,17 @@ impl CloudReader {
     }
 }
 
+/// Reads `path` as one frame at once (where [`CloudReader`] reads it twice, to check it
+/// before a run writes anything and then when the frame is needed): the frame (index 0),
+/// the file's format, what it held, and the input index of each return, in return order.
+/// A dataset run, which checks and processes each file in one go, reads it once.
+pub fn read_frame(
+    path: &Path,
+    options: &CloudOptions,
+) -> Result<(Frame, Format, CloudSummary, Vec<u32>)> {
+    load(path, options)
+}
+
 /// The file's frame, format and summary.
 fn load(path: &Path, options: &CloudOptions) -> Result<(Frame, Format, CloudSummary, Vec<u32>)> {
     let cloud = read_file(

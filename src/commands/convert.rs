@@ -171,7 +171,7 @@ fn convert_settings(args: &Args, capture: &Path, output: FrameOutput) -> serde_j
 
 /// True for the frame files `convert` writes (for folders without a manifest).
 fn is_convert_output(name: &str) -> bool {
-    super::run::numbered(name, "frame_", &[".ply", ".las", ".laz"])
+    crate::engine::reports::numbered(name, "frame_", &[".ply", ".las", ".laz"])
 }
 
 /// Writes the frames of `capture` in `range` into `dir` (the staging folder of `target`);
@@ -190,7 +190,7 @@ fn convert_one(
     let progress = super::frames_progress(global, capture, options, range);
     let mut written = 0u32;
     // Decoding on this thread, PLY encoding and writing on the workers, overlapped
-    // (see `run::stream_frames`); the frame's buffer comes back for the decoder to reuse.
+    // (see `engine::stream_frames`); the frame's buffer comes back for the decoder to reuse.
     let work = |frame: Frame| -> Result<Frame> {
         let name = output.file_name(frame.index);
         crate::writers::atomic::refuse_inputs(&target.join(&name), &[capture])?;
@@ -201,7 +201,7 @@ fn convert_one(
     };
     // No heap warm-up: a frame's decoding and PLY need little heap, and warming 12 MB a
     // worker made `convert` of the shared capture slower (16.0 -> 17.9 ms).
-    super::run::stream_frames(&mut reader, range, 0, work, |frame, reader| {
+    crate::engine::stream_frames(&mut reader, range, 0, work, |frame, reader| {
         written += 1;
         progress.inc(1);
         reader.recycle(frame);
@@ -215,7 +215,11 @@ fn convert_one(
     super::warn_capture(global, Path::new(&shown), &summary, false);
     if written == 0 {
         // Same message as `run`'s: the capture's full frames counted to its end.
-        return Err(super::run::no_frame_error(&shown, range, &mut reader));
+        return Err(crate::engine::reports::no_frame_error(
+            &shown,
+            range,
+            &mut reader,
+        ));
     }
     Ok(written)
 }

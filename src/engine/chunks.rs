@@ -22,7 +22,7 @@
 //! Shards write side by side under a shared lock and never delete anything: a capture
 //! folder holding another run's results is refused (delete it or choose another folder).
 
-use super::run::{self as single, Args, Plan};
+use super::{Plan, RunRequest};
 use crate::cli::Global;
 use crate::hdl32e::frames::FrameReader;
 use crate::hdl32e::index::{FrameScan, FrameSeek};
@@ -56,23 +56,23 @@ impl Job {
     fn shown(&self) -> String {
         self.path
             .as_deref()
-            .map_or_else(|| self.source.clone(), super::capture_shown)
+            .map_or_else(|| self.source.clone(), super::inputs::capture_shown)
     }
 
     fn scan(&self, plan: &Plan) -> Result<FrameScan> {
         Ok(match &self.path {
             Some(p) => FrameScan::open(p, &plan.decoder)?,
             None => FrameScan::from_bytes(
-                Arc::from(single::DEFAULT_CAPTURE),
-                Path::new(single::DEFAULT_CAPTURE_NAME),
+                Arc::from(super::inputs::DEFAULT_CAPTURE),
+                Path::new(super::inputs::DEFAULT_CAPTURE_NAME),
                 &plan.decoder,
             )?,
         })
     }
 
     fn open(&self, plan: &Plan, at: Option<&FrameSeek>) -> Result<FrameReader> {
-        let bytes = || Arc::from(single::DEFAULT_CAPTURE);
-        let name = Path::new(single::DEFAULT_CAPTURE_NAME);
+        let bytes = || Arc::from(super::inputs::DEFAULT_CAPTURE);
+        let name = Path::new(super::inputs::DEFAULT_CAPTURE_NAME);
         Ok(match (&self.path, at) {
             (Some(p), Some(at)) => FrameReader::open_at(p, &plan.decoder, at)?,
             (Some(p), None) => FrameReader::open(p, &plan.decoder)?,
@@ -215,7 +215,7 @@ fn check_folder(
     m: u32,
     inputs: &[&Path],
 ) -> Result<()> {
-    single::check_target(target, inputs)?;
+    super::reports::check_target(target, inputs)?;
     check_parts(target, m)?;
     if let Some(manifest) = staging::read_manifest(target) {
         if manifest.command != "run" || manifest.settings != *settings {
@@ -228,7 +228,7 @@ fn check_folder(
     }
     // Only refuses files this tool did not write (and inputs): with `force` set, results
     // of an earlier run pass, and the manifest was compared above.
-    let ours = |f: &str| single::is_run_output(f) || part_chunk_size(f).is_some();
+    let ours = |f: &str| super::reports::is_run_output(f) || part_chunk_size(f).is_some();
     // Parts are written in place by shards and never listed in a manifest.
     let parts = |f: &str| part_chunk_size(f).is_some();
     staging::check_replace(target, "run", settings, &ours, &parts, true, inputs)?;
@@ -247,8 +247,8 @@ fn merged(dir: &Path, settings: &serde_json::Value) -> bool {
 }
 
 /// Runs `run --chunk-frames m` (as a shard, a merge, or both in one process).
-pub(super) fn run(
-    args: &Args,
+pub(crate) fn run(
+    request: &RunRequest,
     plan: &Plan,
     m: u32,
     inputs: &[&Path],
@@ -260,13 +260,13 @@ pub(super) fn run(
              written in frame order; run it without --chunk-frames"
         );
     }
-    if args.captures.iter().any(|p| super::is_stdin(p)) {
+    if request.captures.iter().any(|p| super::inputs::is_stdin(p)) {
         bail!(
             "--chunk-frames needs capture files: standard input (`-`) cannot be read by \
              several shards, nor resumed mid-capture"
         );
     }
-    if args.force && args.shard.is_some() {
+    if request.force && request.shard.is_some() {
         bail!(
             "--force cannot be given to a shard of --chunk-frames: shards run at once and \
              never delete results; give it to --merge (stale frame files), or delete the \
@@ -274,20 +274,20 @@ pub(super) fn run(
         );
     }
     let mut jobs = Vec::new();
-    if args.captures.is_empty() {
+    if request.captures.is_empty() {
         jobs.push(Job {
-            source: single::DEFAULT_CAPTURE_NAME.into(),
+            source: super::inputs::DEFAULT_CAPTURE_NAME.into(),
             name: "crossroad".into(),
             path: None,
         });
     }
-    for (path, name) in args
+    for (path, name) in request
         .captures
         .iter()
-        .zip(super::output_names(&args.captures))
+        .zip(super::inputs::output_names(&request.captures))
     {
         jobs.push(Job {
-            source: super::capture_label(path),
+            source: super::inputs::capture_label(path),
             name,
             path: Some(path.clone()),
         });
@@ -313,15 +313,15 @@ pub(super) fn run(
         plans.push(Chunks { ranges, seeks });
     }
     let total: usize = plans.iter().map(|c| c.ranges.len()).sum();
-    let folder = if args.shard.is_some() {
-        OutputFolder::lock_shared(&args.output)?
+    let folder = if request.shard.is_some() {
+        OutputFolder::lock_shared(&request.output)?
     } else {
-        OutputFolder::lock(&args.output)?
+        OutputFolder::lock(&request.output)?
     };
-    let result = units(args, plan, m, &jobs, &plans, total, inputs, global);
+    let result = units(request, plan, m, &jobs, &plans, total, inputs, global);
     if result.is_ok() {
         // The checks passed and the merge is done: what killed runs of this tool left.
-        folder.remove_leftovers(&single::is_run_path);
+        folder.remove_leftovers(&super::reports::is_run_path);
     }
     if result.is_err() {
         // A folder this (exclusive) run created, with nothing in it, goes again.
@@ -333,7 +333,7 @@ pub(super) fn run(
 /// Computes the units that fall to this process and merges (unless a shard).
 #[allow(clippy::too_many_arguments)]
 fn units(
-    args: &Args,
+    request: &RunRequest,
     plan: &Plan,
     m: u32,
     jobs: &[Job],
@@ -344,19 +344,19 @@ fn units(
 ) -> Result<()> {
     let mut settings = Vec::new();
     for job in jobs {
-        let s = single::run_settings(plan, &job.source);
-        check_folder(&args.output.join(&job.name), &s, m, inputs)?;
+        let s = super::reports::run_settings(plan, &job.source);
+        check_folder(&request.output.join(&job.name), &s, m, inputs)?;
         settings.push(s);
     }
-    if !args.merge {
+    if !request.merge {
         let mut offset = 0usize;
         let (mut owned, mut computed) = (0usize, 0usize);
         for ((job, chunks), settings) in jobs.iter().zip(plans).zip(&settings) {
             let n = chunks.ranges.len();
-            let dir = args.output.join(&job.name);
+            let dir = request.output.join(&job.name);
             let done = merged(&dir, settings);
             for j in 0..n {
-                if args.shard.is_some_and(|s| !s.owns(offset + j)) {
+                if request.shard.is_some_and(|s| !s.owns(offset + j)) {
                     continue;
                 }
                 owned += 1;
@@ -387,7 +387,7 @@ fn units(
             }
             offset += n;
         }
-        if let Some(shard) = args.shard {
+        if let Some(shard) = request.shard {
             if !global.quiet {
                 eprintln!(
                     "run --shard {shard}: {owned} of {total} capture chunks fall to this shard \
@@ -399,7 +399,7 @@ fn units(
             return Ok(());
         }
     }
-    merge(args, plan, m, jobs, plans, &settings, inputs, global)
+    merge(request, plan, m, jobs, plans, &settings, inputs, global)
 }
 
 /// Processes one chunk: its frames' files into `dir`, its report pieces into the part.
@@ -426,10 +426,10 @@ fn compute_unit(
     let (mut summary, mut clusters, mut csv) = (Vec::new(), Vec::new(), Vec::new());
     let work = |f: crate::frame::Frame| {
         let result = plan.pipeline.process(f)?;
-        single::frame_outputs(plan, result, &job.source, dir, inputs, true)
+        super::frame_files::frame_outputs(plan, result, &job.source, dir, inputs, true)
     };
     let warmup = crate::memory::worker_warmup_bytes();
-    single::stream_frames(
+    super::stream::stream_frames(
         &mut reader,
         range,
         warmup,
@@ -478,7 +478,7 @@ fn compute_unit(
 /// Joins the parts of every capture into its reports, or fails listing missing parts.
 #[allow(clippy::too_many_arguments)]
 fn merge(
-    args: &Args,
+    request: &RunRequest,
     plan: &Plan,
     m: u32,
     jobs: &[Job],
@@ -490,7 +490,7 @@ fn merge(
     // Every part of every capture is checked before anything is written.
     let mut missing = Vec::new();
     for ((job, chunks), settings) in jobs.iter().zip(plans).zip(settings) {
-        let dir = args.output.join(&job.name);
+        let dir = request.output.join(&job.name);
         let n = chunks.ranges.len();
         if merged(&dir, settings) {
             continue;
@@ -536,21 +536,21 @@ fn merge(
     }
     let mut lines = Vec::new();
     for ((job, chunks), settings) in jobs.iter().zip(plans).zip(settings) {
-        let dir = args.output.join(&job.name);
+        let dir = request.output.join(&job.name);
         let names: Vec<String> = (0..chunks.ranges.len()).map(|j| part_name(m, j)).collect();
         if merged(&dir, settings) {
             lines.push(format!("{}: already merged", job.shown()));
             continue;
         }
         lines.push(join_capture(
-            args, plan, job, &dir, &names, settings, inputs, global,
+            request, plan, job, &dir, &names, settings, inputs, global,
         )?);
     }
     if !global.quiet {
         for (line, job) in lines.iter().zip(jobs) {
             eprintln!(
                 "{line}; results in {}",
-                args.output.join(&job.name).display()
+                request.output.join(&job.name).display()
             );
         }
     }
@@ -560,7 +560,7 @@ fn merge(
 /// Writes one capture's reports and manifest from its parts, then deletes the parts.
 #[allow(clippy::too_many_arguments)]
 fn join_capture(
-    args: &Args,
+    request: &RunRequest,
     plan: &Plan,
     job: &Job,
     dir: &Path,
@@ -604,7 +604,7 @@ fn join_capture(
         })
         .collect();
     if !stale.is_empty() {
-        if !args.force {
+        if !request.force {
             let shown: Vec<&str> = stale.iter().take(5).map(String::as_str).collect();
             return Err(anyhow::Error::new(Refused(format!(
                 "{}: holds {} file{} no part of this run wrote ({}{}); rerun the merge with \
@@ -622,8 +622,8 @@ fn join_capture(
     let mut reader = job.open(plan, None)?;
     while !reader.next_batch(64, &plan.frames)?.is_empty() {}
     let capture_summary = reader.summary();
-    super::warn_truncation(global, Path::new(&job.shown()), &capture_summary);
-    super::warn_capture(
+    super::inputs::warn_truncation(global, Path::new(&job.shown()), &capture_summary);
+    super::inputs::warn_capture(
         global,
         Path::new(&job.shown()),
         &capture_summary,
@@ -634,10 +634,10 @@ fn join_capture(
         noise,
         stages,
     };
-    let (summary, clusters) = single::documents(
+    let (summary, clusters) = super::reports::documents(
         plan,
         &job.source,
-        single::SourceSummary::Capture(&capture_summary),
+        super::reports::SourceSummary::Capture(&capture_summary),
         totals,
     );
     let pieces = |field: fn(&Part) -> &str, out: &mut dyn std::io::Write| -> std::io::Result<()> {
@@ -650,10 +650,10 @@ fn join_capture(
         }
         Ok(())
     };
-    single::join_with(&summary, &dir.join("summary.json"), inputs, |out| {
+    super::spool::join_with(&summary, &dir.join("summary.json"), inputs, |out| {
         pieces(|p| &p.summary_frames, out)
     })?;
-    single::join_with(&clusters, &dir.join("clusters.json"), inputs, |out| {
+    super::spool::join_with(&clusters, &dir.join("clusters.json"), inputs, |out| {
         pieces(|p| &p.cluster_frames, out)
     })?;
     crate::writers::atomic::write_atomically(&dir.join("clusters.csv"), inputs, |out| {
@@ -682,7 +682,11 @@ fn join_capture(
     for name in names {
         std::fs::remove_file(dir.join(name)).ok();
     }
-    Ok(single::report_line(&job.shown(), frames, &summary.totals))
+    Ok(super::reports::report_line(
+        &job.shown(),
+        frames,
+        &summary.totals,
+    ))
 }
 
 #[cfg(test)]

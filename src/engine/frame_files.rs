@@ -1,0 +1,250 @@
+//! The files a processed frame writes on its own: its point cloud (PLY, LAS, LAZ, or a
+//! scan in its input's format with a sidecar of fates) and its linkage tree; and its report
+//! pieces, serialised by the worker that processed it.
+
+use super::spool::SpoolEntry;
+use super::Plan;
+use crate::cloud::frames::CloudReader;
+use crate::pipeline::report::{FrameClusters, FrameReport, FATE_CODES};
+use crate::pipeline::FrameResult;
+use crate::writers::ply::{PlyColumns, PlyFrame};
+use crate::writers::scan::ScanPoint;
+use crate::writers::write_file;
+use anyhow::Result;
+use std::path::Path;
+
+/// Writes a processed frame's own files (point cloud, linkage) into `dir` and returns its
+/// report pieces and the frame's return buffer (for the reader to reuse).
+pub(crate) fn frame_outputs(
+    plan: &Plan,
+    mut result: FrameResult,
+    source: &str,
+    dir: &Path,
+    inputs: &[&Path],
+    frame_file: bool,
+) -> Result<(SpoolEntry, Vec<crate::frame::Return>)> {
+    let clusters = FrameClusters {
+        index: result.noisy.index,
+        clusters: std::mem::take(&mut result.clusters),
+    };
+    let r = &result;
+    // The frame file and the reports are a fork an idle worker may take (see
+    // `crate::par::join`); the frame file's error comes first, as when they run in turn.
+    let (ply, reports) = crate::par::join(
+        || {
+            if plan.ply && frame_file {
+                write_ply(plan, r, source, dir, inputs)?;
+            }
+            Ok::<(), anyhow::Error>(())
+        },
+        || {
+            if plan.linkage {
+                write_linkage(plan, r, dir, inputs)?;
+            }
+            SpoolEntry::of(FrameReport::of(r), &clusters)
+        },
+    );
+    ply?;
+    let entry = reports?;
+    // The frame's buffer goes back to the reader for the next frame.
+    Ok((entry, result.noisy.clean))
+}
+
+/// Writes the frame's point cloud (PLY, LAS or LAZ) into `dir`.
+fn write_ply(
+    plan: &Plan,
+    r: &FrameResult,
+    source: &str,
+    dir: &Path,
+    inputs: &[&Path],
+) -> Result<()> {
+    let ground: Vec<u8> = r.ground.iter().map(|&g| u8::from(g)).collect();
+    let path = dir.join(plan.output.file_name(r.noisy.index));
+    let mut comments = vec![
+        format!("config {}", plan.config.provenance()),
+        format!("seed {}", plan.config.seed),
+        format!(
+            "fate codes: {}",
+            FATE_CODES
+                .iter()
+                .enumerate()
+                .map(|(i, c)| format!("{i} {c}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        "cause: index of the stage in the noise chain that decided the fate, 255 none or the \
+         detection filters; range_clean 0 for added returns"
+            .into(),
+        "range is after noise, range_clean before; power is a fraction of emitted power".into(),
+        "cluster -1 is ground or noise".into(),
+    ];
+    // The whole effective configuration, so that it can be rebuilt from the file alone.
+    comments.extend(
+        plan.config
+            .effective_toml()
+            .lines()
+            .filter(|l| !l.trim().is_empty())
+            .map(|l| format!("effective-config {l}")),
+    );
+    let start = r.noisy.clean.first().map_or(0.0, |c| c.time);
+    if plan.keep_dropped {
+        // Every return: kept ones at their noisy position, dropped ones where they were.
+        let mut returns = r.noisy.clean.clone();
+        let mut ground_all = vec![0u8; returns.len()];
+        let mut cluster_all = vec![-1i32; returns.len()];
+        for (s, &k) in r.kept.iter().enumerate() {
+            returns[k as usize] = r.survivors[s];
+            ground_all[k as usize] = ground[s];
+            cluster_all[k as usize] = r.labels[s];
+        }
+        let range_clean: Vec<f32> = (0..r.noisy.len()).map(|i| clean_range(r, i)).collect();
+        let power: Vec<f32> = r.noisy.power.iter().map(|&p| p as f32).collect();
+        let fate: Vec<u8> = r.noisy.fate.iter().map(|&f| f as u8).collect();
+        let ply = PlyFrame {
+            columns: PlyColumns {
+                range_clean: Some(&range_clean),
+                power: Some(&power),
+                fate: Some(&fate),
+                cause: Some(&r.noisy.cause),
+                ground: Some(&ground_all),
+                cluster: Some(&cluster_all),
+            },
+            comments: &comments,
+            ..PlyFrame::new(&returns, source, r.noisy.index, start)
+        };
+        write_file(&*plan.output.document(ply), &path, inputs)?;
+    } else {
+        let range_clean: Vec<f32> = r.kept.iter().map(|&k| clean_range(r, k as usize)).collect();
+        let power: Vec<f32> = r
+            .kept
+            .iter()
+            .map(|&k| r.noisy.power[k as usize] as f32)
+            .collect();
+        // Chains that can report spurious echoes say which points are echoes; the
+        // columns depend on the configuration only, never on the data.
+        let echoes = plan.pipeline.chain().proposes_echoes();
+        let (fate, cause): (Vec<u8>, Vec<u8>) = if echoes {
+            r.kept
+                .iter()
+                .map(|&k| (r.noisy.fate[k as usize] as u8, r.noisy.cause[k as usize]))
+                .unzip()
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        let ply = PlyFrame {
+            columns: PlyColumns {
+                range_clean: Some(&range_clean),
+                power: Some(&power),
+                fate: echoes.then_some(&fate[..]),
+                cause: echoes.then_some(&cause[..]),
+                ground: Some(&ground),
+                cluster: Some(&r.labels),
+            },
+            comments: &comments,
+            ..PlyFrame::new(&r.survivors, source, r.noisy.index, start)
+        };
+        write_file(&*plan.output.document(ply), &path, inputs)?;
+    }
+    Ok(())
+}
+
+/// The kept returns of a processed scan as points to write back (`point` is the return's
+/// index in the frame until [`write_scan`] maps it to the input's).
+pub(crate) fn scan_points(r: &FrameResult) -> Vec<ScanPoint> {
+    r.kept
+        .iter()
+        .zip(&r.survivors)
+        .zip(r.ground.iter().zip(&r.labels))
+        .map(|((&k, s), (&g, &cluster))| {
+            let k = k as usize;
+            ScanPoint {
+                x: s.x,
+                y: s.y,
+                z: s.z,
+                intensity: s.intensity,
+                ring: u16::from(s.ring),
+                point: (k < r.noisy.clean_len).then_some(k as u32),
+                fate: r.noisy.fate[k] as u8,
+                cause: r.noisy.cause[k],
+                range_clean: clean_range(r, k),
+                ground: u8::from(g),
+                cluster,
+            }
+        })
+        .collect()
+}
+
+/// Writes frame `index` of a scan back in the scan's own format, in the input's point
+/// order (echoes the noise added after the recorded points), with its sidecar of fates.
+pub(crate) fn write_scan(
+    reader: &CloudReader,
+    rows: Vec<ScanPoint>,
+    index: u32,
+    dir: &Path,
+    inputs: &[&Path],
+) -> Result<()> {
+    let format = reader.format();
+    let stem = format!("frame_{index:05}");
+    let scan = dir.join(format!(
+        "{stem}.{}",
+        crate::writers::scan::extension(format)
+    ));
+    let fates = dir.join(format!("{stem}.fate.csv"));
+    write_scan_files(format, reader.order(), rows, &scan, &fates, inputs)
+}
+
+/// Writes a scan's noisy points as `format` to `scan` and their fates to `fates`, in the
+/// input's point order (`order`: the input index of each return of the frame), echoes the
+/// noise added after the recorded points. The sidecar is written first, so that a scan
+/// file is there only once both are complete.
+pub(crate) fn write_scan_files(
+    format: crate::cloud::Format,
+    order: &[u32],
+    mut rows: Vec<ScanPoint>,
+    scan: &Path,
+    fates: &Path,
+    inputs: &[&Path],
+) -> Result<()> {
+    use crate::writers::scan::{Fates, Scan};
+    for p in &mut rows {
+        p.point = p.point.and_then(|k| order.get(k as usize).copied());
+    }
+    // Recorded points in input order, then added echoes in return order (stable).
+    rows.sort_by_key(|p| p.point.map_or((1, 0), |i| (0, i)));
+    write_file(&Fates { points: &rows }, fates, inputs)?;
+    write_file(
+        &Scan {
+            format,
+            points: &rows,
+        },
+        scan,
+        inputs,
+    )?;
+    Ok(())
+}
+
+/// Range of return `i` before noise: 0 for a return a stage added (it has no clean origin).
+fn clean_range(r: &FrameResult, i: usize) -> f32 {
+    if i < r.noisy.clean_len {
+        r.noisy.clean[i].range
+    } else {
+        0.0
+    }
+}
+
+/// Writes the frame's single-linkage merge tree into `dir`.
+fn write_linkage(plan: &Plan, r: &FrameResult, dir: &Path, inputs: &[&Path]) -> Result<()> {
+    let points: Vec<[f32; 3]> = r
+        .survivors
+        .iter()
+        .zip(&r.ground)
+        .filter(|(_, &g)| !g)
+        .map(|(s, _)| [s.x, s.y, s.z])
+        .collect();
+    let z = crate::cluster::linkage(&points, plan.config.cluster.max_edge_m)?;
+    let path = dir.join(format!("linkage_{:05}.csv", r.noisy.index));
+    crate::writers::atomic::write_atomically(&path, inputs, |out| {
+        crate::cluster::write_linkage_csv(out, &z)
+    })?;
+    Ok(())
+}

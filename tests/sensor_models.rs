@@ -213,8 +213,13 @@ fn real_vlp16_capture_counts_per_ring_match_the_raw_bytes() {
 #[test]
 #[ignore = "needs the reference CSV written by scripts/vlp16_check.py"]
 fn real_vlp16_capture_matches_velodyne_decoder() {
-    let Some(path) = common::shared("negative/vlp16_mrpt.pcap") else {
-        return;
+    // VLP16_PCAP: another real VLP-16 capture (notes/h-vls-out.md: VeloView's test data).
+    let path = match std::env::var_os("VLP16_PCAP") {
+        Some(p) => std::path::PathBuf::from(p),
+        None => match common::shared("negative/vlp16_mrpt.pcap") {
+            Some(p) => p,
+            None => return,
+        },
     };
     let csv = std::env::var("VLP16_REFERENCE_CSV").expect("VLP16_REFERENCE_CSV");
     let text = std::fs::read_to_string(&csv).unwrap();
@@ -263,6 +268,17 @@ fn real_vlp16_capture_matches_velodyne_decoder() {
             + (f64::from(r.y) - p[1]).powi(2)
             + (f64::from(r.z) - p[2]).powi(2))
         .sqrt();
+        // velodyne_decoder rounds each point's azimuth to 0.01 deg (0.005 deg of arc at
+        // the point's range) and the vertical offsets to its focal-distance values
+        // (0.03 mm from the manual's), plus float32 rounding: within 1 mm besides the
+        // azimuth rounding (0.44 mm seen on the MRPT capture). It interpolates with the
+        // packet's mean rotation rate, lidar-noise with the step to the next block: on a
+        // real capture the steps jitter by 0.01 deg, up to 0.01 deg more of arc.
+        let allowed = f64::from(r.range) * 0.0151f64.to_radians() + 1e-3;
+        assert!(
+            d <= allowed,
+            "reference point {i}: {d} m apart (allowed {allowed})"
+        );
         max_d = max_d.max(d);
         max_dt = max_dt.max((r.time - p[4]).abs());
     }
@@ -279,7 +295,6 @@ fn real_vlp16_capture_matches_velodyne_decoder() {
         refs.len(), max_d, max_dt * 1e6, ref_count, ours_count
     );
     assert_eq!(ours_count, ref_count, "counts per ring");
-    assert!(max_d < 0.002, "max position difference {max_d} m");
 }
 
 /// VLP-32C user manual 63-9325, Table 9-1: (elevation, azimuth offset) in degrees by laser

@@ -719,6 +719,30 @@ impl SensorModel {
     }
 }
 
+/// The described model a user names: its name in any case, spaces, dashes, dots and
+/// underscores ignored ("vlp16", "HDL-64E S3", "hdl64e_s3", "vls128", "VLS-128 fw5.1");
+/// "puck lite" is the VLP-16. `Err` lists the names.
+pub fn by_name(name: &str) -> Result<&'static SensorModel, String> {
+    let key = |s: &str| -> String {
+        s.chars()
+            .filter(|c| c.is_ascii_alphanumeric())
+            .map(|c| c.to_ascii_lowercase())
+            .collect()
+    };
+    let want = key(name);
+    if want == "pucklite" {
+        return Ok(&VLP16);
+    }
+    MODELS
+        .iter()
+        .copied()
+        .find(|m| key(m.name) == want)
+        .ok_or_else(|| {
+            let names: Vec<&str> = MODELS.iter().map(|m| m.name).collect();
+            format!("unknown sensor '{name}': one of {}", names.join(", "))
+        })
+}
+
 /// The described model writing a product id byte, if any.
 pub fn by_product(product: u8) -> Option<&'static SensorModel> {
     MODELS
@@ -803,6 +827,20 @@ mod tests {
         assert!((VLS128.packet_period_us(ReturnMode::Strongest) - 173.4).abs() < 1e-9);
         assert!((VLS128_FW51.packet_period_us(ReturnMode::Strongest) - 160.0).abs() < 1e-9);
         assert_eq!(by_product(0xA1).map(|m| m.name), Some("VLS-128"));
+        for (name, want) in [
+            ("vls128", "VLS-128"),
+            ("VLS-128 FW5.1", "VLS-128 fw5.1"),
+            ("hdl64e_s3", "HDL-64E S3"),
+            ("Puck LITE", "VLP-16"),
+            ("hdl-32e", "HDL-32E"),
+        ] {
+            assert_eq!(by_name(name).map(|m| m.name), Ok(want));
+        }
+        let e = by_name("hdl64e").unwrap_err();
+        assert!(
+            e.contains("'hdl64e'") && e.contains("HDL-64E S2, HDL-64E S3"),
+            "{e}"
+        );
         // Rings: laser 36 (-25 deg) lowest, laser 59 (15 deg) highest.
         let rings = VLS128.rings();
         assert_eq!((rings[36], rings[59]), (0, 127));

@@ -27,7 +27,26 @@ if not os.path.exists(pcap):
     sys.exit(0)
 
 config = vd.Config(model=vd.Model.VLP16, min_range=0.0)
-frames = list(vd.read_pcap(pcap, config, as_pcl_structs=True))
+try:
+    frames = list(vd.read_pcap(pcap, config, as_pcl_structs=True))
+except RuntimeError as e:
+    # A VLP-16 whose product byte says HDL-32E (0x21; VeloView's test capture):
+    # velodyne_decoder refuses it, so it reads a copy with byte 1205 of every 1206-byte
+    # payload set to 0x22 (classic pcap, Ethernet/IPv4/UDP: payload at 42); lidar-noise
+    # reads the original and must tell the VLP-16 by structure.
+    import struct
+
+    print(f"velodyne_decoder: {e}: reading a copy with the product byte set to 0x22")
+    data = bytearray(open(pcap, "rb").read())
+    at = 24
+    while at + 16 <= len(data):
+        incl = struct.unpack_from("<I", data, at + 8)[0]
+        if incl == 42 + 1206 and data[at + 16 + 42 + 1205] == 0x21:
+            data[at + 16 + 42 + 1205] = 0x22
+        at += 16 + incl
+    fixed = out + ".product22.pcap"
+    open(fixed, "wb").write(data)
+    frames = list(vd.read_pcap(fixed, config, as_pcl_structs=True))
 stamp, points = frames[1]
 base = stamp.device % 3600.0
 with open(out, "w") as f:
@@ -35,7 +54,7 @@ with open(out, "w") as f:
     for p in points:
         f.write("%.9g,%.9g,%.9g,%d,%.9f,%d\n" % (p["x"], p["y"], p["z"], p["intensity"], base + float(p["time"]), p["ring"]))
 print(f"velodyne_decoder {vd.__version__}: {len(frames)} frames, frame 1 has {len(points)} points -> {out}")
-env = dict(os.environ, VLP16_REFERENCE_CSV=out)
+env = dict(os.environ, VLP16_REFERENCE_CSV=out, VLP16_PCAP=str(pathlib.Path(pcap).resolve()))
 cmd = ["cargo", "test", "--test", "sensor_models", "--", "--ignored", "--nocapture",
        "real_vlp16_capture_matches_velodyne_decoder"]
 sys.exit(subprocess.run(cmd, cwd=root, env=env).returncode)

@@ -555,6 +555,9 @@ fn sensor_seeds_are_the_packets_they_name() {
             ReturnMode::Strongest,
         ),
         ("hdl64e-s3-dual.bin", "HDL-64E S3", ReturnMode::Dual),
+        ("vls128-strongest.bin", "VLS-128", ReturnMode::Strongest),
+        ("vls128-dual.bin", "VLS-128", ReturnMode::Dual),
+        ("vls128-fw51-last.bin", "VLS-128 fw5.1", ReturnMode::Last),
     ];
     for (name, model, mode) in expected {
         let bytes = std::fs::read(files("corpus", "sensor")[0].with_file_name(name)).unwrap();
@@ -566,8 +569,10 @@ fn sensor_seeds_are_the_packets_they_name() {
         for (k, (p, _)) in packets.iter().enumerate() {
             decoder.decode_packet(p, k as u32, 0.0, &mut out).unwrap();
         }
-        // Channel j of a packet (block * 32 + channel) is empty when j % 7 == 3.
-        let per_packet = (0..12 * 32).filter(|j| j % 7 != 3).count();
+        // Channel j of a packet (block * 32 + channel) is empty when j % 7 == 3; the
+        // VLS-128's dual packets carry 8 blocks.
+        let used = id.model.layout.used_blocks(mode);
+        let per_packet = (0..used * 32).filter(|j| j % 7 != 3).count();
         assert_eq!(out.len(), packets.len() * per_packet, "{name}");
     }
     // The mixed capture is refused, naming the packet where the product changes.

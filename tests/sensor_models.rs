@@ -213,8 +213,13 @@ fn real_vlp16_capture_counts_per_ring_match_the_raw_bytes() {
 #[test]
 #[ignore = "needs the reference CSV written by scripts/vlp16_check.py"]
 fn real_vlp16_capture_matches_velodyne_decoder() {
-    let Some(path) = common::shared("negative/vlp16_mrpt.pcap") else {
-        return;
+    // VLP16_PCAP: another real VLP-16 capture (notes/h-vls-out.md: VeloView's test data).
+    let path = match std::env::var_os("VLP16_PCAP") {
+        Some(p) => std::path::PathBuf::from(p),
+        None => match common::shared("negative/vlp16_mrpt.pcap") {
+            Some(p) => p,
+            None => return,
+        },
     };
     let csv = std::env::var("VLP16_REFERENCE_CSV").expect("VLP16_REFERENCE_CSV");
     let text = std::fs::read_to_string(&csv).unwrap();
@@ -263,6 +268,17 @@ fn real_vlp16_capture_matches_velodyne_decoder() {
             + (f64::from(r.y) - p[1]).powi(2)
             + (f64::from(r.z) - p[2]).powi(2))
         .sqrt();
+        // velodyne_decoder rounds each point's azimuth to 0.01 deg (0.005 deg of arc at
+        // the point's range) and the vertical offsets to its focal-distance values
+        // (0.03 mm from the manual's), plus float32 rounding: within 1 mm besides the
+        // azimuth rounding (0.44 mm seen on the MRPT capture). It interpolates with the
+        // packet's mean rotation rate, lidar-noise with the step to the next block: on a
+        // real capture the steps jitter by 0.01 deg, up to 0.01 deg more of arc.
+        let allowed = f64::from(r.range) * 0.0151f64.to_radians() + 1e-3;
+        assert!(
+            d <= allowed,
+            "reference point {i}: {d} m apart (allowed {allowed})"
+        );
         max_d = max_d.max(d);
         max_dt = max_dt.max((r.time - p[4]).abs());
     }
@@ -279,7 +295,6 @@ fn real_vlp16_capture_matches_velodyne_decoder() {
         refs.len(), max_d, max_dt * 1e6, ref_count, ours_count
     );
     assert_eq!(ours_count, ref_count, "counts per ring");
-    assert!(max_d < 0.002, "max position difference {max_d} m");
 }
 
 /// VLP-32C user manual 63-9325, Table 9-1: (elevation, azimuth offset) in degrees by laser
@@ -715,6 +730,8 @@ fn synthesized_captures_match_velodyne_decoder() {
         let fields: Vec<&str> = line.split('\t').collect();
         let (case, name) = (fields[0], fields[1]);
         let calibration = fields.get(2).filter(|f| !f.is_empty());
+        // velodyne_decoder's first VLS-128 packet is not comparable (see the script).
+        let skip_first = fields.get(3) == Some(&"skip_first");
         let model = MODELS.iter().find(|m| m.name == name).expect("model");
         let bytes = std::fs::read(dir.join(format!("{case}.bin"))).unwrap();
         let payloads: Vec<&[u8]> = bytes.chunks(1206).collect();
@@ -738,7 +755,12 @@ fn synthesized_captures_match_velodyne_decoder() {
         }
         let mut ours = Vec::new();
         for (i, p) in payloads.iter().enumerate() {
-            dec.decode_packet(p, i as u32, 0.0, &mut ours).unwrap();
+            let previous = i.checked_sub(1).map(|k| payloads[k]);
+            dec.decode_packet_after(p, previous, i as u32, 0.0, &mut ours)
+                .unwrap();
+        }
+        if skip_first {
+            ours.retain(|r| r.packet != 0);
         }
         let text = std::fs::read_to_string(dir.join(format!("{case}.csv"))).unwrap();
         // x, y, z, intensity, time, ring, return type (1 strongest, 2 last, 3 both)
@@ -1073,4 +1095,156 @@ fn hdl64e_s2_status_bytes_give_the_units_calibration() {
         "{e}"
     );
     assert!(ModelCalibration::from_status_bytes(status, &VLP32C).is_err());
+}
+
+/// VLS-128 data packets written from the layout (velodyne_decoder's `types.h` and
+/// `unpack_vls128`): flags FF EE, FF DD, FF CC, FF BB by bank; single mode 3 firings of
+/// 4 blocks, dual mode one firing in blocks 0-7 (last, strongest per bank) and 4 empty
+/// blocks; `period_us` apart; `step` centidegrees per firing.
+fn packets128(n: usize, period_us: f64, step: u32, dual: bool, product: u8) -> Vec<(Vec<u8>, u64)> {
+    const FLAGS: [[u8; 2]; 4] = [[0xFF, 0xEE], [0xFF, 0xDD], [0xFF, 0xCC], [0xFF, 0xBB]];
+    let firings = if dual { 1 } else { 3 };
+    (0..n)
+        .map(|i| {
+            let ts = 500_000 + (i as f64 * period_us).round() as u32;
+            let mut p = vec![0u8; 1206];
+            for b in 0..12usize {
+                let (bank, firing) = if dual { (b / 2, 0) } else { (b % 4, b / 4) };
+                let az = ((((i * firings + firing) as u32) * step) % 36_000) as u16;
+                if !dual || b < 8 {
+                    p[b * 100..b * 100 + 2].copy_from_slice(&FLAGS[bank]);
+                }
+                p[b * 100 + 2..b * 100 + 4].copy_from_slice(&az.to_le_bytes());
+            }
+            p[1200..1204].copy_from_slice(&ts.to_le_bytes());
+            p[1204] = if dual { 0x39 } else { 0x37 };
+            p[1205] = product;
+            (p, u64::from(ts) * 1000)
+        })
+        .collect()
+}
+
+#[test]
+fn vls128_is_identified_by_structure_and_refused_when_unknown() {
+    // 10 Hz: 0.208 deg per 57.8 us firing (fw 5.2.3+), 0.192 per 53.33 us (fw 5.1).
+    for (period, step, dual, name) in [
+        (173.4, 21, false, "VLS-128"),
+        (57.8, 21, true, "VLS-128"),
+        (160.0, 19, false, "VLS-128 fw5.1"),
+        (53.333, 19, true, "VLS-128 fw5.1"),
+    ] {
+        let v = ident(&packets128(40, period, step, dual, 0xA1)).unwrap();
+        assert_eq!(
+            (v.model.name, v.product_byte_agrees),
+            (name, true),
+            "{period}"
+        );
+        assert!(
+            (v.rotation_hz - 10.0).abs() < 0.5,
+            "{period}: {}",
+            v.rotation_hz
+        );
+        // The product byte lies (says VLP-16, or old firmware's 0): the four bank flags
+        // and the period still tell the VLS-128.
+        for lie in [0x22, 0x00] {
+            let l = ident(&packets128(40, period, step, dual, lie)).unwrap();
+            assert_eq!(
+                (l.model.name, l.product_byte_agrees),
+                (name, false),
+                "{}",
+                l.note
+            );
+            assert!(l.note.contains(name), "{}", l.note);
+        }
+    }
+    // Four bank flags at a period no VLS-128 firmware has.
+    let e = ident(&packets128(40, 300.0, 21, false, 0xA1)).unwrap_err();
+    assert!(
+        e.contains("unknown sensor") && e.contains("VLS-128 173 us") && e.contains("300 us"),
+        "{e}"
+    );
+}
+
+#[test]
+fn vls128_packets_decode_by_bank_with_the_firing_table() {
+    // Values typed from velodyne_decoder's calib_db (AlphaPrime) and buildTimings:
+    // laser 35: elevation 1.75 deg, rot_correction -0.911 deg (azimuth offset +0.911);
+    // laser 100: elevation -6.06, rot_correction +0.911 (offset -0.911).
+    let mut v = packets128(2, 173.4, 21, false, 0xA1);
+    let p = &mut v[1].0;
+    // Block 5 = bank 1, firing 1: channel 3 is laser 35 (byte 5 * 100 + 4 + 9 = 513).
+    p[513..516].copy_from_slice(&[0xE8, 0x03, 77]); // 1000 units = 4 m
+                                                    // Block 11 = bank 3, firing 2: channel 4 is laser 100 (byte 1100 + 4 + 12 = 1116).
+    p[1116..1119].copy_from_slice(&[0xD0, 0x07, 9]); // 2000 units = 8 m
+    let dec = ModelDecoder::new(&lidar_noise::sensor::VLS128, true, DualSelect::Both);
+    let mut out = Vec::new();
+    dec.decode_packet(&v[1].0, 1, 0.0, &mut out).unwrap();
+    assert_eq!(out.len(), 2);
+    let ts = f64::from(500_000 + 173u32); // round(173.4)
+    for (r, laser, dist, elev, off, firing, group) in [
+        (&out[0], 35, 4.0, 1.75f64, 0.911f64, 1.0, 4.0),
+        (&out[1], 100, 8.0, -6.06, -0.911, 2.0, 14.0),
+    ] {
+        assert_eq!(usize::from(r.laser), laser);
+        // Firing time: firing * 20 channels + (laser / 8 + 2 * (laser / 64)) channels,
+        // 2.89 us each, minus 7 us from the timestamp.
+        let t = ts + firing * 57.8 + group * 2.89 - 7.0;
+        assert!(
+            (r.time * 1e6 - t).abs() < 1e-3,
+            "laser {laser}: {} {t}",
+            r.time * 1e6
+        );
+        // Block azimuth (firing 3 + firing of packet 1) * 0.21 deg, plus the fraction
+        // of the 57.8 us sequence the laser fires into it times the 0.21 deg step.
+        let az = (3.0 + firing) * 0.21 + 0.21 * group * 2.89 / 57.8 + off;
+        assert!(
+            (f64::from(r.azimuth) - az).abs() < 1e-4,
+            "laser {laser}: {} {az}",
+            r.azimuth
+        );
+        let (sa, ca) = az.to_radians().sin_cos();
+        let (sw, cw) = elev.to_radians().sin_cos();
+        let want = [dist * cw * ca, -dist * cw * sa, dist * sw];
+        for (g, w) in [r.x, r.y, r.z].iter().zip(want) {
+            assert!((f64::from(*g) - w).abs() < 1e-5, "laser {laser}: {g} {w}");
+        }
+    }
+    // Dual: block 3 is bank 1's strongest return (channel 0 = laser 32), block 2 its last.
+    let mut d = packets128(2, 57.8, 21, true, 0xA1);
+    d[1].0[304..307].copy_from_slice(&[100, 0, 1]);
+    d[1].0[204..207].copy_from_slice(&[200, 0, 2]);
+    // Blocks 8-11 are empty: a distance there is not read.
+    d[1].0[904..907].copy_from_slice(&[50, 0, 3]);
+    let mut out = Vec::new();
+    dec.decode_packet_after(&d[1].0, Some(&d[0].0), 1, 0.0, &mut out)
+        .unwrap();
+    let got: Vec<(u8, ReturnKind, u16)> = out
+        .iter()
+        .map(|r| (r.laser, r.kind, r.raw_distance))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            (32, ReturnKind::DualLast, 200),
+            (32, ReturnKind::DualStrongest, 100)
+        ]
+    );
+    // Interpolated with the step from the packet before (0.21 deg per firing): laser 32
+    // fires 4 channels in.
+    let az = 0.21 + 0.21 * 4.0 * 2.89 / 57.8 + 6.354;
+    assert!(
+        (f64::from(out[0].azimuth) - az).abs() < 1e-4,
+        "{}",
+        out[0].azimuth
+    );
+    // A lower-bank flag where bank 2's should be is refused with the place.
+    let mut bad = v[1].0.clone();
+    bad[601] = 0xDD;
+    let e = dec
+        .decode_packet(&bad, 0, 0.0, &mut Vec::new())
+        .unwrap_err();
+    assert!(
+        e.contains("block 6") && e.contains("0xFFCC") && e.contains("600"),
+        "{e}"
+    );
 }

@@ -14,6 +14,7 @@ fn args(dir: &std::path::Path) -> SynthArgs {
         frames: Some(1),
         seed: Some(3),
         no_interpolation: false,
+        sensor: None,
     }
 }
 
@@ -48,4 +49,23 @@ fn refuses_to_overwrite_its_input() {
     assert!(std::fs::read_to_string(&scene)
         .unwrap()
         .contains("height_m"));
+}
+
+#[test]
+fn sensor_option_picks_the_sensor_and_refuses_a_rate_it_cannot_turn() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut a = args(dir.path());
+    a.sensor = Some("vlp16".into());
+    run(a, QUIET).unwrap();
+    let pcap = std::fs::read(dir.path().join("crossroad.pcap")).unwrap();
+    // First record: 24-byte file header, 16-byte record header, 42 bytes of Ethernet,
+    // IPv4 and UDP headers, then the 1206-byte payload: product byte 0x22 (VLP-16).
+    assert_eq!(pcap[24 + 16 + 42 + 1205], 0x22);
+    // The crossroad preset turns at 20 Hz: no HDL-64E does; nothing is written.
+    let other = tempfile::tempdir().unwrap();
+    let mut a = args(other.path());
+    a.sensor = Some("HDL-64E S3".into());
+    let e = run(a, QUIET).unwrap_err().to_string();
+    assert!(e.contains("HDL-64E S3") && e.contains("5 to 15 Hz"), "{e}");
+    assert_eq!(std::fs::read_dir(other.path()).unwrap().count(), 0);
 }

@@ -60,7 +60,8 @@ fn truncated_or_garbled_labels_are_refused() {
     let p = Path::new("bad.csv");
     assert!(read_labels(&b""[..], p).is_err());
     assert!(read_labels(&b"frame,firing,laser,label\n1,2\n"[..], p).is_err());
-    assert!(read_labels(&b"frame,firing,laser,label\n1,2,40,0\n"[..], p).is_err());
+    // Laser ids reach 127 (VLS-128 captures); 128 is refused.
+    assert!(read_labels(&b"frame,firing,laser,label\n1,2,128,0\n"[..], p).is_err());
     assert!(read_labels(&b"frame,packet,block,laser,label\n1,2,3\n"[..], p).is_err());
     let err = read_labels(&b"frame,firing,laser,label\n1,2,3\n"[..], p)
         .unwrap_err()

@@ -1,4 +1,5 @@
-//! `lidar-noise synth`: writes a synthetic HDL-32E capture with ground-truth labels.
+//! `lidar-noise synth`: writes a synthetic capture (HDL-32E by default, any described
+//! sensor with `--sensor NAME`) with ground-truth labels.
 
 use crate::synth::scene::random_scene;
 use crate::synth::{labels, objects_json, write_capture, Scene, SynthOptions};
@@ -38,6 +39,11 @@ pub struct SynthArgs {
     /// towards the next block (`--no-interpolation` is the old spelling).
     #[arg(long = "no-interpolate", alias = "no-interpolation")]
     pub no_interpolation: bool,
+    /// Sensor to synthesize: HDL-32E (default), VLP-16, "Puck Hi-Res", VLP-32C,
+    /// "HDL-64E S2", "HDL-64E S3", VLS-128 or "VLS-128 fw5.1" (case, spaces and dashes
+    /// ignored: vlp16, hdl64e-s3, vls128).
+    #[arg(long, value_name = "NAME")]
+    pub sensor: Option<String>,
 }
 
 /// Runs `lidar-noise synth`: writes DIR/<name>.pcap, DIR/<name>.labels.csv.gz and
@@ -58,8 +64,23 @@ pub fn run(args: SynthArgs, global: crate::cli::Global) -> anyhow::Result<()> {
     if let Some(seed) = args.seed {
         scene.seed = seed;
     }
+    let sensor = match &args.sensor {
+        Some(name) => crate::sensor::by_name(name).map_err(|e| anyhow::anyhow!("--sensor: {e}"))?,
+        None => &crate::sensor::HDL32E,
+    };
+    let (lo, hi) = sensor.rotation_hz;
+    let hz = scene.sensor.rotation_hz;
+    if sensor.name != crate::sensor::HDL32E.name && !(lo..=hi).contains(&hz) {
+        bail!(
+            "--sensor {}: the scene turns the sensor at {hz} Hz, the {} turns at {lo} to {hi} Hz \
+             (set [sensor] rotation_hz in a scene file)",
+            sensor.name,
+            sensor.name
+        );
+    }
     let options = SynthOptions {
         interpolate: !args.no_interpolation,
+        sensor,
         ..SynthOptions::default()
     };
     let dir = &args.output;
@@ -115,8 +136,9 @@ pub fn run(args: SynthArgs, global: crate::cli::Global) -> anyhow::Result<()> {
         return Ok(());
     }
     eprintln!(
-        "{}: {} rotations at {} Hz, {} records ({} data, {} position), {} returns",
+        "{}: {} {} rotations at {} Hz, {} records ({} data, {} position), {} returns",
         scene.name,
+        sensor.name,
         summary.frames,
         scene.sensor.rotation_hz,
         summary.records,

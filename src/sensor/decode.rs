@@ -25,6 +25,13 @@
 //! `Return::block` is [`SensorModel::return_block`]: the firing sequence in firing order
 //! (0..23 for the VLP-16 in single mode), dual returns adjacent, so each (block, laser)
 //! pair of a packet is one firing slot of the spurious-return rules.
+//!
+//! The VLS-128 ([`super::VLS128`]): block `b` carries bank `b % 4` (dual mode: bank
+//! `b / 2`, blocks 8-11 empty and not read), laser `32 * bank + channel`; its banks fire
+//! one after the other, so the interpolation fraction is the laser's time into the
+//! whole sequence (`SensorModel::laser_offset_us`). A dual-mode VLS-128 packet holds a
+//! single firing: [`ModelDecoder::decode_packet_after`] takes the step from the packet
+//! before, as velodyne_decoder does.
 
 use super::calibration::ModelCalibration;
 use super::{ReturnMode, SensorModel};
@@ -152,6 +159,23 @@ impl ModelDecoder {
         hour_offset_us: f64,
         out: &mut Vec<Return>,
     ) -> Result<PacketCounts, String> {
+        self.decode_packet_after(payload, None, record, hour_offset_us, out)
+    }
+
+    /// As [`ModelDecoder::decode_packet`], given the data packet before this one: a
+    /// packet holding a single firing (the VLS-128 in dual return mode) has no next
+    /// block to interpolate towards, so its azimuth step is the one from `previous`'s
+    /// first block to its own, per firing of `previous` (velodyne_decoder's rule). Without
+    /// `previous` (or when it is not a data packet of the model) such a packet is not
+    /// interpolated. Packets with two or more firings ignore `previous`.
+    pub fn decode_packet_after(
+        &self,
+        payload: &[u8],
+        previous: Option<&[u8]>,
+        record: u32,
+        hour_offset_us: f64,
+        out: &mut Vec<Return>,
+    ) -> Result<PacketCounts, String> {
         let m = &self.model;
         let lay = &m.layout;
         if payload.len() != lay.payload_bytes {
@@ -163,7 +187,8 @@ impl ModelDecoder {
             ));
         }
         if let Some(b) = lay.bad_flag(payload) {
-            let want = lay.bank_flags[b % lay.banks()].to_be_bytes();
+            let mode = lay.return_mode(payload).unwrap_or(ReturnMode::Strongest);
+            let want = lay.expected_flag(mode, b).to_be_bytes();
             return Err(format!(
                 "block {b} has no 0x{:02X}{:02X} flag (payload byte offset {})",
                 want[1],
@@ -184,25 +209,35 @@ impl ModelDecoder {
         // (dual mode: the pair's first block, as velodyne_decoder and ROS read it).
         let azimuth: Vec<u32> = (0..n * banks)
             .map(|fb| {
-                u32::from(lay.block_azimuth(payload, (fb / banks) * per + fb % banks)) % 36000
+                u32::from(lay.block_azimuth(payload, lay.block_of(mode, fb / banks, 0, fb % banks)))
+                    % 36000
             })
             .collect();
-        let mut step: Vec<u32> = (0..n * banks)
+        let mut step: Vec<f64> = (0..n * banks)
             .map(|fb| match azimuth.get(fb + banks) {
                 Some(&next) => {
                     let s = (next + 36000 - azimuth[fb]) % 36000;
                     if s > MAX_STEP_CENTIDEG {
-                        0
+                        0.0
                     } else {
-                        s
+                        f64::from(s)
                     }
                 }
-                None => 0,
+                None => 0.0,
             })
             .collect();
         if n >= 2 {
             for k in 0..banks {
                 step[(n - 1) * banks + k] = step[(n - 2) * banks + k];
+            }
+        } else if let Some(prev) = previous.filter(|p| lay.is_data_packet(p)) {
+            let prev_mode = lay.return_mode(prev).unwrap_or(mode);
+            let prev_firings = lay.blocks / m.blocks_per_firing(prev_mode);
+            let a = u32::from(lay.block_azimuth(prev, 0)) % 36000;
+            let s = (azimuth[0] + 36000 - a) % 36000;
+            let per_firing = f64::from(s) / prev_firings as f64;
+            if per_firing <= f64::from(MAX_STEP_CENTIDEG) {
+                step.iter_mut().for_each(|x| *x = per_firing);
             }
         }
         let ts = f64::from(lay.timestamp_us(payload)) + hour_offset_us;
@@ -211,14 +246,14 @@ impl ModelDecoder {
             mode: Some(mode),
             ..PacketCounts::default()
         };
-        for block in 0..lay.blocks {
+        for block in 0..lay.used_blocks(mode) {
             let Some(kind) = self.kind(mode, block) else {
                 continue;
             };
-            let fb = (block / per) * banks + block % banks;
+            let fb = (block / per) * banks + lay.block_bank(mode, block);
             let az0 = f64::from(azimuth[fb]) * 0.01;
             let gap = if self.interpolate {
-                f64::from(step[fb]) * 0.01
+                step[fb] * 0.01
             } else {
                 0.0
             };
@@ -229,7 +264,7 @@ impl ModelDecoder {
                     counts.zero_distance += 1;
                     continue;
                 }
-                let (sequence, laser) = m.block_laser(block, channel);
+                let (sequence, laser) = m.block_laser_in(mode, block, channel);
                 let into_block = sequence as f64 * m.sequence_us + m.laser_offset_us(laser);
                 let cal = &self.cal.lasers[laser];
                 let mut az = az0 + gap * into_block / block_us + cal.azimuth_offset_deg;

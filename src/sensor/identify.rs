@@ -18,6 +18,12 @@
 //! writes, and the period tells them apart (6 firings of 48 us, 288 us, for the S2;
 //! 6 of 57.6 us, 345.6 us, for the S3; half in dual mode, where the first blocks of the
 //! two return groups carry the same azimuth).
+//!
+//! The VLS-128 writes flags 0xFFEE, 0xFFDD, 0xFFCC and 0xFFBB in turn (pairs of each in
+//! dual mode), which no other model writes; its two firmware timings are told apart by
+//! the period (173.4 us a packet with the 2.89 us channel, 160 us with the 8/3 us one;
+//! a third in dual mode, where a packet holds one firing and the step per firing is
+//! measured from one packet's first block to the next's).
 
 use super::{ReturnMode, SensorModel, MODELS};
 
@@ -72,7 +78,11 @@ fn spacing_us(times: impl Iterator<Item = f64>) -> Option<f64> {
 pub fn identify(packets: &[(&[u8], u64)]) -> Result<Identified, String> {
     // The layout most packets follow: all blocks 0xFFEE, or the HDL-64E's alternating
     // 0xFFEE / 0xFFDD banks.
-    let layouts = [super::LAYOUT_1206, super::LAYOUT_HDL64E];
+    let layouts = [
+        super::LAYOUT_1206,
+        super::LAYOUT_HDL64E,
+        super::LAYOUT_VLS128,
+    ];
     let (layout, data) = layouts
         .iter()
         .map(|l| {
@@ -88,8 +98,8 @@ pub fn identify(packets: &[(&[u8], u64)]) -> Result<Identified, String> {
     if data.len() < 3 {
         return Err(format!(
             "{} Velodyne data packets (1206-byte UDP payloads with 0xFFEE block flags, or \
-             0xFFEE and 0xFFDD alternating) among {} packets: at least 3 are needed to tell \
-             the sensor by its packet timing",
+             0xFFEE and 0xFFDD alternating, or 0xFFEE, 0xFFDD, 0xFFCC, 0xFFBB in turn) among \
+             {} packets: at least 3 are needed to tell the sensor by its packet timing",
             data.len(),
             packets.len()
         ));
@@ -112,8 +122,9 @@ pub fn identify(packets: &[(&[u8], u64)]) -> Result<Identified, String> {
         .or_else(|| spacing_us(data.iter().map(|(_, ns)| *ns as f64 / 1000.0)))
         .ok_or("no two data packets with increasing timestamps: the packet timing is unknown")?;
     // Azimuth step between consecutive firings' first blocks inside each packet.
-    let per = layout.banks() * if mode == ReturnMode::Dual { 2 } else { 1 };
-    let steps: Vec<f64> = data
+    let per = layout.blocks_per_firing(mode);
+    let firings = layout.blocks / per;
+    let mut steps: Vec<f64> = data
         .iter()
         .flat_map(|(p, _)| {
             (0..layout.blocks / per - 1).map(move |f| {
@@ -124,6 +135,19 @@ pub fn identify(packets: &[(&[u8], u64)]) -> Result<Identified, String> {
         })
         .filter(|s| *s > 0.0 && *s < 5.0)
         .collect();
+    if firings == 1 {
+        // One firing a packet (the VLS-128 in dual mode): the step from one packet's
+        // first block to the next packet's.
+        steps = data
+            .windows(2)
+            .map(|w| {
+                let a = u32::from(layout.block_azimuth(w[0].0, 0)) % 36000;
+                let b = u32::from(layout.block_azimuth(w[1].0, 0)) % 36000;
+                f64::from((b + 36000 - a) % 36000) * 0.01
+            })
+            .filter(|s| *s > 0.0 && *s < 5.0)
+            .collect();
+    }
     let step =
         median(steps).ok_or("the block azimuths do not advance: the sensor is not turning")?;
     let fits = |m: &SensorModel| {

@@ -14,7 +14,10 @@
 //!   the frame's returns, not on how the capture file numbers its records: a label
 //!   file survives re-encoding the capture (other packet sizes, position packets
 //!   added or removed);
-//! - `laser`: laser id 0..31 (firing order within the block);
+//! - `laser`: laser id 0..31 (firing order within the block) for the HDL-32E; the
+//!   sensor's laser id (0..127) for captures of other sensors (`synth --sensor`),
+//!   where `firing` counts firing sequences (a VLS-128 or HDL-64E sequence spans
+//!   several bank blocks; the laser id tells the bank);
 //! - `label`: 0 for the ground, k for object id k (see `<name>.objects.json`).
 //!
 //! `(frame, firing, laser)` identifies a return inside its capture. The synthesizer
@@ -32,6 +35,9 @@ use flate2::Compression;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::Path;
 
+/// Laser ids a labels file may name: 0..127 (the VLS-128's 128 lasers).
+pub const MAX_LASERS: u8 = 128;
+
 /// Header line of a labels file.
 pub const HEADER: &str = "frame,firing,laser,label";
 /// Header line of the previous format (record and block instead of firing), still read.
@@ -46,7 +52,7 @@ pub struct LabelRow {
     pub frame: u32,
     /// Zero-based index within the frame of the firing, among firings with a return.
     pub firing: u32,
-    /// Laser id, 0..31.
+    /// Laser id, 0..31 (0..127 for other sensors).
     pub laser: u8,
     /// 0 = ground, k = object id.
     pub label: u16,
@@ -248,7 +254,7 @@ impl<'a> LabelRows<'a> {
                 Some(LabelRow {
                     frame,
                     firing: firings.firing(frame, packet, block),
-                    laser: num(fields[3]).filter(|&l: &u8| l < 32)?,
+                    laser: num(fields[3]).filter(|&l: &u8| l < MAX_LASERS)?,
                     label: num(fields[4])?,
                 })
             })()
@@ -257,7 +263,7 @@ impl<'a> LabelRows<'a> {
                 Some(LabelRow {
                     frame: num(fields[0])?,
                     firing: num(fields[1])?,
-                    laser: num(fields[2]).filter(|&l: &u8| l < 32)?,
+                    laser: num(fields[2]).filter(|&l: &u8| l < MAX_LASERS)?,
                     label: num(fields[3])?,
                 })
             })()
@@ -349,7 +355,7 @@ mod tests {
     #[test]
     fn rejects_bad_rows() {
         let p = Path::new("x.csv");
-        assert!(read_labels(&b"frame,firing,laser,label\n0,1,32,0\n"[..], p).is_err());
+        assert!(read_labels(&b"frame,firing,laser,label\n0,1,128,0\n"[..], p).is_err());
         assert!(read_labels(&b"nope\n"[..], p).is_err());
         let rows = read_labels(&b"frame,firing,laser,label\n0,1,31,2\n"[..], p).unwrap();
         assert_eq!(

@@ -1,5 +1,6 @@
-//! Scene synthesizer: ray-casts an HDL-32E in a simple scene and writes a capture
-//! with ground-truth labels (`lidar-noise synth`).
+//! Scene synthesizer: ray-casts an HDL-32E (or, with `--sensor`, any sensor of
+//! `src/sensor/`: [`synthesize_model`]) in a simple scene and writes a capture with
+//! ground-truth labels (`lidar-noise synth`).
 //!
 //! Timing and geometry follow `docs/hdl32e.md`: block n (counting data packets only)
 //! fires at `t0 + n * 46.08 µs`; the head turns at the scene's rate and the capture
@@ -25,6 +26,8 @@ use crate::hdl32e::encode::{
     BLOCK_DURATION_US, DATA_PAYLOAD_LEN, DATA_PORT, LASERS_PER_BLOCK, PACKET_DURATION_US,
     POSITION_PAYLOAD_LEN, POSITION_PORT, RETURN_MODE_STRONGEST, US_PER_HOUR,
 };
+use crate::sensor::encode::{encode_packet, PacketHeader};
+use crate::sensor::{ReturnMode, SensorModel, TimestampMark};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -46,8 +49,11 @@ pub struct SynthOptions {
     /// Interpolate each laser's azimuth towards the next block (true, default) or
     /// cast every laser of a block at the block azimuth (false).
     pub interpolate: bool,
-    /// Calibration giving the lasers' elevations and azimuth offsets.
+    /// Calibration giving the lasers' elevations and azimuth offsets (HDL-32E).
     pub calibration: Calibration,
+    /// Sensor to synthesize: the HDL-32E (default: the path above, its bytes as
+    /// before) or any other described model ([`synthesize_model`]).
+    pub sensor: &'static SensorModel,
 }
 
 impl Default for SynthOptions {
@@ -55,6 +61,7 @@ impl Default for SynthOptions {
         SynthOptions {
             interpolate: true,
             calibration: Calibration::builtin(),
+            sensor: &crate::sensor::HDL32E,
         }
     }
 }
@@ -190,6 +197,9 @@ pub fn synthesize<F>(scene: &Scene, options: &SynthOptions, mut sink: F) -> io::
 where
     F: FnMut(Record<'_>, &[CastReturn]) -> io::Result<()>,
 {
+    if options.sensor.name != crate::sensor::HDL32E.name {
+        return synthesize_model(scene, options.sensor, options.interpolate, sink);
+    }
     let caster = Caster::new(scene, &options.calibration);
     let spin = Spin::new(scene.sensor.rotation_hz);
     let end_block = spin.end_block(scene.frames);
@@ -291,6 +301,149 @@ where
         }
     }
     summary.records = record;
+    Ok(summary)
+}
+
+/// Synthesizes a capture of any described sensor other than the HDL-32E (single
+/// return, strongest): as [`synthesize`], with the model's packet layout, timing and
+/// beam table. Firing `n` (one block per bank; a VLP-16 block holds two sequences)
+/// starts at `n * block_us` after the first and carries the block azimuth
+/// `round(n * step)` (hundredths of a degree, `step` = 36000 * rate * block_us); laser
+/// `k` of sequence `s` fires `s * sequence_us + laser_offset_us(k)` into its firing and
+/// is cast at that fraction of the way to the next firing's azimuth (interpolated mode),
+/// as `sensor::decode` reads it back. Each packet's timestamp marks its first firing
+/// (plus the model's `timestamp_after_first_us`; for a last-firing model the packet's
+/// last firing). Rays start at the sensor origin: per-laser origin offsets (the VLP-16's
+/// vertical corrections, up to 11.2 mm, which the decoder adds) are not modelled. No
+/// position packets; HDL-64E status bytes are 'H' 0. `CastReturn::block` is the
+/// return's `Return::block` (the firing sequence within the packet), so labels key on
+/// (frame, firing sequence, laser id). A scene turning faster or slower than the model
+/// can is refused (the HDL-64E turns at 5 to 15 Hz).
+pub fn synthesize_model<F>(
+    scene: &Scene,
+    model: &'static SensorModel,
+    interpolate: bool,
+    mut sink: F,
+) -> io::Result<Summary>
+where
+    F: FnMut(Record<'_>, &[CastReturn]) -> io::Result<()>,
+{
+    let mode = ReturnMode::Strongest;
+    let hz = scene.sensor.rotation_hz;
+    if !(model.rotation_hz.0..=model.rotation_hz.1).contains(&hz) {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!(
+                "the scene turns the sensor at {hz} Hz: the {} turns at {} to {} Hz",
+                model.name, model.rotation_hz.0, model.rotation_hz.1
+            ),
+        ));
+    }
+    let caster = Caster::with_angles(scene, model.elevation_deg, model.azimuth_offset_deg);
+    let block_us = model.block_us();
+    let spin = Spin {
+        per_block: 36_000.0 * hz * block_us * 1e-6,
+    };
+    let end_firing = spin.end_block(scene.frames);
+    let firings = model.layout.blocks / model.blocks_per_firing(mode);
+    let data_packets = end_firing.div_ceil(firings as u64);
+    let noise = (scene.range_noise_m > 0.0)
+        .then(|| Normal::new(0.0, scene.range_noise_m))
+        .transpose()
+        .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e.to_string()))?;
+    let mut rng_frame = u32::MAX;
+    let mut rng = ChaCha8Rng::seed_from_u64(scene.seed);
+    let period = model.packet_period_us(mode);
+    let stamp_after_first = match model.timestamp_mark {
+        TimestampMark::FirstFiring => model.timestamp_after_first_us,
+        TimestampMark::LastFiring => -model.firing_offset_us(mode, 0, 0),
+    };
+    let mut summary = Summary {
+        frames: scene.frames,
+        ..Summary::default()
+    };
+    let mut returns: Vec<CastReturn> = Vec::new();
+    let mut slots: Vec<(usize, usize, u16, u8)> = Vec::new();
+    for p in 0..data_packets {
+        returns.clear();
+        slots.clear();
+        let first_us = FIRST_TIMESTAMP_US + p as f64 * period;
+        let ts = (first_us + stamp_after_first).round() as u64;
+        let mut azimuths = Vec::with_capacity(firings);
+        for f in 0..firings {
+            let n = p * firings as u64 + f as u64;
+            let q = spin.azimuth(n);
+            azimuths.push((q % 36_000) as u16);
+            if n >= end_firing {
+                continue;
+            }
+            let frame = (q / 36_000) as u32;
+            if noise.is_some() && frame != rng_frame {
+                // One stream per (seed, frame), as the HDL-32E path draws.
+                rng = ChaCha8Rng::seed_from_u64(scene.seed);
+                rng.set_stream(u64::from(frame));
+                rng_frame = frame;
+            }
+            let step = (spin.azimuth(n + 1) - q) as f64;
+            for s in 0..model.sequences_per_block {
+                let sequence = f * model.sequences_per_block + s;
+                for k in 0..model.lasers {
+                    let into = s as f64 * model.sequence_us + model.laser_offset_us(k);
+                    let az = if interpolate {
+                        (q as f64 + step * into / block_us) / 100.0
+                    } else {
+                        q as f64 / 100.0
+                    };
+                    let Some(hit) = caster.cast(az, k) else {
+                        continue;
+                    };
+                    let mut range = hit.range;
+                    if let Some(normal) = &noise {
+                        range += normal.sample(&mut rng);
+                    }
+                    let raw = (range / model.distance_resolution_m)
+                        .round()
+                        .clamp(0.0, 65_535.0) as u16;
+                    if raw == 0 {
+                        continue;
+                    }
+                    let inten = intensity(hit.reflectance, hit.retro, hit.cos_incidence);
+                    slots.push((sequence, k, raw, inten));
+                    returns.push(CastReturn {
+                        frame,
+                        packet: summary.records,
+                        block: sequence as u8,
+                        laser: k as u8,
+                        raw_distance: raw,
+                        intensity: inten,
+                        label: hit.label,
+                    });
+                }
+            }
+        }
+        let header = PacketHeader {
+            mode,
+            firing_azimuths: azimuths,
+            timestamp_us: (ts % US_PER_HOUR) as u32,
+            status: (b'H', 0),
+        };
+        let payload = encode_packet(model, &header, slots.iter().copied())
+            .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
+        let payload: &[u8; DATA_PAYLOAD_LEN] = payload
+            .as_slice()
+            .try_into()
+            .map_err(|_| io::Error::new(io::ErrorKind::InvalidData, "packet size"))?;
+        sink(
+            Record::Data {
+                capture_time_us: CAPTURE_EPOCH_US + ts,
+                payload,
+            },
+            &returns,
+        )?;
+        summary.records += 1;
+        summary.data_packets += 1;
+        summary.returns += returns.len() as u64;
+    }
     Ok(summary)
 }
 

@@ -76,9 +76,9 @@ struct Target {
 pub struct Caster {
     origin: [f64; 3],
     rot: [[f64; 3]; 3],
-    cos_elev: [f64; LASERS],
-    sin_elev: [f64; LASERS],
-    az_offset: [f64; LASERS],
+    cos_elev: Vec<f64>,
+    sin_elev: Vec<f64>,
+    az_offset: Vec<f64>,
     ground_n: [f64; 3],
     ground_d: f64,
     ground_reflectance: f64,
@@ -140,15 +140,20 @@ impl Caster {
     /// Precomputes the scene for casting with the calibration's elevations and
     /// azimuth offsets.
     pub fn new(scene: &Scene, cal: &Calibration) -> Caster {
-        let mut cos_elev = [0.0; LASERS];
-        let mut sin_elev = [0.0; LASERS];
-        let mut az_offset = [0.0; LASERS];
-        for (j, laser) in cal.lasers.iter().enumerate() {
-            let (s, c) = laser.elevation_deg.to_radians().sin_cos();
-            cos_elev[j] = c;
-            sin_elev[j] = s;
-            az_offset[j] = laser.azimuth_offset_deg;
-        }
+        let elevation: Vec<f64> = cal.lasers.iter().map(|l| l.elevation_deg).collect();
+        let offset: Vec<f64> = cal.lasers.iter().map(|l| l.azimuth_offset_deg).collect();
+        debug_assert_eq!(elevation.len(), LASERS);
+        Caster::with_angles(scene, &elevation, &offset)
+    }
+
+    /// Precomputes the scene for casting with any sensor's lasers: elevation and
+    /// azimuth offset of each laser id in degrees (e.g. a `sensor::SensorModel`'s).
+    pub fn with_angles(scene: &Scene, elevation_deg: &[f64], azimuth_offset_deg: &[f64]) -> Caster {
+        let (sin_elev, cos_elev): (Vec<f64>, Vec<f64>) = elevation_deg
+            .iter()
+            .map(|w| w.to_radians().sin_cos())
+            .unzip();
+        let az_offset = azimuth_offset_deg.to_vec();
         // Ground: z = h0 + tan(s) * (x cos a - y sin a)  <=>  n_raw . p = h0.
         let g = &scene.ground;
         let t = g.slope_deg.to_radians().tan();

@@ -229,10 +229,15 @@ pub fn to_returns(
         let l = usize::from(laser);
         // The firing on the circle: a laser fired ahead of its firing's azimuth (an
         // offset, a late slot in the sequence) may belong to the turn's last firing.
-        let k = ((azimuth * us_per_deg - lead_us[l]) / sequence_us)
-            .round()
-            .rem_euclid(n as f64) as i64
-            % n;
+        // Within one turn of the grid either way (azimuth 0 to 360, offsets under one
+        // turn), so one add or subtract wraps it (no float remainder).
+        let mut k = ((azimuth * us_per_deg - lead_us[l]) / sequence_us).round() as i64;
+        if k < 0 {
+            k += n;
+        } else if k >= n {
+            k -= n;
+        }
+        let k = k.clamp(0, n - 1);
         let free = |f: i64| (0..n).contains(&f) && !taken[f as usize * lasers + l];
         let firing = if free(k) {
             k

@@ -120,6 +120,25 @@ pub fn score(
     }
 }
 
+/// A scan's ground truth as a frame source keeps it: per point of the file, with the
+/// input index of each return of its frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CloudTruth {
+    /// The label files, for messages and the report.
+    pub labels: String,
+    /// Per point of the file.
+    pub truth: GroundTruth,
+    /// Input index of each return of the scan's frame.
+    pub order: Vec<u32>,
+}
+
+impl CloudTruth {
+    /// Scores the pipeline's result on the scan's frame (see [`score`]).
+    pub fn score(&self, r: &FrameResult, min_points: usize, edges: &[f64]) -> TruthScore {
+        score(r, &self.truth, &self.order, min_points, edges, &self.labels)
+    }
+}
+
 /// Where a scan's labels are, when the dataset's layout puts them beside it:
 /// SemanticKITTI `SEQ/velodyne/NNNNNN.bin` -> `SEQ/labels/NNNNNN.label`; KITTI object
 /// `velodyne/NNNNNN.bin` -> `label_2/NNNNNN.txt` with `calib/NNNNNN.txt`.

@@ -45,6 +45,11 @@ pub struct Args {
     /// placed on (default 20 for nuScenes .pcd.bin, 10 otherwise).
     #[arg(long, value_name = "HZ")]
     pub rotation_hz: Option<f64>,
+    /// Per-point labels of the point-cloud scan (SemanticKITTI .label, nuScenes-lidarseg
+    /// _lidarseg.bin or -panoptic .npz): ground and object scores go to truth.json. By
+    /// default a KITTI scan's ../labels/NNNNNN.label, or ../label_2 and ../calib boxes.
+    #[arg(long, value_name = "FILE")]
+    pub labels: Option<PathBuf>,
     /// Experiment configuration (default: the built-in configs/paper.toml).
     #[arg(short, long, value_name = "FILE")]
     pub config: Option<PathBuf>,
@@ -173,25 +178,38 @@ fn cloud_format(path: &Path) -> Option<crate::cloud::Format> {
 
 /// How a point-cloud file of `format` is read, from `--sensor` and `--rotation-hz`.
 fn cloud_options(args: &Args, path: &Path, format: crate::cloud::Format) -> Result<CloudOptions> {
+    use crate::cloud::guess::{guess_sensor, sensor_by_name, SENSOR_NAMES};
     use crate::cloud::Format;
     let sensor = match args.sensor.as_deref() {
-        None if format == Format::Kitti => anyhow::bail!(
-            "{}: a KITTI scan comes from an HDL-64E, which lidar-noise does not model yet \
-             (point clouds run as an HDL-32E: --sensor hdl32e); pass --sensor hdl32e only if \
-             this scan was recorded by an HDL-32E",
-            path.display()
-        ),
-        None => &crate::sensor::HDL32E,
-        Some(name)
-            if name.eq_ignore_ascii_case("hdl32e") || name.eq_ignore_ascii_case("hdl-32e") =>
-        {
-            &crate::sensor::HDL32E
+        Some(name) => sensor_by_name(name).ok_or_else(|| {
+            anyhow::anyhow!("--sensor {name}: not a sensor modelled here ({SENSOR_NAMES})")
+        })?,
+        None if format == Format::Kitti => {
+            // KITTI's sensor is an HDL-64E: the default once the stages run 64 lasers. The
+            // data's own evidence is shown beside it.
+            let cloud = crate::cloud::read_file(path, &Default::default())?;
+            let data = match guess_sensor(&cloud.points) {
+                Ok(g) => g.reason,
+                Err(e) => format!("the sensor cannot be told from the data: {e}"),
+            };
+            anyhow::bail!(
+                "{}: a KITTI scan comes from an HDL-64E, whose 64 lasers the noise stages do \
+                 not model yet (they model 32): nothing was written; the data: {data}; pass \
+                 --sensor hdl32e only if an HDL-32E recorded this scan",
+                path.display()
+            )
         }
-        Some(name) => anyhow::bail!(
-            "--sensor {name}: point clouds run as an HDL-32E only so far (--sensor hdl32e): \
-             the noise stages' firing slots are those of its 32 lasers"
-        ),
+        None => &crate::sensor::HDL32E,
     };
+    if sensor.name != crate::sensor::HDL32E.name {
+        anyhow::bail!(
+            "--sensor {}: {} scans are converted by the library (cloud::returns), but the noise \
+             stages' firing slots are those of the HDL-32E's 32 lasers so far: run takes \
+             --sensor hdl32e only; nothing was written",
+            args.sensor.as_deref().unwrap_or_default(),
+            sensor.name
+        );
+    }
     let rotation_hz = args.rotation_hz.unwrap_or(if format == Format::NuScenes {
         20.0
     } else {
@@ -201,6 +219,7 @@ fn cloud_options(args: &Args, path: &Path, format: crate::cloud::Format) -> Resu
         sensor,
         format: Some(format),
         rotation_hz,
+        labels: args.labels.clone(),
     })
 }
 
@@ -451,22 +470,23 @@ pub(super) fn run_settings(plan: &Plan, source: &str) -> serde_json::Value {
 
 /// True for the names `run` writes in a capture folder (for folders without a manifest).
 pub(super) fn is_run_output(name: &str) -> bool {
-    matches!(name, "summary.json" | "clusters.json" | "clusters.csv")
-        || numbered(
-            name,
-            "frame_",
-            &[
-                ".ply",
-                ".las",
-                ".laz",
-                ".pcd.bin",
-                ".bin",
-                ".pcd",
-                ".csv",
-                ".fate.csv",
-            ],
-        )
-        || numbered(name, "linkage_", &[".csv"])
+    matches!(
+        name,
+        "summary.json" | "clusters.json" | "clusters.csv" | "truth.json"
+    ) || numbered(
+        name,
+        "frame_",
+        &[
+            ".ply",
+            ".las",
+            ".laz",
+            ".pcd.bin",
+            ".bin",
+            ".pcd",
+            ".csv",
+            ".fate.csv",
+        ],
+    ) || numbered(name, "linkage_", &[".csv"])
 }
 
 /// True for the paths, relative to a run's output folder, of the files `run` writes
@@ -550,8 +570,19 @@ fn run_capture(
     };
     // A scan written back in its own format replaces the frame file.
     let native = plan.native && plan.ply && matches!(reader, Source::Cloud(_));
+    // A labelled scan's ground and object scores (one frame), for truth.json.
+    let truth = match &mut reader {
+        Source::Cloud(r) => r.take_truth(),
+        Source::Capture(_) => None,
+    };
+    let scored = std::sync::Mutex::new(None);
     let work = |f: Frame| -> Result<(SpoolEntry, Vec<crate::frame::Return>, Vec<ScanPoint>)> {
         let result = plan.pipeline.process(f)?;
+        if let Some(t) = &truth {
+            let bands = &crate::sweep::metrics::DEFAULT_BANDS;
+            *scored.lock().expect("no panic holds it") =
+                Some(t.score(&result, plan.config.cluster.min_points, bands));
+        }
         if let Some(p) = &pcap {
             p.encode_frame(&result.noisy);
         }
@@ -637,6 +668,12 @@ fn run_capture(
                  (0 to 131.07 m) and are written as no return in {name}"
             ));
         }
+    }
+    if let Some(s) = scored.into_inner().expect("no panic holds it") {
+        let path = dir.join("truth.json");
+        crate::writers::atomic::write_atomically(&path, inputs, |out| {
+            serde_json::to_writer_pretty(&mut *out, &s).map_err(std::io::Error::other)
+        })?;
     }
     spool.finish(&summary, dir, inputs)?;
     Ok(report_line(&shown, frames, &summary.totals))

@@ -116,18 +116,51 @@ fn one(scan: &Path, sensor: Option<&str>, labels: Option<&Path>) -> Result<(), S
             pct(near, far.len())
         );
     } else {
-        // Rows from point order: a new row where the azimuth crosses 0 upwards.
-        let mut row = 0usize;
-        let mut prev = 0.0f32;
-        let mut rows = Vec::with_capacity(bare.len());
-        for (i, p) in bare.iter().enumerate() {
-            let az = p.y.atan2(p.x);
-            if i > 0 && prev < 0.0 && az >= 0.0 && (az - prev) < 0.5 {
-                row += 1;
+        // Rows from point order. KITTI files differ: object-benchmark scans (cut to the
+        // camera's view) start each row at azimuth 0, so a row begins where the azimuth
+        // crosses 0 upwards; odometry (SemanticKITTI) scans wrap at the back, so a row
+        // begins where the azimuth falls by more than 180 deg. Of the two splits, the one
+        // whose rows are the thinnest in elevation (median of each row's 10-90 % spread)
+        // is taken.
+        let az: Vec<f32> = bare.iter().map(|p| p.y.atan2(p.x)).collect();
+        let el: Vec<f32> = bare
+            .iter()
+            .map(|p| p.z.atan2((p.x * p.x + p.y * p.y).sqrt()).to_degrees())
+            .collect();
+        let split = |front: bool| -> Vec<usize> {
+            let mut row = 0;
+            let mut rows = vec![0usize; az.len()];
+            for i in 1..az.len() {
+                let (a, b) = (az[i - 1], az[i]);
+                let new = if front {
+                    a < 0.0 && b >= 0.0 && b - a < 0.5
+                } else {
+                    b - a < -std::f32::consts::PI
+                };
+                row += usize::from(new);
+                rows[i] = row;
             }
-            prev = az;
-            rows.push(row);
-        }
+            rows
+        };
+        let spread = |rows: &[usize]| -> f32 {
+            let mut by: HashMap<usize, Vec<f32>> = HashMap::new();
+            for (&r, &e) in rows.iter().zip(&el) {
+                by.entry(r).or_default().push(e);
+            }
+            let mut s: Vec<f32> = by
+                .into_values()
+                .filter(|v| v.len() >= 20)
+                .map(|mut v| {
+                    v.sort_by(f32::total_cmp);
+                    v[v.len() * 9 / 10] - v[v.len() / 10]
+                })
+                .collect();
+            s.sort_by(f32::total_cmp);
+            s.get(s.len() / 2).copied().unwrap_or(f32::MAX)
+        };
+        let (a, b) = (split(true), split(false));
+        let rows = if spread(&a) <= spread(&b) { a } else { b };
+        let row = rows.last().copied().unwrap_or(0);
         let mut counts: HashMap<(usize, u8), usize> = HashMap::new();
         for (i, &r) in rows.iter().enumerate() {
             *counts.entry((r, laser_of_point[i])).or_default() += 1;

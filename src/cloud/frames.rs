@@ -4,10 +4,13 @@
 //!
 //! The file is read and checked when the reader is opened, so a bad file is refused before
 //! anything is written; the points are then dropped and read again when the frame is
-//! needed, so a run over many files holds one scan at a time, not all of them.
+//! needed, so a run over many files holds one scan at a time, not all of them. Labels
+//! (given, or found beside the scan: [`super::truth::labels_beside`]) are read and checked
+//! against the scan when it is opened too, and kept as its ground truth.
 
 use super::returns::{to_returns, ReturnsOptions};
-use super::{read_file, Format, IntensityScale, ReadOptions};
+use super::truth::{labels_beside, read_truth, CloudTruth, LabelsBeside};
+use super::{read_file, CloudPoint, Format, IntensityScale, ReadOptions};
 use crate::error::{Error, Result};
 use crate::frame::{Frame, FrameSource};
 use crate::sensor::SensorModel;
@@ -16,7 +19,7 @@ use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
 /// How a point-cloud file is read.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct CloudOptions {
     /// The sensor that recorded the scan.
     pub sensor: &'static SensorModel,
@@ -24,6 +27,9 @@ pub struct CloudOptions {
     pub format: Option<Format>,
     /// Rotation rate in Hz (the firing grid's size).
     pub rotation_hz: f64,
+    /// A per-point label file (SemanticKITTI `.label`, nuScenes-lidarseg or -panoptic);
+    /// `None` looks beside the scan.
+    pub labels: Option<PathBuf>,
 }
 
 /// What a point-cloud source held, for the run's summary.json.
@@ -47,31 +53,52 @@ pub struct CloudSummary {
     pub moved_to_neighbour_firing: usize,
     /// Points left sharing a firing slot with another (no free slot within reach).
     pub sharing_a_slot: usize,
+    /// Points whose laser came from their elevation (no ring field).
+    pub laser_from_elevation: usize,
+    /// Of those, points between two beams of the table, whose laser is a guess.
+    pub laser_ambiguous: usize,
 }
 
 /// One point-cloud file as a frame source.
 pub struct CloudReader {
     path: PathBuf,
-    options: CloudOptions,
+    /// Boxed, as the truth: `run` moves readers around in its jobs.
+    options: Box<CloudOptions>,
     format: Format,
     summary: CloudSummary,
     done: bool,
     /// Input index of each return of the frame handed out (empty before).
     order: Vec<u32>,
+    /// The scan's ground truth, when labels were given or found (boxed: a reader is moved
+    /// around in `run`'s jobs).
+    truth: Option<Box<CloudTruth>>,
 }
 
 impl CloudReader {
     /// Reads and checks `path` (every point must become a return of the sensor).
     pub fn open(path: &Path, options: &CloudOptions) -> Result<Self> {
-        let (frame, format, summary, _) = load(path, options)?;
+        let (frame, format, summary, order, points) = load(path, options)?;
         drop(frame);
+        let found = match &options.labels {
+            Some(p) => Some(LabelsBeside::PerPoint(p.clone())),
+            None => labels_beside(path),
+        };
+        let truth = match found {
+            Some(labels) => Some(Box::new(CloudTruth {
+                truth: read_truth(&labels, &points)?,
+                labels: labels.shown(),
+                order,
+            })),
+            None => None,
+        };
         Ok(CloudReader {
             path: path.to_path_buf(),
-            options: *options,
+            options: Box::new(options.clone()),
             format,
             summary,
             done: false,
             order: Vec::new(),
+            truth,
         })
     }
 
@@ -89,6 +116,11 @@ impl CloudReader {
     pub fn order(&self) -> &[u32] {
         &self.order
     }
+
+    /// The scan's ground truth (labels given or found beside it), taken out of the reader.
+    pub fn take_truth(&mut self) -> Option<CloudTruth> {
+        self.truth.take().map(|t| *t)
+    }
 }
 
 /// Reads `path` as one frame at once (where [`CloudReader`] reads it twice, to check it
@@ -99,11 +131,16 @@ pub fn read_frame(
     path: &Path,
     options: &CloudOptions,
 ) -> Result<(Frame, Format, CloudSummary, Vec<u32>)> {
-    load(path, options)
+    let (frame, format, summary, order, _) = load(path, options)?;
+    Ok((frame, format, summary, order))
 }
 
+/// What [`load`] gives: the frame, the format, the summary, the input index of each
+/// return, the points.
+type Loaded = (Frame, Format, CloudSummary, Vec<u32>, Vec<CloudPoint>);
+
 /// The file's frame, format and summary.
-fn load(path: &Path, options: &CloudOptions) -> Result<(Frame, Format, CloudSummary, Vec<u32>)> {
+fn load(path: &Path, options: &CloudOptions) -> Result<Loaded> {
     let cloud = read_file(
         path,
         &ReadOptions {
@@ -136,6 +173,8 @@ fn load(path: &Path, options: &CloudOptions) -> Result<(Frame, Format, CloudSumm
         firings: placed.firings,
         moved_to_neighbour_firing: placed.moved,
         sharing_a_slot: placed.shared,
+        laser_from_elevation: placed.from_elevation,
+        laser_ambiguous: placed.ambiguous,
     };
     if placed.returns.is_empty() {
         return Err(Error::Invalid(format!("{shown}: the file holds no point")));
@@ -145,7 +184,13 @@ fn load(path: &Path, options: &CloudOptions) -> Result<(Frame, Format, CloudSumm
         partial: false,
         returns: placed.returns,
     };
-    Ok((frame, cloud.info.format, summary, placed.order))
+    Ok((
+        frame,
+        cloud.info.format,
+        summary,
+        placed.order,
+        cloud.points,
+    ))
 }
 
 impl FrameSource for CloudReader {
@@ -157,7 +202,7 @@ impl FrameSource for CloudReader {
         if !frames.contains(&0) {
             return Ok(Vec::new());
         }
-        let (frame, _, summary, order) = load(&self.path, &self.options)?;
+        let (frame, _, summary, order, _) = load(&self.path, &self.options)?;
         if summary != self.summary {
             return Err(Error::Invalid(format!(
                 "{}: the file changed while it was being processed",

@@ -18,13 +18,16 @@
 //! allocated. Every error names the file and the place (byte offset, point index, line
 //! and column), and no input makes a reader panic (tests/fuzz.rs, targets `cloud-*`).
 
+pub mod boxes;
 pub mod csv;
 pub mod frames;
+pub mod guess;
 pub mod kitti;
 pub mod labels;
 pub mod nuscenes;
 pub mod pcd;
 pub mod returns;
+pub mod truth;
 
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};

@@ -1,24 +1,36 @@
 //! Point-cloud points as returns of a spinning sensor model (issue 31, "Point clouds in
-//! and out"; the Python package's `Chain.apply` on plain arrays, issue 32).
+//! and out"; the Python package's `Chain.apply` on plain arrays, issue 32). Any
+//! [`SensorModel`] works: HDL-32E, VLP-16, Puck Hi-Res, VLP-32C, HDL-64E S2/S3.
 //!
 //! Each point becomes the [`Return`] the sensor would have reported:
 //! - range, azimuth and elevation from x y z (azimuth clockwise seen from above, as the
 //!   decoder gives it: x = r cos(el) cos(az), y = -r cos(el) sin(az)); x y z are kept as
-//!   stored. The model's mounting offsets are not applied (the HDL-32E has none in its
-//!   built-in table).
+//!   stored. Mounting and per-laser offsets: the points are taken in the sensor frame as
+//!   the dataset stores them (its mounting already removed or never applied); a laser's
+//!   vertical offset (VLP-16 and Puck Hi-Res: at most 11.2 mm) is not subtracted, which
+//!   moves a point's elevation by under 0.13 deg at 5 m, far less than the 2 deg between
+//!   their beams. A laser's azimuth offset (VLP-32C: +-1.4 or +-4.2 deg; HDL-64E: up to
+//!   9.8 deg) is taken off the point's azimuth before its firing is found, as the
+//!   decoder adds it (point azimuth = firing azimuth + offset).
 //! - the laser from the ring (0 = lowest beam, the sensor's rings) where the point has
-//!   one, else from the elevation: the laser whose table elevation is nearest.
+//!   one, else from the elevation: the laser whose table elevation is nearest (the
+//!   model's built-in table; a unit's own calibration differs, by up to 2.5 deg a laser
+//!   on the HDL-64E, which [`CloudReturns::ambiguous`] and `notes` measure).
 //! - the firing slot from the azimuth on the sensor's firing grid: at `rotation_hz` a turn
-//!   holds n = round(1 / (rotation_hz * block_us)) firings (2170 for the HDL-32E at
-//!   10 Hz), firing k starting at azimuth 360 k / n, and laser l of a firing fires
-//!   `l * laser_us` after its start. A point goes to the firing whose laser-l direction is
-//!   nearest its azimuth; when two points claim one slot (a dataset's motion compensation
-//!   or a merged sweep), the later in file order moves to the nearest free firing within
-//!   two on either side, and shares the slot only when those are taken too (counted in
+//!   holds n = round(1 / (rotation_hz * sequence_us)) firing sequences (2170 for the
+//!   HDL-32E at 10 Hz, 1808 for the VLP-16, 2083 for the HDL-64E S2), firing k starting
+//!   at azimuth 360 k / n, and laser l of a firing fires `laser_offset_us(l)` after its
+//!   start (its group's time on the VLP-32C and HDL-64E, whose two banks fire together).
+//!   A point goes to the firing whose laser-l direction is nearest its azimuth (on the
+//!   circle: a point just before 360 deg may belong to firing 0 when its laser's offset
+//!   says so); when two points claim one slot (a dataset's motion compensation or a merged
+//!   sweep), the later in file order moves to the nearest free firing within two on either
+//!   side, and shares the slot only when those are taken too (counted in
 //!   [`CloudReturns::shared`]). Slots no point claims are the sensor's empty slots (sky,
 //!   no echo), which the spurious-return rules of `noise::spurious` need.
 //! - packet and block from the firing (firings numbered from 0 at the turn's start,
-//!   `sequences_per_packet` firings a packet), time = `start_time` + the firing's and
+//!   `sequences_per_packet` firings a packet in single return mode: 12 on the HDL-32E and
+//!   VLP-32C, 24 on the VLP-16, 6 on the HDL-64E), time = `start_time` + the firing's and
 //!   laser's offsets, so time follows the azimuth as in a capture.
 //! - the intensity byte from the stored value by the format's scale (KITTI 0-1 times 255,
 //!   nuScenes and unstated as stored), rounded and clamped to 0-255.
@@ -66,10 +78,72 @@ pub struct CloudReturns {
     pub moved: usize,
     /// Points left sharing a slot with an earlier point (no free slot within reach).
     pub shared: usize,
+    /// Points whose laser came from their elevation (no ring field).
+    pub from_elevation: usize,
+    /// Of those, points in the middle half between two neighbouring beams of the table
+    /// (or more than half a spacing beyond the outermost): their laser is a guess.
+    pub ambiguous: usize,
 }
 
 /// Firings on either side searched for a free slot when a point's own is taken.
 const REACH: i64 = 2;
+
+/// A sensor model's beams sorted by elevation, for the laser nearest an elevation.
+#[derive(Clone, Debug)]
+pub struct BeamTable {
+    /// Laser ids from the lowest beam up (the rings' order).
+    by_elevation: Vec<u8>,
+    /// Their elevations, degrees, ascending.
+    elevation: Vec<f64>,
+    /// Midpoints between neighbouring beams.
+    bounds: Vec<f64>,
+}
+
+impl BeamTable {
+    /// The beams of `model` (its built-in elevation table).
+    pub fn new(model: &SensorModel) -> Self {
+        let rings = model.rings();
+        let mut by_elevation = vec![0u8; model.lasers];
+        for (laser, &ring) in rings.iter().enumerate() {
+            by_elevation[usize::from(ring)] = laser as u8;
+        }
+        let elevation: Vec<f64> = by_elevation
+            .iter()
+            .map(|&l| model.elevation_deg[usize::from(l)])
+            .collect();
+        let bounds = elevation.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
+        BeamTable {
+            by_elevation,
+            elevation,
+            bounds,
+        }
+    }
+
+    /// The laser whose beam is nearest `elevation_deg`, and whether the choice is
+    /// ambiguous: the elevation lies more than a quarter of the spacing to the next beam
+    /// on its side away from the nearest beam (the middle half between two beams), or
+    /// beyond the outermost beams by more than half their spacing.
+    pub fn nearest(&self, elevation_deg: f64) -> (u8, bool) {
+        let i = self.bounds.partition_point(|&b| b < elevation_deg);
+        let e = self.elevation[i];
+        let n = self.elevation.len();
+        // The neighbour on the point's side of the nearest beam, else the other one.
+        let j = if elevation_deg >= e {
+            if i + 1 < n {
+                i + 1
+            } else {
+                i.saturating_sub(1)
+            }
+        } else if i > 0 {
+            i - 1
+        } else {
+            (i + 1).min(n - 1)
+        };
+        let gap = (self.elevation[j] - e).abs();
+        let ambiguous = gap > 0.0 && (elevation_deg - e).abs() > 0.25 * gap;
+        (self.by_elevation[i], ambiguous)
+    }
+}
 
 /// Turns `points` into returns of `model` (see the module's documentation). Errors name
 /// `source` and the point index: a non-finite coordinate or intensity, a ring at or above
@@ -100,28 +174,24 @@ pub fn to_returns(
         )));
     }
     let lasers = model.lasers;
-    let block_us = model.block_us();
-    let n = (1e6 / (options.rotation_hz * block_us)).round().max(1.0) as i64;
+    let sequence_us = model.sequence_us;
+    let n = (1e6 / (options.rotation_hz * sequence_us)).round().max(1.0) as i64;
     let us_per_deg = 1e6 / (360.0 * options.rotation_hz);
     let per_packet = model.sequences_per_packet(ReturnMode::Strongest) as i64;
     let rings = model.rings();
-    let mut laser_of_ring = vec![0u8; lasers];
-    for (laser, &ring) in rings.iter().enumerate() {
-        laser_of_ring[ring as usize] = laser as u8;
-    }
-    // Lasers sorted by elevation with the midpoints between neighbours: the nearest laser
-    // of an elevation is one binary search.
-    let by_elevation: Vec<usize> = laser_of_ring.iter().map(|&l| l as usize).collect();
-    let bounds: Vec<f64> = by_elevation
-        .windows(2)
-        .map(|w| 0.5 * (model.elevation_deg[w[0]] + model.elevation_deg[w[1]]))
+    let beams = BeamTable::new(model);
+    // Per laser: its firing time in the sequence and its azimuth offset in microseconds
+    // of rotation, so a point's firing is one division.
+    let laser_us: Vec<f64> = (0..lasers).map(|l| model.laser_offset_us(l)).collect();
+    let lead_us: Vec<f64> = (0..lasers)
+        .map(|l| laser_us[l] + model.azimuth_offset_deg.get(l).copied().unwrap_or(0.0) * us_per_deg)
         .collect();
     let scale = match options.intensity_scale {
         IntensityScale::Unit => 255.0,
         IntensityScale::Byte | IntensityScale::Unstated => 1.0,
     };
     let mut taken = vec![false; n as usize * lasers];
-    let (mut moved, mut shared) = (0, 0);
+    let (mut moved, mut shared, mut from_elevation, mut ambiguous) = (0, 0, 0, 0);
     // Per point: its slot (firing * lasers + laser) and its return, in input order.
     let mut slot_of = Vec::with_capacity(points.len());
     let mut placed = Vec::with_capacity(points.len());
@@ -140,7 +210,7 @@ pub fn to_returns(
         let azimuth = (-y).atan2(x).to_degrees().rem_euclid(360.0);
         let elevation = z.atan2(horizontal).to_degrees();
         let laser = match p.ring {
-            Some(ring) if usize::from(ring) < lasers => laser_of_ring[usize::from(ring)],
+            Some(ring) if usize::from(ring) < lasers => beams.by_elevation[usize::from(ring)],
             Some(ring) => {
                 return Err(Error::Invalid(format!(
                     "{source}: point {i} (0-based): ring {ring} is out of range for the {} \
@@ -149,13 +219,25 @@ pub fn to_returns(
                     lasers - 1
                 )))
             }
-            None => by_elevation[bounds.partition_point(|&b| b < elevation)] as u8,
+            None => {
+                let (laser, unsure) = beams.nearest(elevation);
+                from_elevation += 1;
+                ambiguous += usize::from(unsure);
+                laser
+            }
         };
         let l = usize::from(laser);
-        let laser_us = l as f64 * model.laser_us;
-        let k = ((azimuth * us_per_deg - laser_us) / block_us)
-            .round()
-            .clamp(0.0, (n - 1) as f64) as i64;
+        // The firing on the circle: a laser fired ahead of its firing's azimuth (an
+        // offset, a late slot in the sequence) may belong to the turn's last firing.
+        // Within one turn of the grid either way (azimuth 0 to 360, offsets under one
+        // turn), so one add or subtract wraps it (no float remainder).
+        let mut k = ((azimuth * us_per_deg - lead_us[l]) / sequence_us).round() as i64;
+        if k < 0 {
+            k += n;
+        } else if k >= n {
+            k -= n;
+        }
+        let k = k.clamp(0, n - 1);
         let free = |f: i64| (0..n).contains(&f) && !taken[f as usize * lasers + l];
         let firing = if free(k) {
             k
@@ -167,7 +249,7 @@ pub fn to_returns(
             k
         };
         taken[firing as usize * lasers + l] = true;
-        let time_us = firing as f64 * block_us + laser_us;
+        let time_us = firing as f64 * sequence_us + laser_us[l];
         let byte = (f64::from(p.intensity) * scale).round().clamp(0.0, 255.0) as u8;
         slot_of.push(firing as u32 * lasers as u32 + u32::from(laser));
         placed.push(Return {
@@ -210,6 +292,8 @@ pub fn to_returns(
         firings: n as u32,
         moved,
         shared,
+        from_elevation,
+        ambiguous,
     })
 }
 
@@ -266,6 +350,113 @@ mod tests {
             assert_eq!(r.raw_distance, 10_000);
             assert_eq!(r.ring, HDL32E.rings()[laser]);
         }
+    }
+
+    /// The point laser `laser` of `model` would measure at `range` in firing `k` of a
+    /// 10 Hz turn, from the manuals' numbers written out here: `fire_us` is the laser's
+    /// time in its firing sequence, `az_offset` its azimuth offset, `el` its elevation.
+    fn model_point(seq_us: f64, k: u32, fire_us: f64, az_offset: f64, el: f64) -> CloudPoint {
+        let az = (f64::from(k) * seq_us + fire_us) * 3.6e-3 + az_offset;
+        let (sa, ca) = az.to_radians().sin_cos();
+        let (se, ce) = el.to_radians().sin_cos();
+        let range = 15.0;
+        point(
+            (range * ce * ca) as f32,
+            (-range * ce * sa) as f32,
+            (range * se) as f32,
+            10.0,
+            None,
+        )
+    }
+
+    #[test]
+    fn every_model_places_a_grid_point_on_its_firing_laser_and_time() {
+        use crate::sensor::{HDL64E_S2, HDL64E_S3, PUCK_HI_RES, VLP16, VLP32C};
+        let opts = ReturnsOptions::default();
+        // (model, sequence us, firings a turn at 10 Hz, firings a packet, firing k,
+        // laser, its firing time in the sequence, azimuth offset, elevation)
+        let cases = [
+            // VLP-16 manual 9.5: laser 9 fires 9 * 2.304 us into its 55.296 us sequence;
+            // Table 9-1: +9 deg. 24 sequences a packet.
+            (
+                &VLP16,
+                55.296,
+                1808,
+                24,
+                700u32,
+                9usize,
+                9.0 * 2.304,
+                0.0,
+                9.0,
+            ),
+            (&PUCK_HI_RES, 55.296, 1808, 24, 1807, 0, 0.0, 0.0, -10.0),
+            // VLP-32C: lasers in pairs every 2.304 us, laser 29 is pair 14: 32.256 us;
+            // Table 9-1: +15 deg, azimuth offset -1.4 deg.
+            (&VLP32C, 55.296, 1808, 12, 100, 29, 14.0 * 2.304, -1.4, 15.0),
+            // HDL-64E S2: 48 us firings, groups of four 6 us apart, 0/1.26/2.46/3.66 us
+            // in a group; laser 37 (lower bank, lane 5: group 1, second) fires at 7.26 us;
+            // VeloView's HDL-64.xml: -20.34 deg, azimuth offset -2.96 deg.
+            (
+                &HDL64E_S2,
+                48.0,
+                2083,
+                6,
+                1000,
+                37,
+                6.0 + 1.26,
+                -2.96,
+                -20.34,
+            ),
+            // Laser 2 (upper bank, lane 2): 2.46 us; +1.15 deg, azimuth offset -3.3 deg:
+            // firing 0's direction is 356.7 deg, on the circle's far side.
+            (&HDL64E_S2, 48.0, 2083, 6, 0, 2, 2.46, -3.3, 1.15),
+            // HDL-64E S3: 57.6 us firings, groups 7.2 us apart, 0/1.3/2.5/3.7 us; laser 63
+            // (lower bank, lane 31: group 7, fourth): 7 * 7.2 + 3.7 us; -11.12 deg, -1.54.
+            (
+                &HDL64E_S3,
+                57.6,
+                1736,
+                6,
+                1735,
+                63,
+                7.0 * 7.2 + 3.7,
+                -1.54,
+                -11.12,
+            ),
+        ];
+        for (model, seq, n, per_packet, k, laser, fire_us, az_offset, el) in cases {
+            let p = model_point(seq, k, fire_us, az_offset, el);
+            let out = to_returns(&[p], model, &opts, "t").unwrap();
+            let r = out.returns[0];
+            let what = format!("{} firing {k} laser {laser}", model.name);
+            assert_eq!(out.firings, n, "{what}");
+            assert_eq!(usize::from(r.laser), laser, "{what}");
+            assert_eq!(r.packet, k / per_packet, "{what}");
+            assert_eq!(u32::from(r.block), k % per_packet, "{what}");
+            let t = (f64::from(k) * seq + fire_us) * 1e-6;
+            assert!((r.time - t).abs() < 1e-9, "{what}: {} vs {t}", r.time);
+            assert_eq!(out.from_elevation, 1);
+        }
+    }
+
+    #[test]
+    fn the_elevation_says_when_the_laser_is_a_guess() {
+        use crate::sensor::{HDL64E_S2, VLP16};
+        let beams = BeamTable::new(&VLP16);
+        // VLP-16 beams every 2 deg: +1.2 deg is laser 1 (+1), sure; +1.6 and +2.4 are in
+        // the middle half between +1 and +3 (laser 3).
+        assert_eq!(beams.nearest(1.2), (1, false));
+        assert_eq!(beams.nearest(1.6), (1, true));
+        assert_eq!(beams.nearest(2.4), (3, true));
+        assert_eq!(beams.nearest(2.6), (3, false));
+        // Beyond the top beam (+15, laser 15) by more than half a spacing.
+        assert_eq!(beams.nearest(15.4), (15, false));
+        assert_eq!(beams.nearest(16.0), (15, true));
+        // HDL-64E: -9.37 (laser 56) and -9.15 (laser 57) are 0.22 deg apart.
+        let beams = BeamTable::new(&HDL64E_S2);
+        assert_eq!(beams.nearest(-9.36), (56, false));
+        assert_eq!(beams.nearest(-9.2), (57, false));
+        assert_eq!(beams.nearest(-9.29), (56, true));
     }
 
     #[test]

@@ -32,6 +32,11 @@ pub struct Args {
     /// placed on (default 20 for nuScenes .pcd.bin, 10 otherwise).
     #[arg(long, value_name = "HZ")]
     pub rotation_hz: Option<f64>,
+    /// Per-point labels of the point-cloud scan (SemanticKITTI .label, nuScenes-lidarseg
+    /// _lidarseg.bin or -panoptic .npz): ground and object scores go to truth.json. By
+    /// default a KITTI scan's ../labels/NNNNNN.label, or ../label_2 and ../calib boxes.
+    #[arg(long, value_name = "FILE")]
+    pub labels: Option<PathBuf>,
     /// Experiment configuration (default: the built-in configs/paper.toml).
     #[arg(short, long, value_name = "FILE")]
     pub config: Option<PathBuf>,
@@ -134,6 +139,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         merge: args.merge,
         sensor: args.sensor,
         rotation_hz: args.rotation_hz,
+        labels: args.labels,
     };
     crate::engine::run(&plan, &request, global)
 }

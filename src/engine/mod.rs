@@ -104,6 +104,9 @@ pub struct RunRequest {
     pub sensor: Option<String>,
     /// Rotation rate of point-cloud scans in Hz (`--rotation-hz`).
     pub rotation_hz: Option<f64>,
+    /// Per-point labels of a point-cloud scan (`--labels`); by default those found beside
+    /// it.
+    pub labels: Option<PathBuf>,
 }
 
 /// Runs the pipeline on every input of `request` with the settings of `plan`, writing
@@ -335,25 +338,38 @@ pub(crate) fn cloud_options(
     path: &Path,
     format: crate::cloud::Format,
 ) -> Result<CloudOptions> {
+    use crate::cloud::guess::{guess_sensor, sensor_by_name, SENSOR_NAMES};
     use crate::cloud::Format;
     let sensor = match request.sensor.as_deref() {
-        None if format == Format::Kitti => anyhow::bail!(
-            "{}: a KITTI scan comes from an HDL-64E, which lidar-noise does not model yet \
-             (point clouds run as an HDL-32E: --sensor hdl32e); pass --sensor hdl32e only if \
-             this scan was recorded by an HDL-32E",
-            path.display()
-        ),
-        None => &crate::sensor::HDL32E,
-        Some(name)
-            if name.eq_ignore_ascii_case("hdl32e") || name.eq_ignore_ascii_case("hdl-32e") =>
-        {
-            &crate::sensor::HDL32E
+        Some(name) => sensor_by_name(name).ok_or_else(|| {
+            anyhow::anyhow!("--sensor {name}: not a sensor modelled here ({SENSOR_NAMES})")
+        })?,
+        None if format == Format::Kitti => {
+            // KITTI's sensor is an HDL-64E: the default once the stages run 64 lasers. The
+            // data's own evidence is shown beside it.
+            let cloud = crate::cloud::read_file(path, &Default::default())?;
+            let data = match guess_sensor(&cloud.points) {
+                Ok(g) => g.reason,
+                Err(e) => format!("the sensor cannot be told from the data: {e}"),
+            };
+            anyhow::bail!(
+                "{}: a KITTI scan comes from an HDL-64E, whose 64 lasers the noise stages do \
+                 not model yet (they model 32): nothing was written; the data: {data}; pass \
+                 --sensor hdl32e only if an HDL-32E recorded this scan",
+                path.display()
+            )
         }
-        Some(name) => anyhow::bail!(
-            "--sensor {name}: point clouds run as an HDL-32E only so far (--sensor hdl32e): \
-             the noise stages' firing slots are those of its 32 lasers"
-        ),
+        None => &crate::sensor::HDL32E,
     };
+    if sensor.name != crate::sensor::HDL32E.name {
+        anyhow::bail!(
+            "--sensor {}: {} scans are converted by the library (cloud::returns), but the noise \
+             stages' firing slots are those of the HDL-32E's 32 lasers so far: run takes \
+             --sensor hdl32e only; nothing was written",
+            request.sensor.as_deref().unwrap_or_default(),
+            sensor.name
+        );
+    }
     let rotation_hz = request
         .rotation_hz
         .unwrap_or(if format == Format::NuScenes {
@@ -365,6 +381,7 @@ pub(crate) fn cloud_options(
         sensor,
         format: Some(format),
         rotation_hz,
+        labels: request.labels.clone(),
     })
 }
 
@@ -405,8 +422,19 @@ fn run_source(
     };
     // A scan written back in its own format replaces the frame file.
     let native = plan.native && plan.ply && matches!(reader, Source::Cloud(_));
+    // A labelled scan's ground and object scores (one frame), for truth.json.
+    let truth = match &mut reader {
+        Source::Cloud(r) => r.take_truth(),
+        Source::Capture(_) => None,
+    };
+    let scored = std::sync::Mutex::new(None);
     let work = |f: Frame| -> Result<(SpoolEntry, Vec<crate::frame::Return>, Vec<ScanPoint>)> {
         let result = plan.pipeline.process(f)?;
+        if let Some(t) = &truth {
+            let bands = &crate::sweep::metrics::DEFAULT_BANDS;
+            *scored.lock().expect("no panic holds it") =
+                Some(t.score(&result, plan.config.cluster.min_points, bands));
+        }
         if let Some(p) = &pcap {
             p.encode_frame(&result.noisy);
         }
@@ -492,6 +520,12 @@ fn run_source(
                  (0 to 131.07 m) and are written as no return in {name}"
             ));
         }
+    }
+    if let Some(s) = scored.into_inner().expect("no panic holds it") {
+        let path = dir.join("truth.json");
+        crate::writers::atomic::write_atomically(&path, inputs, |out| {
+            serde_json::to_writer_pretty(&mut *out, &s).map_err(std::io::Error::other)
+        })?;
     }
     spool.finish(&summary, dir, inputs)?;
     Ok(report_line(&shown, frames, &summary.totals))

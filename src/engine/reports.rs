@@ -80,22 +80,23 @@ pub fn run_settings(plan: &Plan, source: &str) -> serde_json::Value {
 
 /// True for the names `run` writes in a capture folder (for folders without a manifest).
 pub fn is_run_output(name: &str) -> bool {
-    matches!(name, "summary.json" | "clusters.json" | "clusters.csv")
-        || numbered(
-            name,
-            "frame_",
-            &[
-                ".ply",
-                ".las",
-                ".laz",
-                ".pcd.bin",
-                ".bin",
-                ".pcd",
-                ".csv",
-                ".fate.csv",
-            ],
-        )
-        || numbered(name, "linkage_", &[".csv"])
+    matches!(
+        name,
+        "summary.json" | "clusters.json" | "clusters.csv" | "truth.json"
+    ) || numbered(
+        name,
+        "frame_",
+        &[
+            ".ply",
+            ".las",
+            ".laz",
+            ".pcd.bin",
+            ".bin",
+            ".pcd",
+            ".csv",
+            ".fate.csv",
+        ],
+    ) || numbered(name, "linkage_", &[".csv"])
 }
 
 /// True for the paths, relative to a run's output folder, of the files `run` writes

@@ -145,6 +145,28 @@ impl BeamTable {
     }
 }
 
+/// `x.round() as i64` (halves away from zero, saturating, NaN to 0) without the libm call
+/// `round` is on the x86-64 baseline: the integer part, then one step by the fraction,
+/// which `x - t` gives exactly.
+#[inline]
+fn round_i64(x: f64) -> i64 {
+    let t = x as i64;
+    let f = x - t as f64;
+    t.saturating_add(i64::from(f >= 0.5))
+        .saturating_sub(i64::from(f <= -0.5))
+}
+
+/// `x.round().clamp(0.0, max) as u16`, without the libm call (see [`round_i64`]): the clamp
+/// first (max(NaN, 0) is 0), then the step up by the fraction.
+#[inline]
+fn round_clamped(x: f64, max: u16) -> u16 {
+    #[allow(clippy::manual_clamp)] // `clamp` would pass a NaN through
+    let c = x.max(0.0).min(f64::from(max));
+    let t = c as u32;
+    let up = u32::from(x - f64::from(t) >= 0.5);
+    (t + up).min(u32::from(max)) as u16
+}
+
 /// Turns `points` into returns of `model` (see the module's documentation). Errors name
 /// `source` and the point index: a non-finite coordinate or intensity, a ring at or above
 /// the model's number of lasers, a rotation rate outside the model's range.
@@ -207,7 +229,9 @@ pub fn to_returns(
         let h2 = x * x + y * y;
         let horizontal = h2.sqrt();
         let range = (h2 + z * z).sqrt();
-        let azimuth = (-y).atan2(x).to_degrees().rem_euclid(360.0);
+        // atan2 gives [-180, 180] degrees: one add wraps it (wrap_360 is rem_euclid's value
+        // without its fmod call).
+        let azimuth = crate::noise::wrap_360((-y).atan2(x).to_degrees());
         let elevation = z.atan2(horizontal).to_degrees();
         let laser = match p.ring {
             Some(ring) if usize::from(ring) < lasers => beams.by_elevation[usize::from(ring)],
@@ -231,7 +255,7 @@ pub fn to_returns(
         // offset, a late slot in the sequence) may belong to the turn's last firing.
         // Within one turn of the grid either way (azimuth 0 to 360, offsets under one
         // turn), so one add or subtract wraps it (no float remainder).
-        let mut k = ((azimuth * us_per_deg - lead_us[l]) / sequence_us).round() as i64;
+        let mut k = round_i64((azimuth * us_per_deg - lead_us[l]) / sequence_us);
         if k < 0 {
             k += n;
         } else if k >= n {
@@ -250,7 +274,7 @@ pub fn to_returns(
         };
         taken[firing as usize * lasers + l] = true;
         let time_us = firing as f64 * sequence_us + laser_us[l];
-        let byte = (f64::from(p.intensity) * scale).round().clamp(0.0, 255.0) as u8;
+        let byte = round_clamped(f64::from(p.intensity) * scale, 255) as u8;
         slot_of.push(firing as u32 * lasers as u32 + u32::from(laser));
         placed.push(Return {
             x: p.x,
@@ -261,9 +285,7 @@ pub fn to_returns(
             elevation: elevation as f32,
             time: options.start_time + time_us * 1e-6,
             packet: (firing / per_packet) as u32,
-            raw_distance: (range / model.distance_resolution_m)
-                .round()
-                .clamp(0.0, f64::from(u16::MAX)) as u16,
+            raw_distance: round_clamped(range / model.distance_resolution_m, u16::MAX),
             intensity: byte,
             laser,
             ring: rings[l],
@@ -300,6 +322,53 @@ pub fn to_returns(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_roundings_are_libms() {
+        let mut xs = vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            -2.5,
+            0.499_999_999_999_999_94,
+            -0.499_999_999_999_999_94,
+            254.5,
+            255.49,
+            255.5,
+            65_534.5,
+            65_535.4,
+            65_535.5,
+            1e12,
+            -1e12,
+            4.5e15,
+            9.3e18,
+            -9.3e18,
+            1e300,
+            -1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            f64::MIN_POSITIVE,
+            -f64::MIN_POSITIVE,
+        ];
+        xs.extend((-200_000..200_000).map(|k| f64::from(k) * 0.004_999_7));
+        xs.extend((-2_000..2_000).map(|k| f64::from(k) * 0.5));
+        xs.extend((0..2_000).map(|k| 65_000.0 + f64::from(k) * 0.37));
+        for x in xs {
+            assert_eq!(round_i64(x), x.round() as i64, "{x}");
+            assert_eq!(
+                round_clamped(x, 255),
+                x.round().clamp(0.0, 255.0) as u16,
+                "{x}"
+            );
+            let want = x.round().clamp(0.0, f64::from(u16::MAX)) as u16;
+            assert_eq!(round_clamped(x, u16::MAX), want, "{x}");
+        }
+    }
     use crate::sensor::HDL32E;
 
     fn point(x: f32, y: f32, z: f32, intensity: f32, ring: Option<u16>) -> CloudPoint {

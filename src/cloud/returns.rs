@@ -145,19 +145,9 @@ impl BeamTable {
     }
 }
 
-/// `x.round() as i64` (halves away from zero, saturating, NaN to 0) without the libm call
-/// `round` is on the x86-64 baseline: the integer part, then one step by the fraction,
-/// which `x - t` gives exactly.
-#[inline]
-fn round_i64(x: f64) -> i64 {
-    let t = x as i64;
-    let f = x - t as f64;
-    t.saturating_add(i64::from(f >= 0.5))
-        .saturating_sub(i64::from(f <= -0.5))
-}
-
-/// `x.round().clamp(0.0, max) as u16`, without the libm call (see [`round_i64`]): the clamp
-/// first (max(NaN, 0) is 0), then the step up by the fraction.
+/// `x.round().clamp(0.0, max) as u16` without the libm call `round` is on the x86-64
+/// baseline: the clamp first (max(NaN, 0) is 0), then one step up by the fraction, which
+/// `x - t` gives exactly.
 #[inline]
 fn round_clamped(x: f64, max: u16) -> u16 {
     #[allow(clippy::manual_clamp)] // `clamp` would pass a NaN through
@@ -255,7 +245,8 @@ pub fn to_returns(
         // offset, a late slot in the sequence) may belong to the turn's last firing.
         // Within one turn of the grid either way (azimuth 0 to 360, offsets under one
         // turn), so one add or subtract wraps it (no float remainder).
-        let mut k = round_i64((azimuth * us_per_deg - lead_us[l]) / sequence_us);
+        let mut k =
+            crate::noise::summary::round_to_i64((azimuth * us_per_deg - lead_us[l]) / sequence_us);
         if k < 0 {
             k += n;
         } else if k >= n {
@@ -324,7 +315,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_roundings_are_libms() {
+    fn the_clamped_rounding_is_libms() {
         let mut xs = vec![
             0.0,
             -0.0,
@@ -359,7 +350,6 @@ mod tests {
         xs.extend((-2_000..2_000).map(|k| f64::from(k) * 0.5));
         xs.extend((0..2_000).map(|k| 65_000.0 + f64::from(k) * 0.37));
         for x in xs {
-            assert_eq!(round_i64(x), x.round() as i64, "{x}");
             assert_eq!(
                 round_clamped(x, 255),
                 x.round().clamp(0.0, 255.0) as u16,

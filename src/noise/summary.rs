@@ -80,7 +80,7 @@ fn bin_upper_nm(bin: usize) -> u64 {
 /// 2^52 the truncation `t` and the fraction `x - t` are exact, so the fraction decides
 /// the rounding exactly; NaN, infinities and larger values take `round` itself.
 #[inline]
-fn round_to_i64(x: f64) -> i64 {
+pub(crate) fn round_to_i64(x: f64) -> i64 {
     if x.abs() < 4_503_599_627_370_496.0 {
         let t = x as i64;
         let frac = x - t as f64;

@@ -143,6 +143,20 @@ fn no_frame_without_frames_names_the_whole_capture_not_a_range_nobody_gave() {
 }
 
 #[test]
+fn no_frame_names_the_full_frames_where_they_are() {
+    // The full frames' indexes were guessed from the partial count: a capture whose only
+    // partial sweep is its last (crossroad: full frames 0 and 1) was said to hold 1..2.
+    fails_with(
+        &["--quiet", "run", "fixtures/crossroad.pcap", "--frames", "9"],
+        &["2 full frames (indexes 0..1)"],
+    );
+    fails_with(
+        &["--quiet", "run", "fixtures/parking.pcap", "--frames", "1"],
+        &["1 full frame (indexes 0..0)"],
+    );
+}
+
+#[test]
 fn a_calibration_file_inside_the_output_folder_is_never_replaced() {
     // Issue 30, defect 4: `run C --calibration out/crossroad/summary.json -o out --force`
     // replaced the calibration with the report.

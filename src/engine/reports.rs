@@ -225,11 +225,10 @@ pub fn no_frame_error(
     }
     let s = reader.summary();
     let full = s.full_frames;
-    let (first, last) = if s.partial_frames > 0 {
-        (1, full)
-    } else {
-        (0, full.saturating_sub(1))
-    };
+    // Full sweeps follow each other: from the first one (after a partial first sweep, or
+    // frame 0 when the capture starts on a full turn).
+    let first = s.first_full_frame.unwrap_or(0);
+    let last = first + full.saturating_sub(1);
     let partial_note = if *frames.start() == 0 && *frames.end() == 0 {
         "frame 0 is the partial first sweep (add --keep-partial to process it); "
     } else {

@@ -82,6 +82,9 @@ pub struct CaptureSummary {
     pub full_frames: u32,
     /// Partial sweeps (first and last of the capture).
     pub partial_frames: u32,
+    /// Index of the first full sweep, for messages (not in reports).
+    #[serde(skip)]
+    pub first_full_frame: Option<u32>,
     /// Non-zero returns in the whole capture, partial sweeps included.
     pub returns: u64,
     /// Non-zero returns in full frames.
@@ -392,6 +395,7 @@ impl FrameReader {
                 rotation_hz: None,
                 full_frames: 0,
                 partial_frames: 0,
+                first_full_frame: None,
                 returns: 0,
                 returns_in_full_frames: 0,
                 duration_s: 0.0,
@@ -536,6 +540,7 @@ impl FrameReader {
         } else {
             self.summary.full_frames += 1;
             self.summary.returns_in_full_frames += b.frame.returns.len() as u64;
+            self.summary.first_full_frame.get_or_insert(b.frame.index);
         }
         if !b.frame.partial || self.keep_partial {
             self.ready.push_back(b.frame);

@@ -312,3 +312,75 @@ fn a_folder_that_is_no_dataset_is_refused_naming_it() {
     );
     assert!(!out.exists());
 }
+
+#[test]
+fn a_labelled_sequence_gets_each_scans_scores_and_resumes_them() {
+    // SemanticKITTI labels beside the scans (u32 a point: class in the low 16 bits,
+    // instance in the high ones): returns below -1.2 m are road (40), the rest of those
+    // within 20 m one car (10, instance 7), the others unlabelled (0).
+    let dir = tempfile::tempdir().unwrap();
+    let seq = kitti(dir.path());
+    std::fs::create_dir_all(seq.join("labels")).unwrap();
+    for (i, f) in scans().iter().enumerate() {
+        let labels: Vec<u8> = f
+            .returns
+            .iter()
+            .map(|r| {
+                if r.z < -1.2 {
+                    40u32
+                } else if r.x.hypot(r.y) < 20.0 {
+                    (7 << 16) | 10
+                } else {
+                    0
+                }
+            })
+            .flat_map(u32::to_le_bytes)
+            .collect();
+        std::fs::write(seq.join("labels").join(format!("{i:06}.label")), labels).unwrap();
+    }
+    let out = dir.path().join("out");
+    run(&seq, &out, "2", KITTI);
+    let n = scans().len();
+    for i in 0..n {
+        let text = std::fs::read_to_string(out.join(format!("velodyne/{i:06}.truth.json")))
+            .unwrap_or_else(|e| panic!("scan {i}: {e}"));
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert!(
+            v["labels"]
+                .as_str()
+                .unwrap()
+                .ends_with(&format!("{i:06}.label")),
+            "{v}"
+        );
+        assert!(v["ground_points"].as_u64().unwrap() > 0, "{v}");
+        let p = v["ground_precision"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&p), "{v}");
+    }
+    // A missing score is computed again on a rerun; a scan without its labels' score is
+    // not complete.
+    let before = files(&out);
+    std::fs::remove_file(out.join("velodyne/000001.truth.json")).unwrap();
+    run(&seq, &out, "2", KITTI);
+    assert_eq!(files(&out), before);
+    // A label file of the wrong length names it and writes nothing for that scan.
+    std::fs::write(seq.join("labels/000002.label"), [0u8; 12]).unwrap();
+    let fresh = dir.path().join("fresh");
+    let o = bin2()
+        .args(["--quiet", "run"])
+        .arg(&seq)
+        .args(KITTI)
+        .args(["-c", "configs/paper.toml", "-o"])
+        .arg(&fresh)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("000002.label"), "{err}");
+    for ext in ["bin", "fate.csv", "truth.json"] {
+        assert!(
+            !fresh.join(format!("velodyne/000002.{ext}")).exists(),
+            "{ext}"
+        );
+    }
+    assert!(fresh.join("velodyne/000003.truth.json").is_file());
+}

@@ -79,18 +79,7 @@ impl CloudReader {
     pub fn open(path: &Path, options: &CloudOptions) -> Result<Self> {
         let (frame, format, summary, order, points) = load(path, options)?;
         drop(frame);
-        let found = match &options.labels {
-            Some(p) => Some(LabelsBeside::PerPoint(p.clone())),
-            None => labels_beside(path),
-        };
-        let truth = match found {
-            Some(labels) => Some(Box::new(CloudTruth {
-                truth: read_truth(&labels, &points)?,
-                labels: labels.shown(),
-                order,
-            })),
-            None => None,
-        };
+        let truth = truth_of(path, options, &points, order)?.map(Box::new);
         Ok(CloudReader {
             path: path.to_path_buf(),
             options: Box::new(options.clone()),
@@ -127,13 +116,38 @@ impl CloudReader {
 /// before a run writes anything and then when the frame is needed): the frame (index 0),
 /// the file's format, what it held, and the input index of each return, in return order.
 /// A dataset run, which checks and processes each file in one go, reads it once.
-pub fn read_frame(
+/// Also gives the scan's ground truth, when labels were given or found beside it.
+pub fn read_frame(path: &Path, options: &CloudOptions) -> Result<ReadFrame> {
+    let (frame, format, summary, order, points) = load(path, options)?;
+    let truth = truth_of(path, options, &points, order.clone())?;
+    Ok((frame, format, summary, order, truth))
+}
+
+/// The ground truth of the scan at `path` from its labels (given in `options`, else found
+/// beside it), checked against its points; `order` is the input index of each return.
+fn truth_of(
     path: &Path,
     options: &CloudOptions,
-) -> Result<(Frame, Format, CloudSummary, Vec<u32>)> {
-    let (frame, format, summary, order, _) = load(path, options)?;
-    Ok((frame, format, summary, order))
+    points: &[CloudPoint],
+    order: Vec<u32>,
+) -> Result<Option<CloudTruth>> {
+    let found = match &options.labels {
+        Some(p) => Some(LabelsBeside::PerPoint(p.clone())),
+        None => labels_beside(path),
+    };
+    Ok(match found {
+        Some(labels) => Some(CloudTruth {
+            truth: read_truth(&labels, points)?,
+            labels: labels.shown(),
+            order,
+        }),
+        None => None,
+    })
 }
+
+/// What [`read_frame`] gives: the frame, the format, the summary, the input index of each
+/// return, the ground truth.
+pub type ReadFrame = (Frame, Format, CloudSummary, Vec<u32>, Option<CloudTruth>);
 
 /// What [`load`] gives: the frame, the format, the summary, the input index of each
 /// return, the points.

@@ -285,14 +285,23 @@ pub fn run(plan: &Plan, request: &RunRequest, dir: &Path, global: Global) -> Res
         let stem = data.stem(path);
         let scan_out = out_dir.join(format!("{stem}{}", data.layout.extension()));
         let fate_out = out_dir.join(format!("{stem}.fate.csv"));
-        if resume && scan_out.is_file() && fate_out.is_file() {
+        // A labelled scan's scores: written before the scan, so a scan file on disk means
+        // all of its outputs are.
+        let truth_out = crate::cloud::truth::labels_beside(path)
+            .map(|_| out_dir.join(format!("{stem}.truth.json")));
+        if resume
+            && scan_out.is_file()
+            && fate_out.is_file()
+            && truth_out.as_ref().is_none_or(|t| t.is_file())
+        {
             skipped.fetch_add(1, Ordering::Relaxed);
             progress.inc(1);
             return Ok(None);
         }
         let mut own = inputs.clone();
         own[inputs.len() - 1] = path;
-        let done = run_file(plan, request, &data, i, &scan_out, &fate_out, &own);
+        let outs = (scan_out.as_path(), fate_out.as_path(), truth_out.as_deref());
+        let done = run_file(plan, request, &data, i, outs, &own);
         progress.inc(1);
         done.map(Some)
     };
@@ -353,13 +362,12 @@ fn run_file(
     request: &RunRequest,
     data: &Dataset,
     i: usize,
-    scan_out: &Path,
-    fate_out: &Path,
+    (scan_out, fate_out, truth_out): (&Path, &Path, Option<&Path>),
     inputs: &[&Path],
 ) -> Result<FileDone> {
     let path = &data.scans[i];
     let options = cloud_options(request, path, data.layout.format())?;
-    let (mut frame, format, _, order) = read_frame(path, &options)?;
+    let (mut frame, format, _, order, truth) = read_frame(path, &options)?;
     // The file's index in sorted order is its frame index: its random streams derive from
     // (seed, index, stage), the same whether it runs in a shard or in the whole run.
     frame.index = u32::try_from(i)
@@ -371,12 +379,23 @@ fn run_file(
         .map_err(|e| anyhow::anyhow!("{}: {e:#}", path.display()))?;
     let rows = super::frame_files::scan_points(&result);
     let kept = rows.len();
-    let written =
-        super::frame_files::write_scan_files(format, &order, rows, scan_out, fate_out, inputs);
+    let written = (|| -> Result<()> {
+        if let (Some(t), Some(out)) = (&truth, truth_out) {
+            let bands = &crate::sweep::metrics::DEFAULT_BANDS;
+            let score = t.score(&result, plan.config.cluster.min_points, bands);
+            crate::writers::atomic::write_atomically(out, inputs, |w| {
+                serde_json::to_writer_pretty(&mut *w, &score).map_err(std::io::Error::other)
+            })?;
+        }
+        super::frame_files::write_scan_files(format, &order, rows, scan_out, fate_out, inputs)
+    })();
     if written.is_err() {
-        // The sidecar went first: without its scan it is no output of this file.
+        // The sidecars went first: without their scan they are no output of this file.
         if !scan_out.exists() {
             std::fs::remove_file(fate_out).ok();
+            if let Some(t) = truth_out {
+                std::fs::remove_file(t).ok();
+            }
         }
     }
     written?;

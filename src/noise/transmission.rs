@@ -73,6 +73,9 @@ pub fn attenuate(power: &mut [f64], range: &[f32], fate: &[super::Fate], two_alp
 /// (four doubles a vector instead of SSE2's two; detected once, at run time, because the
 /// crate is built for the x86-64 baseline). The results are the same bits: AVX2 brings
 /// wider vectors, not fused multiply-adds, and the compiler never fuses on its own.
+/// Only a small `f` is reliably inlined into the AVX2 function: the larger loops (the Mie
+/// rain pass, the intensity rule) have their own `#[target_feature]` twin instead, which
+/// measured 4 M instructions a frame less than going through this closure.
 #[inline(always)]
 pub fn wide<R>(f: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]

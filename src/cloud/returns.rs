@@ -145,18 +145,6 @@ impl BeamTable {
     }
 }
 
-/// `x.round().clamp(0.0, max) as u16` without the libm call `round` is on the x86-64
-/// baseline: the clamp first (max(NaN, 0) is 0), then one step up by the fraction, which
-/// `x - t` gives exactly.
-#[inline]
-fn round_clamped(x: f64, max: u16) -> u16 {
-    #[allow(clippy::manual_clamp)] // `clamp` would pass a NaN through
-    let c = x.max(0.0).min(f64::from(max));
-    let t = c as u32;
-    let up = u32::from(x - f64::from(t) >= 0.5);
-    (t + up).min(u32::from(max)) as u16
-}
-
 /// Turns `points` into returns of `model` (see the module's documentation). Errors name
 /// `source` and the point index: a non-finite coordinate or intensity, a ring at or above
 /// the model's number of lasers, a rotation rate outside the model's range.
@@ -265,7 +253,7 @@ pub fn to_returns(
         };
         taken[firing as usize * lasers + l] = true;
         let time_us = firing as f64 * sequence_us + laser_us[l];
-        let byte = round_clamped(f64::from(p.intensity) * scale, 255) as u8;
+        let byte = crate::noise::round_clamped(f64::from(p.intensity) * scale, 255) as u8;
         slot_of.push(firing as u32 * lasers as u32 + u32::from(laser));
         placed.push(Return {
             x: p.x,
@@ -276,7 +264,10 @@ pub fn to_returns(
             elevation: elevation as f32,
             time: options.start_time + time_us * 1e-6,
             packet: (firing / per_packet) as u32,
-            raw_distance: round_clamped(range / model.distance_resolution_m, u16::MAX),
+            raw_distance: crate::noise::round_clamped(
+                range / model.distance_resolution_m,
+                u16::MAX,
+            ),
             intensity: byte,
             laser,
             ring: rings[l],
@@ -351,12 +342,12 @@ mod tests {
         xs.extend((0..2_000).map(|k| 65_000.0 + f64::from(k) * 0.37));
         for x in xs {
             assert_eq!(
-                round_clamped(x, 255),
+                crate::noise::round_clamped(x, 255),
                 x.round().clamp(0.0, 255.0) as u16,
                 "{x}"
             );
             let want = x.round().clamp(0.0, f64::from(u16::MAX)) as u16;
-            assert_eq!(round_clamped(x, u16::MAX), want, "{x}");
+            assert_eq!(crate::noise::round_clamped(x, u16::MAX), want, "{x}");
         }
     }
     use crate::sensor::HDL32E;

@@ -734,19 +734,25 @@ impl<'a> View<'a> {
 }
 
 /// `x` rounded half up and clamped to a byte, the value of
-/// [`sensor::scale_byte`]`(1, x)` (`round(x).clamp(0, 255)`) without its branch: the cast
-/// saturates (a negative x gives 0, NaN gives 0 and then x - t is NaN, so no step up) and
-/// `x - t` is exact for t <= 255 <= x or 0 <= x - t < 1. The clamp comes first, in
-/// floating point, so the conversion is a plain one that vectorises.
+/// [`sensor::scale_byte`]`(1, x)` (`round(x).clamp(0, 255)`): [`round_clamped`] to 255.
 #[inline(always)]
 fn round_byte(x: f64) -> u8 {
-    // max(NaN, 0) is 0, so `c` is never NaN (`clamp` would pass a NaN through).
+    round_clamped(x, 255) as u8
+}
+
+/// `x.round().clamp(0.0, max) as u16` without the libm call `round` is on the x86-64
+/// baseline and without a branch: the clamp first, in floating point (max(NaN, 0) is 0,
+/// so the conversion is a plain one that vectorises), then one step up by the fraction,
+/// which `x - t` gives exactly (t <= max <= x, or 0 <= x - t < 1).
+#[inline(always)]
+pub(crate) fn round_clamped(x: f64, max: u16) -> u16 {
+    // `clamp` would pass a NaN through.
     #[allow(clippy::manual_clamp)]
-    let c = x.max(0.0).min(255.0);
-    // SAFETY: c is finite and in [0, 255], so its integer part fits an i32.
+    let c = x.max(0.0).min(f64::from(max));
+    // SAFETY: c is finite and in [0, 65535], so its integer part fits an i32.
     let t = unsafe { c.to_int_unchecked::<i32>() };
     let up = i32::from(x - f64::from(t) >= 0.5);
-    (t + up).min(255) as u8
+    (t + up).min(i32::from(max)) as u16
 }
 
 /// The intensity rule on recorded bytes `bytes` in place (module documentation,

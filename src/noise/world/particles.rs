@@ -20,8 +20,8 @@
 //! other stages.
 
 use super::mie::{Dsd, MieTable};
-use crate::noise::{Echo, Fate, NoisyFrame};
-use rand::{Rng, RngCore};
+use crate::noise::{Echo, Fate, NoisyFrame, SlotId};
+use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
 /// LISA ignores particles nearer than this (m).
@@ -260,11 +260,14 @@ struct SizeBin {
 /// overlap at its r_b, the largest it reaches there, with the rest of xi(r) decided per
 /// particle), so the echoes have exactly the distribution of
 /// drawing every particle in the cone and keeping the detectable ones (tested against
-/// that brute force), at a cost of one uniform per beam.
+/// that brute force), at a cost of two uniforms per beam that holds a particle.
 ///
-/// Draw pattern: one 32-bit uniform per lit beam, whatever its range (so as a rate grows,
-/// the beams that hold particles at a lower rate still hold them); three per particle drawn,
-/// and with [`Population::optics`] one more per particle bright enough to be detected.
+/// Draw pattern ([`Population::beams`]): for each beam that holds a particle, one uniform
+/// for the geometric gap from the previous such beam and one for its count; three per
+/// particle drawn, and with [`Population::optics`] one more per particle bright enough to
+/// be detected. A sweep of the rate reuses the same stream (common random numbers), but
+/// the beams holding particles at a lower rate are not always among those at a higher
+/// one: the coupling is in distribution, not beam by beam.
 #[derive(Clone, Debug)]
 pub struct Population {
     /// tan of the full beam divergence.
@@ -473,37 +476,72 @@ impl Population {
         p.c * (0..self.bins.len()).map(|b| self.weight(p, b)).sum::<f64>()
     }
 
-    /// Draws the detectable particles of a beam whose target lies at `range` m (infinite
-    /// for an empty slot) and calls `out` with each echo; `alpha` is the extinction of the
-    /// medium (1/m). Always draws one 32-bit uniform first.
-    pub fn beam(
+    /// Draws the detectable particles of `n` beams in order and calls `out(k, echo)` with
+    /// each echo of beam k; `range(k)` is beam k's target range in metres (infinite for an
+    /// empty slot, `None` for a beam that lights nothing, such as an occluded one) and
+    /// `alpha` the extinction of the medium (1/m).
+    ///
+    /// Each beam's superset region holds Poisson(lambda_max) particles, so whether a beam
+    /// holds any is a Bernoulli trial of probability 1 - p0 and the gap to the next beam
+    /// that does is geometric: one draw per lit beam, G = floor(-ln U / lambda_max),
+    /// instead of one per beam (a 32-bit draw and its test for each of a frame's 50,000
+    /// beams were a quarter of a weather chain's time, while rain lights about 0.2 % of
+    /// them and moderate snow 8 %). A lit beam then draws its count from Poisson
+    /// conditioned on at least one, by inversion, and its particles.
+    pub fn beams(
         &self,
         p: &Prepared,
         rng: &mut ChaCha8Rng,
+        n: usize,
+        mut range: impl FnMut(usize) -> Option<f64>,
+        alpha: f64,
+        mut out: impl FnMut(usize, Echo),
+    ) {
+        let lambda = p.lambda_max;
+        if !(lambda > 0.0 && lambda.is_finite()) {
+            return;
+        }
+        let mut k = 0usize;
+        loop {
+            // U in (0, 1]: -ln U in [0, inf); `as` saturates a huge gap.
+            let u: f64 = 1.0 - rng.random::<f64>();
+            let gap = (-u.ln() / lambda).floor() as usize;
+            k = k.saturating_add(gap);
+            if k >= n {
+                return;
+            }
+            // Also false for a NaN range.
+            if let Some(r) = range(k).filter(|&r| r > p.lo) {
+                // The count given at least one: inversion of a uniform on [p0, 1).
+                let v: f64 = rng.random();
+                let u = p.p0_max + v * (1.0 - p.p0_max);
+                let (mut count, mut term, mut cdf) =
+                    (1u32, p.p0_max * lambda, p.p0_max * (1.0 + lambda));
+                while u >= cdf && count < 100_000 {
+                    count += 1;
+                    term *= lambda / f64::from(count);
+                    cdf += term;
+                }
+                self.particles(p, rng, count, r, alpha, |e| out(k, e));
+            }
+            k += 1;
+        }
+    }
+
+    /// The `count` particles of a lit beam's superset region (every bin to its r_b,
+    /// whatever the target's range): those behind the target at `range` and those below
+    /// the threshold are dropped (thinning a Poisson process keeps it Poisson, so this is
+    /// exact, and it spares the per-beam sum over the bins a nearer target would need).
+    fn particles(
+        &self,
+        p: &Prepared,
+        rng: &mut ChaCha8Rng,
+        count: u32,
         range: f64,
         alpha: f64,
         mut out: impl FnMut(Echo),
     ) {
-        // A 32-bit uniform (the midpoint of its 2^-32 cell): most beams draw no particle,
-        // and half a 64-bit draw per beam was a tenth of a weather chain's time.
-        let u = (f64::from(rng.next_u32()) + 0.5) * (1.0 / 4_294_967_296.0);
-        // Also false for a NaN range.
-        if range.is_nan() || range <= p.lo || u < p.p0_max {
-            return;
-        }
-        // Every beam draws the particles of the whole superset region (to each bin's r_b,
-        // whatever the target's range) and drops those behind its target: thinning a
-        // Poisson process keeps it Poisson, so this is exact, and it spares the per-beam
-        // sum over the bins a nearer target would need (most beams draw no particle).
-        let lambda = p.lambda_max;
-        // Poisson inversion of the same uniform.
-        let (mut count, mut term, mut cdf) = (1u32, p.p0_max * lambda, p.p0_max * (1.0 + lambda));
-        while u >= cdf && count < 100_000 {
-            count += 1;
-            term *= lambda / f64::from(count);
-            cdf += term;
-        }
-        let total = lambda / p.c;
+        let total = p.lambda_max / p.c;
         let w3 = |r: f64| {
             let w = p.a + r * p.t;
             w * w * w
@@ -553,7 +591,7 @@ impl Population {
 
 /// Proposes the echoes of `pop` for every beam of `frame` (recorded returns, whatever
 /// their fate except occluded, then vacant slots when `empty_slots`), drawing from `rng`
-/// in that order.
+/// only for the beams that light a particle ([`Population::beams`]).
 pub fn propose_population_echoes(
     frame: &mut NoisyFrame,
     rng: &mut ChaCha8Rng,
@@ -570,24 +608,37 @@ pub fn propose_population_echoes(
         .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2);
     let prep = pop.prepare(kappa, frame.threshold, frame.min_range);
     let slots = frame.slots();
-    for i in 0..frame.clean_len {
-        // Occlusion removes the beam: no particle is lit (and no draw is made).
-        if frame.fate[i] == Fate::Occluded {
-            continue;
-        }
-        let range = f64::from(frame.range[i]);
-        pop.beam(&prep, rng, range, alpha, |e| {
-            frame.propose_slot(slots.slot_of(i), e)
-        });
-    }
-    if empty_slots {
-        for slot in 0..slots.len() as u32 {
-            if slots.is_vacant(slot) {
-                pop.beam(&prep, rng, f64::INFINITY, alpha, |e| {
-                    frame.propose_slot(slot, e)
-                });
-            }
-        }
+    let vacant: Vec<SlotId> = if empty_slots {
+        (0..slots.len() as u32)
+            .filter(|&s| slots.is_vacant(s))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let n = frame.clean_len;
+    // Beams 0..n are the recorded returns, then the vacant slots.
+    let mut lit: Vec<(SlotId, Echo)> = Vec::new();
+    pop.beams(
+        &prep,
+        rng,
+        n + vacant.len(),
+        |k| match k.checked_sub(n) {
+            // Occlusion removes the beam: no particle is lit.
+            None if frame.fate[k] == Fate::Occluded => None,
+            None => Some(f64::from(frame.range[k])),
+            Some(_) => Some(f64::INFINITY),
+        },
+        alpha,
+        |k, e| {
+            let slot = match k.checked_sub(n) {
+                None => slots.slot_of(k),
+                Some(v) => vacant[v],
+            };
+            lit.push((slot, e));
+        },
+    );
+    for (slot, e) in lit {
+        frame.propose_slot(slot, e);
     }
 }
 
@@ -714,11 +765,14 @@ mod population_tests {
         let mut rng = ChaCha8Rng::seed_from_u64(12);
         let prep = pop.prepare(100.0, th, 0.0);
         let mut s = [0.0; 5];
-        for _ in 0..beams {
-            pop.beam(&prep, &mut rng, range, 0.0, |e| {
-                add(&mut s, f64::from(e.range), e.power)
-            });
-        }
+        pop.beams(
+            &prep,
+            &mut rng,
+            beams as usize,
+            |_| Some(range),
+            0.0,
+            |_, e| add(&mut s, f64::from(e.range), e.power),
+        );
         s
     }
 

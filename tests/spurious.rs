@@ -313,3 +313,132 @@ fn a_dual_slot_with_only_its_strongest_return_resolves() {
     assert_eq!(f.cause[i], 2);
     assert_eq!(f.range[i], 3.0);
 }
+
+/// A frame of `firings` firings of 32 lasers in `mode` (`Strongest`, `Last` or dual),
+/// some slots empty, fates and powers drawn from small sets so that ties are common.
+fn random_frame(seed: u64, firings: u32, mode: ReturnKind) -> NoisyFrame {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let kinds: &[ReturnKind] = match mode {
+        ReturnKind::Strongest | ReturnKind::Last => &[mode],
+        _ => &[ReturnKind::DualLast, ReturnKind::DualStrongest],
+    };
+    let mut v = Vec::new();
+    for firing in 0..firings {
+        for &kind in kinds {
+            for laser in 0..32u8 {
+                if rng.random_bool(0.1) {
+                    continue;
+                }
+                v.push(ret(
+                    laser,
+                    [5.0, 10.0, 20.0][rng.random_range(0..3)],
+                    firing,
+                    kind,
+                ));
+            }
+        }
+    }
+    let mut f = frame(v);
+    for i in 0..f.clean_len {
+        f.power[i] = [0.0005, 0.002, 0.004, 0.008][rng.random_range(0..4)];
+        f.fate[i] = [
+            Fate::Kept,
+            Fate::Kept,
+            Fate::Kept,
+            Fate::Occluded,
+            Fate::BelowPower,
+        ][rng.random_range(0..5)];
+    }
+    f
+}
+
+/// An echo from the same small sets (a NaN power for none, sometimes).
+fn random_echo(rng: &mut rand_chacha::ChaCha8Rng) -> Echo {
+    use rand::Rng;
+    Echo {
+        range: [1.5, 5.0, 10.0, 20.0][rng.random_range(0..4)],
+        power: [0.0005, 0.002, 0.004, 0.008, f64::NAN][rng.random_range(0..5)],
+    }
+}
+
+#[test]
+fn an_echo_for_every_return_resolves_as_the_same_echoes_proposed_one_by_one() {
+    // The column of `propose_each` (fog's echoes) stands for candidates proposed in
+    // return order, after the earlier stages' and before its own stage's others: the
+    // same fates, causes, ranges, powers and bytes in every return mode, ties included.
+    use rand::{Rng, SeedableRng};
+    for mode in [
+        ReturnKind::Strongest,
+        ReturnKind::Last,
+        ReturnKind::DualLast,
+    ] {
+        for seed in 0..40 {
+            let mut column = random_frame(seed, 6, mode);
+            let mut one_by_one = random_frame(seed, 6, mode);
+            let slots = column.slots();
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1000 + seed);
+            // Stage 0: a few echoes anywhere; stage 1: the column, then more echoes;
+            // stage 2: a few more.
+            let early: Vec<(u32, Echo)> = (0..20)
+                .map(|_| {
+                    (
+                        rng.random_range(0..slots.len() as u32),
+                        random_echo(&mut rng),
+                    )
+                })
+                .collect();
+            let each: Vec<Echo> = (0..column.clean_len)
+                .map(|_| random_echo(&mut rng))
+                .collect();
+            // The rest of stage 1: every empty slot and some occupied ones.
+            let vacant: Vec<(u32, Echo)> = (0..slots.len() as u32)
+                .filter(|&s| slots.is_vacant(s) || s % 7 == 0)
+                .map(|s| (s, random_echo(&mut rng)))
+                .collect();
+            let late: Vec<(u32, Echo)> = (0..20)
+                .map(|_| {
+                    (
+                        rng.random_range(0..slots.len() as u32),
+                        random_echo(&mut rng),
+                    )
+                })
+                .collect();
+            for (f, dense) in [(&mut column, true), (&mut one_by_one, false)] {
+                f.stage = 0;
+                for &(s, e) in &early {
+                    f.propose_slot(s, e);
+                }
+                f.stage = 1;
+                if dense {
+                    f.propose_each(each.clone());
+                } else {
+                    for (i, &e) in each.iter().enumerate() {
+                        if !e.power.is_nan() {
+                            f.propose(i, e);
+                        }
+                    }
+                }
+                for &(s, e) in &vacant {
+                    f.propose_slot(s, e);
+                }
+                f.stage = 2;
+                for &(s, e) in &late {
+                    f.propose_slot(s, e);
+                }
+            }
+            assert_eq!(column.proposals(), one_by_one.candidates, "{mode:?} {seed}");
+            resolve(&mut column);
+            resolve(&mut one_by_one);
+            let what = format!("{mode:?} seed {seed}");
+            assert_eq!(column.fate, one_by_one.fate, "{what}");
+            assert_eq!(column.cause, one_by_one.cause, "{what}");
+            assert_eq!(column.range, one_by_one.range, "{what}");
+            assert_eq!(column.power, one_by_one.power, "{what}");
+            assert_eq!(column.clean, one_by_one.clean, "{what}");
+            assert_eq!(column.moved.intensity, one_by_one.moved.intensity, "{what}");
+            // Not vacuous: echoes won.
+            assert!(column.fate.contains(&Fate::Replaced), "{what}");
+        }
+    }
+}

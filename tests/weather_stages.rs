@@ -150,8 +150,8 @@ fn fog_echo_power_follows_the_paper_integral_within_1_percent() {
             &stage("fog", &body),
             vec![ret(0, r0 as f32, 0, 0, ReturnKind::Strongest)],
         );
-        assert_eq!(f.candidates.len(), 1, "V {v} R0 {r0}");
-        let echo = f.candidates[0].echo;
+        assert_eq!(f.proposals().len(), 1, "V {v} R0 {r0}");
+        let echo = f.proposals()[0].echo;
         let (want_r, want_p) = reference_echo(v, r0, r1, r2, tau * 1e-9, kappa);
         assert!(
             (echo.power / want_p - 1.0).abs() < 0.01,
@@ -173,7 +173,7 @@ fn fog_echo_power_follows_the_paper_integral_within_1_percent() {
         &stage("fog", "visibility_m = 100\nbeta_r = 0.138"),
         vec![ret(0, 50.0, 0, 0, ReturnKind::Strongest)],
     );
-    assert!((three.candidates[0].echo.power / one.candidates[0].echo.power - 3.0).abs() < 1e-12);
+    assert!((three.proposals()[0].echo.power / one.proposals()[0].echo.power - 3.0).abs() < 1e-12);
 }
 
 #[test]
@@ -525,21 +525,21 @@ fn fog_range_noise_follows_hahner_v1() {
         ),
         returns,
     );
-    let base = f64::from(plain.candidates[0].echo.range);
+    let base = f64::from(plain.proposals()[0].echo.range);
     assert!(plain
-        .candidates
+        .proposals()
         .iter()
         .all(|c| f64::from(c.echo.range) == base));
     let (lo, hi) = (base * r0 / (r0 + n), base * r0 / (r0 - n));
     let mut below = 0;
     let mut sum = 0.0;
-    for c in &noisy.candidates {
+    for c in &noisy.proposals() {
         let r = f64::from(c.echo.range);
         assert!(r >= lo - 1e-5 && r <= hi + 1e-5, "{r} not in [{lo}, {hi}]");
         below += usize::from(r < base);
         sum += r / base;
     }
-    let m = noisy.candidates.len();
+    let m = noisy.proposals().len();
     assert_eq!(m, 3000);
     // E[R0/U] for U uniform on [R0 - n, R0 + n] = R0 / (2 n) ln((R0 + n)/(R0 - n)).
     let want = r0 / (2.0 * n) * ((r0 + n) / (r0 - n)).ln();

@@ -75,7 +75,7 @@ use std::sync::Arc;
 
 pub use detection::apply_detection;
 pub use power::{IdealPower, PowerConstants};
-pub use spurious::{Echo, SlotId, Slots};
+pub use spurious::{DenseEchoes, Echo, SlotId, Slots};
 pub use summary::NoiseSummary;
 
 /// What happened to a return; the first cause in pipeline order wins.
@@ -162,6 +162,13 @@ pub struct NoisyFrame {
     pub stage: u8,
     /// Echoes proposed by the stages, resolved once per firing slot after the chain.
     pub candidates: Vec<spurious::Candidate>,
+    /// Echoes one stage proposed for every recorded return at once (fog), resolved with
+    /// `candidates` as if proposed in their place ([`NoisyFrame::propose_each`]).
+    pub dense: Option<spurious::DenseEchoes>,
+    /// The recorded intensity bytes of the clean returns, when the chain read them with
+    /// the ideal powers: the copy the intensity column starts from when an echo replaces
+    /// a return (rather than one more strided read of `clean`).
+    pub recorded_intensity: Option<Vec<u8>>,
     /// The firing slots of the frame, built when a stage first asks for them.
     pub slots: Option<Arc<Slots>>,
     /// The ideal-power model, for the intensity of spurious echoes.
@@ -407,6 +414,47 @@ fn room_for_added(n: usize) -> usize {
     n / 4 + 64
 }
 
+/// The ranges, ideal powers and intensity bytes of `returns`, and their firing slots
+/// when `slots` (and the frame is of the usual kind, [`spurious::SlotsBuilder`]), with a
+/// copy of the returns appended to `copy` when given: one pass over the returns, a
+/// chunk at a time, where separate passes each streamed a frame's 2.4 MB of returns from
+/// beyond the L2 cache.
+#[allow(clippy::type_complexity)]
+fn start_columns(
+    returns: &[Return],
+    mut copy: Option<&mut Vec<Return>>,
+    ideal: &IdealPower,
+    slots: bool,
+) -> ((Vec<f32>, Vec<f64>, Vec<u8>), Option<Slots>) {
+    let n = returns.len();
+    let mut range = Vec::with_capacity(n + room_for_added(n));
+    let mut power = Vec::with_capacity(n + room_for_added(n));
+    let mut bytes = Vec::with_capacity(n);
+    let mut builder = if slots {
+        spurious::SlotsBuilder::new(returns)
+    } else {
+        None
+    };
+    for chunk in returns.chunks(LAYOUT_CHUNK) {
+        if let Some(c) = copy.as_mut() {
+            c.extend_from_slice(chunk);
+        }
+        for r in chunk {
+            range.push(r.range);
+            bytes.push(r.intensity);
+        }
+        if builder.as_mut().is_some_and(|b| !b.push(chunk)) {
+            builder = None;
+        }
+    }
+    // The powers from the columns: a loop that vectorises (a division a return).
+    crate::noise::transmission::wide(|| {
+        power.extend(range.iter().zip(&bytes).map(|(&r, &b)| ideal.power(b, r)));
+    });
+    let built = builder.and_then(spurious::SlotsBuilder::finish);
+    ((range, power, bytes), built)
+}
+
 impl NoisyFrame {
     /// Starts a noisy frame: ranges are the clean ranges, powers the ideal powers.
     pub fn new(index: u32, clean: Vec<Return>, ideal: &IdealPower) -> Self {
@@ -419,21 +467,40 @@ impl NoisyFrame {
     }
 
     /// Same as [`NoisyFrame::new`], also returning the recorded intensity bytes, read in
-    /// the same pass (for the intensity rule).
-    fn new_keeping_bytes(index: u32, clean: Vec<Return>, ideal: &IdealPower) -> (Self, Vec<u8>) {
-        let n = clean.len();
-        let mut range = Vec::with_capacity(n + room_for_added(n));
-        let mut power = Vec::with_capacity(n + room_for_added(n));
-        let mut bytes = Vec::with_capacity(n);
-        for r in &clean {
-            range.push(r.range);
-            power.push(ideal.power(r.intensity, r.range));
-            bytes.push(r.intensity);
-        }
-        (
-            NoisyFrame::of_parts(index, clean, range, power, None),
-            bytes,
-        )
+    /// the same pass (for the intensity rule), and with the firing slots built in it
+    /// when `slots` (for chains whose stages propose echoes).
+    fn new_keeping_bytes(
+        index: u32,
+        clean: Vec<Return>,
+        ideal: &IdealPower,
+        slots: bool,
+    ) -> (Self, Vec<u8>) {
+        let (columns, built) = start_columns(&clean, None, ideal, slots);
+        NoisyFrame::of_columns(index, clean, columns, built)
+    }
+
+    /// [`NoisyFrame::new_keeping_bytes`] of a copy of `returns`, made in the same pass.
+    fn copy_keeping_bytes(
+        index: u32,
+        returns: &[Return],
+        ideal: &IdealPower,
+        slots: bool,
+    ) -> (Self, Vec<u8>) {
+        let n = returns.len();
+        let mut clean = Vec::with_capacity(n + room_for_added(n));
+        let (columns, built) = start_columns(returns, Some(&mut clean), ideal, slots);
+        NoisyFrame::of_columns(index, clean, columns, built)
+    }
+
+    fn of_columns(
+        index: u32,
+        clean: Vec<Return>,
+        (range, power, bytes): (Vec<f32>, Vec<f64>, Vec<u8>),
+        slots: Option<Slots>,
+    ) -> (Self, Vec<u8>) {
+        let mut frame = NoisyFrame::of_parts(index, clean, range, power, None);
+        frame.slots = slots.map(Arc::new);
+        (frame, bytes)
     }
 
     /// Same as [`NoisyFrame::new`] with its [`Layout`] built in the same pass over the
@@ -476,6 +543,8 @@ impl NoisyFrame {
             min_range: crate::config::DetectionConfig::default().min_range_m,
             stage: 0,
             candidates: Vec::new(),
+            dense: None,
+            recorded_intensity: None,
             slots: None,
             power_model: None,
             moved: Moved::default(),
@@ -938,6 +1007,9 @@ pub struct NoiseChain {
     detection: crate::config::DetectionConfig,
     /// Some stage reads the frame's layout.
     layout: bool,
+    /// True when a stage may propose echoes: the firing slots are built as the frame
+    /// starts.
+    echoes: bool,
 }
 
 impl NoiseChain {
@@ -955,6 +1027,7 @@ impl NoiseChain {
             .collect::<Vec<Arc<dyn NoiseStage>>>();
         NoiseChain {
             layout: stages.iter().any(|s| s.uses_layout()),
+            echoes: stages.iter().any(|s| s.proposes_echoes()),
             seed: config.seed,
             power: Arc::new(IdealPower::new(
                 &config.power,
@@ -984,10 +1057,16 @@ impl NoiseChain {
 
     /// Runs ideal power, the stages and the detection filters on a copy of `frame`.
     pub fn process(&self, frame: &Frame) -> NoisyFrame {
-        let n = frame.returns.len();
-        let mut returns = Vec::with_capacity(n + room_for_added(n));
-        returns.extend_from_slice(&frame.returns);
-        self.process_returns(frame.index, returns)
+        if self.stages.is_empty() || self.layout {
+            let n = frame.returns.len();
+            let mut returns = Vec::with_capacity(n + room_for_added(n));
+            returns.extend_from_slice(&frame.returns);
+            return self.process_returns(frame.index, returns);
+        }
+        // The copy made in the pass that reads the returns.
+        let (noisy, bytes) =
+            NoisyFrame::copy_keeping_bytes(frame.index, &frame.returns, &self.power, self.echoes);
+        self.process_started(frame.index, (noisy, Some(bytes)))
     }
 
     /// Same as [`NoiseChain::process`], taking the frame's returns without copying.
@@ -1004,14 +1083,25 @@ impl NoiseChain {
         }
         // The recorded bytes for the intensity rule: read with the ideal powers when
         // no layout (which holds them) is built.
-        let (mut noisy, recorded) = if self.layout {
+        let started = if self.layout {
             (NoisyFrame::with_layout(index, returns, &self.power), None)
         } else if self.stages.is_empty() {
             (NoisyFrame::new(index, returns, &self.power), None)
         } else {
-            let (f, b) = NoisyFrame::new_keeping_bytes(index, returns, &self.power);
+            let (f, b) = NoisyFrame::new_keeping_bytes(index, returns, &self.power, self.echoes);
             (f, Some(b))
         };
+        self.process_started(index, started)
+    }
+
+    /// The rest of [`NoiseChain::process_returns`] from the started frame and, when read,
+    /// its recorded intensity bytes.
+    fn process_started(
+        &self,
+        index: u32,
+        (mut noisy, recorded): (NoisyFrame, Option<Vec<u8>>),
+    ) -> NoisyFrame {
+        noisy.recorded_intensity = recorded;
         noisy.threshold = self.detection.min_power;
         noisy.min_range = self.detection.min_range_m;
         noisy.power_model = Some(Arc::clone(&self.power));
@@ -1031,7 +1121,7 @@ impl NoiseChain {
         spurious::resolve(&mut noisy);
         apply_detection(&mut noisy, &self.detection);
         if !self.stages.is_empty() {
-            match recorded {
+            match noisy.recorded_intensity.take() {
                 Some(bytes) => noisy.intensity_rule_on(&ideal, bytes),
                 None => noisy.apply_intensity_rule(&ideal),
             }
@@ -1208,6 +1298,43 @@ mod tests {
                 }
             })
             .collect()
+    }
+
+    #[test]
+    fn a_copied_frame_gives_what_the_owned_frame_gives() {
+        // `process` copies the returns in the pass that reads them and builds the firing
+        // slots there; `process_owned` reads the returns it is given. Weather with
+        // echoes of every kind, and a sensor chain (the layout's path).
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+        for name in [
+            "adverse-weather.toml",
+            "pdiagram-world.toml",
+            "pdiagram-sensor.toml",
+        ] {
+            let path = dir.join(name);
+            let (cfg, _) = Config::load(Some(&path), &[], None).unwrap();
+            let chain = NoiseChain::new(&cfg);
+            let frame = Frame {
+                index: 3,
+                partial: false,
+                returns: returns(5000),
+            };
+            let a = chain.process(&frame);
+            let b = chain.process_owned(frame.clone());
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&a.power), bits(&b.power), "{name}");
+            assert_eq!(a.range, b.range, "{name}");
+            assert_eq!(a.fate, b.fate, "{name}");
+            assert_eq!(a.cause, b.cause, "{name}");
+            // Debug text: the returns' times hold NaNs.
+            let text = |f: &NoisyFrame| format!("{:?}", f.clean);
+            assert!(text(&a) == text(&b), "{name}: the returns differ");
+            assert_eq!(a.moved.intensity, b.moved.intensity, "{name}");
+            assert!(
+                a.fate.iter().any(|f| *f != Fate::Kept),
+                "{name}: nothing happened"
+            );
+        }
     }
 
     #[test]

@@ -51,6 +51,19 @@ pub struct Candidate {
     pub stage: u8,
 }
 
+/// Echoes one stage proposed for every recorded return at once, one along each return's
+/// beam in its slot: a column rather than a candidate each, because fog proposes one for
+/// nearly every return and most lose to the return (pushing and then ranking a frame's
+/// worth of candidates was a sixth of a weather chain's time). [`resolve`] treats them
+/// as candidates proposed by `stage` in return order, before that stage's other ones.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DenseEchoes {
+    /// Index in the chain of the stage that proposed them.
+    pub stage: u8,
+    /// Per recorded return: its echo, or a NaN power for none.
+    pub echo: Vec<Echo>,
+}
+
 /// Which return logic the capture's firings follow.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SlotMode {
@@ -86,6 +99,8 @@ pub struct Slots {
 }
 
 const NONE: u32 = u32::MAX;
+/// Marks an entry of `resolve`'s best echoes as the dense column's echo of a return.
+const DENSE: u32 = 1 << 31;
 const LASERS: usize = 32;
 
 /// Firing number of each (packet, block) seen: a table indexed by packet and block when
@@ -129,6 +144,19 @@ impl FiringIndex {
 impl Slots {
     /// The slots of a frame's recorded returns (the first `clean_len` of `returns`).
     pub fn of(returns: &[Return]) -> Slots {
+        Slots::of_single_in_order(returns).unwrap_or_else(|| Slots::of_any(returns))
+    }
+
+    /// [`Slots::of`] in one pass over the returns, for the usual frame (see
+    /// [`SlotsBuilder`]); `None` for any other frame.
+    fn of_single_in_order(returns: &[Return]) -> Option<Slots> {
+        let mut b = SlotsBuilder::new(returns)?;
+        b.push(returns).then_some(())?;
+        b.finish()
+    }
+
+    /// [`Slots::of`] for any frame.
+    fn of_any(returns: &[Return]) -> Slots {
         // A dual capture decoded with one of its two returns behaves like that single
         // mode: its slots hold one return of that kind.
         // One pass for the kinds and the span of packets (the returns are 48 bytes each:
@@ -160,34 +188,28 @@ impl Slots {
         let mut occupants: Vec<[u32; 2]> = Vec::with_capacity(expected * LASERS);
         let mut slot_of = Vec::with_capacity(returns.len());
         let mut index = FiringIndex::new(lo, hi, returns.len());
-        let mut last_key = None;
+        // A dual pair of blocks is one firing.
+        let block_mask = if mode == SlotMode::Dual { !1u8 } else { !0u8 };
+        // (packet, block) packed in 40 bits: u64::MAX is no key.
+        let (mut last_key, mut f) = (u64::MAX, 0u32);
         for (i, r) in returns.iter().enumerate() {
-            let block = if mode == SlotMode::Dual {
-                r.block & !1
-            } else {
-                r.block
-            };
-            let key = (r.packet, block);
-            let f = match last_key {
-                Some((k, f)) if k == key => f,
-                _ => index.get_or_insert(key, || {
+            let block = r.block & block_mask;
+            let key = u64::from(r.packet) << 8 | u64::from(block);
+            if key != last_key {
+                f = index.get_or_insert((r.packet, block), || {
                     firings.push(Firing {
                         packet: r.packet,
                         block,
                     });
                     occupants.extend(std::iter::repeat_n([NONE; 2], LASERS));
                     (firings.len() - 1) as u32
-                }),
-            };
-            last_key = Some((key, f));
+                });
+                last_key = key;
+            }
             let slot = f * LASERS as u32 + u32::from(r.laser.min(31));
             let o = &mut occupants[slot as usize];
             // Dual: the last return in entry 0, the strongest in entry 1.
-            let at = match r.kind {
-                ReturnKind::DualStrongest => 1,
-                _ if o[0] == NONE => 0,
-                _ => 1,
-            };
+            let at = usize::from(r.kind == ReturnKind::DualStrongest || o[0] != NONE);
             if o[at] == NONE {
                 o[at] = i as u32;
             }
@@ -341,6 +363,103 @@ impl Slots {
     }
 }
 
+/// Builds a frame's [`Slots`] a chunk of returns at a time, in one pass, for the usual
+/// frame: single-return kinds, packets within the first and last returns' (a decoded
+/// capture's frame is consecutive records). Why: a 50k-return frame's returns are
+/// 2.4 MB, beyond the L2 cache, and every pass over them streams it; the chain builds
+/// the slots in the pass that reads the returns for the ideal powers. Other frames take
+/// the general path of [`Slots::of`].
+pub(crate) struct SlotsBuilder {
+    lo: u32,
+    /// Firing number of each (packet - lo, block), `NONE` for none yet.
+    of: Vec<u32>,
+    firings: Vec<Firing>,
+    occupants: Vec<[u32; 2]>,
+    slot_of: Vec<SlotId>,
+    /// (packet, block) of the last return, packed in 40 bits (`u64::MAX`: none).
+    last_key: u64,
+    f: u32,
+    kinds: u8,
+}
+
+impl SlotsBuilder {
+    /// For the frame `returns` (only its first and last are read); `None` when its
+    /// packets do not ascend from the first to the last or span too many.
+    pub(crate) fn new(returns: &[Return]) -> Option<SlotsBuilder> {
+        let (lo, hi) = (returns.first()?.packet, returns.last()?.packet);
+        let span = u64::from(hi.checked_sub(lo)?) + 1;
+        // The table's bound of `FiringIndex::new`.
+        if span * 256 > 64 * returns.len() as u64 + 65_536 {
+            return None;
+        }
+        let expected = (span as usize).saturating_mul(12).min(returns.len());
+        Some(SlotsBuilder {
+            lo,
+            of: vec![NONE; span as usize * 256],
+            firings: Vec::with_capacity(expected),
+            occupants: Vec::with_capacity(expected * LASERS),
+            slot_of: Vec::with_capacity(returns.len()),
+            last_key: u64::MAX,
+            f: 0,
+            kinds: 0,
+        })
+    }
+
+    /// Adds the next returns of the frame; false when the frame needs the general path
+    /// (a packet outside the span).
+    pub(crate) fn push(&mut self, chunk: &[Return]) -> bool {
+        for r in chunk {
+            let i = self.slot_of.len() as u32;
+            self.kinds |= 1 << (r.kind as u8);
+            let key = u64::from(r.packet) << 8 | u64::from(r.block);
+            if key != self.last_key {
+                let index = r.packet.wrapping_sub(self.lo) as usize * 256 + usize::from(r.block);
+                let Some(at) = self.of.get_mut(index) else {
+                    return false;
+                };
+                if *at == NONE {
+                    *at = self.firings.len() as u32;
+                    self.firings.push(Firing {
+                        packet: r.packet,
+                        block: r.block,
+                    });
+                    self.occupants
+                        .extend(std::iter::repeat_n([NONE; 2], LASERS));
+                }
+                self.f = *at;
+                self.last_key = key;
+            }
+            let slot = self.f * LASERS as u32 + u32::from(r.laser.min(31));
+            let o = &mut self.occupants[slot as usize];
+            let at = usize::from(o[0] != NONE);
+            if o[at] == NONE {
+                o[at] = i;
+            }
+            self.slot_of.push(slot);
+        }
+        true
+    }
+
+    /// The slots; `None` when the frame has dual-return kinds (the general path).
+    pub(crate) fn finish(self) -> Option<Slots> {
+        let dual = (1 << ReturnKind::DualLast as u8) | (1 << ReturnKind::DualStrongest as u8);
+        if self.kinds & dual != 0 {
+            return None;
+        }
+        let mode = if self.kinds & (1 << ReturnKind::Last as u8) != 0 {
+            SlotMode::Last
+        } else {
+            SlotMode::Strongest
+        };
+        Some(Slots {
+            mode,
+            firings: self.firings,
+            occupants: self.occupants,
+            slot_of: self.slot_of,
+        })
+    }
+}
+
 impl NoisyFrame {
     /// The firing slots of the frame's recorded returns (built on first use).
     pub fn slots(&mut self) -> Arc<Slots> {
@@ -356,13 +475,65 @@ impl NoisyFrame {
         self.propose_slot(slot, echo);
     }
 
+    /// Proposes `echo[i]` in the firing slot of every recorded return i (along its beam;
+    /// a NaN power for none), as [`NoisyFrame::propose`] would one by one in that order.
+    pub fn propose_each(&mut self, mut echo: Vec<Echo>) {
+        echo.truncate(self.clean_len);
+        if self.dense.is_some() {
+            // A second such stage in the chain: its echoes as candidates, in order.
+            for (i, e) in echo.into_iter().enumerate() {
+                if !e.power.is_nan() {
+                    self.propose(i, e);
+                }
+            }
+            return;
+        }
+        for e in &mut echo {
+            if !(e.range.is_finite() && e.power.is_finite()) {
+                e.power = f64::NAN;
+            }
+        }
+        echo.resize(
+            self.clean_len,
+            Echo {
+                range: f32::NAN,
+                power: f64::NAN,
+            },
+        );
+        self.dense = Some(DenseEchoes {
+            stage: self.stage,
+            echo,
+        });
+    }
+
+    /// Every proposed echo, in proposal order (the column of [`NoisyFrame::propose_each`]
+    /// in its place among the candidates).
+    pub fn proposals(&self) -> Vec<Candidate> {
+        let Some(d) = &self.dense else {
+            return self.candidates.clone();
+        };
+        let slots = Slots::of(&self.clean[..self.clean_len]);
+        let at = self.candidates.partition_point(|c| c.stage < d.stage);
+        let mut all = self.candidates[..at].to_vec();
+        all.extend(d.echo.iter().enumerate().filter_map(|(i, e)| {
+            (!e.power.is_nan()).then_some(Candidate {
+                slot: slots.slot_of(i),
+                echo: *e,
+                stage: d.stage,
+            })
+        }));
+        all.extend_from_slice(&self.candidates[at..]);
+        all
+    }
+
     /// Proposes an echo in a firing slot (occupied or vacant).
     pub fn propose_slot(&mut self, slot: SlotId, echo: Echo) {
         if self.candidates.capacity() == 0 {
-            // Scatter stages often propose for most returns (fog: every one), and a
-            // chain's other scatter stages a few percent more: room for them all, so the
-            // buffer is not copied as it grows.
-            self.candidates.reserve(self.len() + self.len() / 4 + 1024);
+            // Scatter stages often propose for most returns, and a chain's other scatter
+            // stages a few percent more: room for them all, so the buffer is not copied
+            // as it grows (fog's echo a return is a column, `propose_each`).
+            let most = if self.dense.is_some() { 0 } else { self.len() };
+            self.candidates.reserve(most + self.len() / 4 + 1024);
         }
         if echo.range.is_finite() && echo.power.is_finite() {
             self.candidates.push(Candidate {
@@ -436,6 +607,34 @@ impl NoisyFrame {
             .map_or(0, |m| m.intensity_of(echo.power, echo.range))
     }
 
+    /// [`NoisyFrame::replace`] of every recorded return `i` in `which` by `echo[i]`.
+    fn replace_each(&mut self, which: &[u32], echo: &[Echo], cause: u8) {
+        let Some(&first) = which.first() else {
+            return;
+        };
+        // The first one makes the intensity column; the rest only write.
+        self.replace(first as usize, echo[first as usize], cause);
+        let NoisyFrame {
+            range,
+            power,
+            fate,
+            cause: causes,
+            moved,
+            power_model,
+            ..
+        } = self;
+        let intensity = moved.intensity.as_mut().expect("made by `replace`");
+        let model = power_model.as_deref();
+        for &i in &which[1..] {
+            let (i, e) = (i as usize, echo[i as usize]);
+            range[i] = e.range;
+            power[i] = e.power;
+            fate[i] = Fate::Replaced;
+            causes[i] = cause;
+            intensity[i] = model.map_or(0, |m| m.intensity_of(e.power, e.range));
+        }
+    }
+
     /// Makes recorded (or added) return `i` report `echo` proposed by stage `cause`.
     fn replace(&mut self, i: usize, echo: Echo, cause: u8) {
         self.range[i] = echo.range;
@@ -444,9 +643,13 @@ impl NoisyFrame {
         self.cause[i] = cause;
         let intensity = self.echo_intensity(&echo);
         let n = self.len();
-        self.moved
-            .intensity
-            .get_or_insert_with(|| self.clean.iter().map(|r| r.intensity).collect())[i] = intensity;
+        let (clean, recorded) = (&self.clean, &self.recorded_intensity);
+        self.moved.intensity.get_or_insert_with(|| {
+            let mut col = recorded.clone().unwrap_or_default();
+            col.truncate(clean.len());
+            col.extend(clean[col.len()..].iter().map(|r| r.intensity));
+            col
+        })[i] = intensity;
         debug_assert_eq!(self.moved.intensity.as_ref().map(Vec::len), Some(n));
     }
 }
@@ -463,15 +666,21 @@ struct Contender {
 /// Lets every slot's proposed echoes compete with its return (see the module
 /// documentation) and applies the winners.
 pub fn resolve(frame: &mut NoisyFrame) {
-    if frame.candidates.is_empty() {
+    if frame.candidates.is_empty() && frame.dense.is_none() {
         return;
     }
     let slots = frame.slots();
-    let mut candidates = std::mem::take(&mut frame.candidates);
     let mut contenders: Vec<Contender> = Vec::with_capacity(8);
     if slots.mode == SlotMode::Dual {
+        let mut candidates = frame.proposals();
+        frame.dense = None;
+        frame.candidates.clear();
         resolve_dual(frame, &slots, &mut candidates, &mut contenders);
-    } else {
+        return;
+    }
+    let mut candidates = std::mem::take(&mut frame.candidates);
+    let dense = frame.dense.take();
+    {
         // One report per slot: only each slot's best detectable echo (the first of the
         // highest power, or of the farthest range, in proposal order) can win, so the
         // others need no grouping (sorting a frame's worth of echoes by slot was a tenth
@@ -481,39 +690,96 @@ pub fn resolve(frame: &mut NoisyFrame) {
             .iter()
             .map(|c| c.slot as usize + 1)
             .max()
-            .unwrap_or(0);
+            .unwrap_or(0)
+            .max(if dense.is_some() { slots.len() } else { 0 });
         let mut best = vec![NONE; n];
+        let beats = |e: &Echo, o: &Echo| {
+            if last {
+                e.range > o.range
+            } else {
+                e.power > o.power
+            }
+        };
+        // How many vacant slots gain a return (the column's echoes are all in occupied
+        // ones), so the columns grow once.
+        let mut gains = 0;
         for (k, c) in candidates.iter().enumerate() {
             if !frame.detectable(c.echo.range, c.echo.power) {
                 continue;
             }
             let b = &mut best[c.slot as usize];
-            let better = *b == NONE || {
-                let o = &candidates[*b as usize].echo;
-                if last {
-                    c.echo.range > o.range
-                } else {
-                    c.echo.power > o.power
-                }
-            };
-            if better {
+            if *b == NONE {
+                let vacant = slots
+                    .occupants
+                    .get(c.slot as usize)
+                    .is_none_or(|o| o[0] == NONE);
+                gains += usize::from(vacant);
+                *b = k as u32;
+            } else if beats(&c.echo, &candidates[*b as usize].echo) {
                 *b = k as u32;
             }
         }
-        // Room for every return the vacant slots could gain, so the columns grow once.
-        let gains = best
-            .iter()
-            .enumerate()
-            .filter(|&(slot, &b)| {
-                b != NONE && slots.occupants.get(slot).is_none_or(|o| o[0] == NONE)
-            })
-            .count();
+        // The column's echoes, proposed (in return order) after the candidates of earlier
+        // stages and before those of its own and later ones: against a slot's best
+        // candidate, it wins when better, or as good and proposed earlier. Most slots
+        // hold one return and no candidate: their echo competes with the return alone,
+        // decided here (the same rule as below; the returns it replaces are disjoint from
+        // the slots settled below, so the order does not matter).
+        if let Some(d) = &dense {
+            let (threshold, min_range) = (frame.threshold, frame.min_range);
+            let detectable = |r: f32, p: f64| p >= threshold && f64::from(r) >= min_range;
+            let (range, power, fate) = (&frame.range, &frame.power, &frame.fate);
+            // Branch-free for the usual slot (whether an echo wins is a coin toss to the
+            // branch predictor): every return is written, the count moves on a win.
+            let mut replaced = vec![0u32; d.echo.len()];
+            let mut m = 0;
+            for (i, (e, &slot)) in d.echo.iter().zip(&slots.slot_of).enumerate() {
+                let ok = detectable(e.range, e.power);
+                let b = &mut best[slot as usize];
+                let usual = *b == NONE && slots.occupants[slot as usize] == [i as u32, NONE];
+                if usual || !ok {
+                    let f = fate[i];
+                    let alive = f.is_alive() & detectable(range[i], power[i]);
+                    let better = if last {
+                        e.range > range[i]
+                    } else {
+                        e.power > power[i]
+                    };
+                    let wins = ok & (f != Fate::Occluded) & (!alive | better);
+                    replaced[m] = i as u32;
+                    m += usize::from(wins);
+                    continue;
+                }
+                let wins = match *b {
+                    NONE => true,
+                    x if x & DENSE != 0 => beats(e, &d.echo[(x & !DENSE) as usize]),
+                    k => {
+                        let c = &candidates[k as usize];
+                        beats(e, &c.echo) || (c.stage >= d.stage && !beats(&c.echo, e))
+                    }
+                };
+                if wins {
+                    *b = DENSE | i as u32;
+                }
+            }
+            frame.replace_each(&replaced[..m], &d.echo, d.stage);
+        }
+        let candidate = |b: u32, slot: usize| -> Candidate {
+            match &dense {
+                Some(d) if b & DENSE != 0 => Candidate {
+                    slot: slot as SlotId,
+                    echo: d.echo[(b & !DENSE) as usize],
+                    stage: d.stage,
+                },
+                _ => candidates[b as usize],
+            }
+        };
         frame.reserve_returns(gains);
         for (slot, &b) in best.iter().enumerate() {
             if b == NONE {
                 continue;
             }
-            let c = candidates[b as usize];
+            let c = candidate(b, slot);
             match slots.occupants.get(slot) {
                 // The common case, one recorded return, as `resolve_slot` decides it.
                 Some(&[i, NONE]) if i != NONE => {
@@ -763,5 +1029,86 @@ fn resolve_slot(
             // A recorded return already reports this pick, or no entry can hold it.
             _ => {}
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ret(packet: u32, block: u8, laser: u8, kind: ReturnKind) -> Return {
+        Return {
+            x: 1.0,
+            y: 0.0,
+            z: 0.0,
+            range: 1.0,
+            azimuth: 0.0,
+            elevation: 0.0,
+            time: 0.0,
+            packet,
+            raw_distance: 500,
+            intensity: 10,
+            laser,
+            ring: laser,
+            block,
+            kind,
+        }
+    }
+
+    fn same(a: &Slots, b: &Slots) -> bool {
+        a.mode == b.mode
+            && a.firings == b.firings
+            && a.occupants == b.occupants
+            && a.slot_of == b.slot_of
+    }
+
+    #[test]
+    fn the_one_pass_slots_equal_the_general_ones_and_leave_other_frames_to_them() {
+        // Consecutive packets of 12 blocks, lasers missing here and there, a laser twice
+        // in a firing (a duplicate), both single kinds.
+        for kind in [ReturnKind::Strongest, ReturnKind::Last] {
+            let mut v = Vec::new();
+            for packet in 7..12u32 {
+                for block in 0..12u8 {
+                    for laser in 0..32u8 {
+                        if (u32::from(laser) * 7 + packet + u32::from(block)) % 5 != 0 {
+                            v.push(ret(packet, block, laser, kind));
+                        }
+                    }
+                    v.push(ret(packet, block, 3, kind));
+                }
+            }
+            let fast = Slots::of_single_in_order(&v).expect("the usual frame");
+            assert!(same(&fast, &Slots::of_any(&v)), "{kind:?}");
+            assert!(same(&Slots::of(&v), &fast));
+            // Chunk by chunk, as the chain builds it.
+            let mut b = SlotsBuilder::new(&v).unwrap();
+            for chunk in v.chunks(100) {
+                assert!(b.push(chunk));
+            }
+            assert!(same(&b.finish().unwrap(), &fast));
+            // A packet before the first one's: the general path, the same slots.
+            let mut w = v.clone();
+            w[40].packet = 3;
+            assert!(Slots::of_single_in_order(&w).is_none());
+            assert!(same(&Slots::of(&w), &Slots::of_any(&w)));
+            assert_eq!(Slots::of(&w).firings.len(), fast.firings.len() + 1);
+        }
+        // Dual kinds: the general path.
+        let v: Vec<Return> = (0..4u8)
+            .flat_map(|block| {
+                let kind = if block % 2 == 0 {
+                    ReturnKind::DualLast
+                } else {
+                    ReturnKind::DualStrongest
+                };
+                (0..32u8).map(move |laser| ret(1, block, laser, kind))
+            })
+            .collect();
+        assert!(Slots::of_single_in_order(&v).is_none());
+        let s = Slots::of(&v);
+        assert_eq!(s.mode, SlotMode::Dual);
+        assert_eq!(s.firings.len(), 2);
+        assert!(Slots::of_single_in_order(&[]).is_none());
     }
 }

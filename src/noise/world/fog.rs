@@ -777,37 +777,42 @@ impl NoiseStage for Fog {
         };
         let far_ok = frame.detectable(far.range, far.power);
         let far_from = table.far_from;
-        let vacant = if self.empty_slots {
-            slots.len().saturating_sub(frame.clean_len)
-        } else {
-            0
+        // One echo a recorded return, as a column (`propose_each`).
+        let none = Echo {
+            range: f32::NAN,
+            power: f64::NAN,
         };
-        // Its own echoes, and room for a later stage's few (drops, flakes) so the buffer
-        // is not copied as it grows.
-        frame
-            .candidates
-            .reserve(frame.clean_len + vacant + frame.clean_len / 8 + 1024);
-        for i in 0..frame.clean_len {
-            let r0 = f64::from(frame.range[i]);
-            let fate = frame.fate[i];
-            let echo = if r0 >= far_from && n == 0.0 {
-                if !far_ok {
-                    continue;
+        let (threshold, min_range) = (frame.threshold, frame.min_range);
+        let m = frame.clean_len;
+        let each: Vec<Echo> = frame.range[..m]
+            .iter()
+            .zip(&frame.fate[..m])
+            .map(|(&r0, &fate)| {
+                let r0 = f64::from(r0);
+                let echo = if r0 >= far_from && n == 0.0 {
+                    if far_ok {
+                        far
+                    } else {
+                        none
+                    }
+                } else {
+                    let (r, integral) = table.lookup(r0);
+                    Echo {
+                        range: noisy(rng, r, r0) as f32,
+                        power: scale * integral,
+                    }
+                };
+                // Occlusion removes the beam; only detectable echoes can take part in the
+                // slot's competition (`NoisyFrame::detectable`).
+                let detectable = echo.power >= threshold && f64::from(echo.range) >= min_range;
+                if fate != Fate::Occluded && detectable {
+                    echo
+                } else {
+                    none
                 }
-                far
-            } else {
-                let (r, integral) = table.lookup(r0);
-                Echo {
-                    range: noisy(rng, r, r0) as f32,
-                    power: scale * integral,
-                }
-            };
-            // Occlusion removes the beam; only detectable echoes can take part in the
-            // slot's competition.
-            if fate != Fate::Occluded && frame.detectable(echo.range, echo.power) {
-                frame.propose_slot(slots.slot_of(i), echo);
-            }
-        }
+            })
+            .collect();
+        frame.propose_each(each);
         if self.empty_slots {
             for slot in 0..slots.len() as u32 {
                 if !slots.is_vacant(slot) {

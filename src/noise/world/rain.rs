@@ -79,7 +79,7 @@ use crate::error::Result;
 use crate::noise::{Fate, NoiseStage, NoisyFrame};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
+use rand_distr::{Distribution, StandardNormal};
 use serde::Serialize;
 use std::sync::Arc;
 use toml::Value;
@@ -432,7 +432,14 @@ impl Rain {
     fn mie_returns(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng, two_alpha: f64, p_th: f64) {
         DRAWS.with_borrow_mut(|draws| {
             draws.clear();
-            draws.extend((0..frame.range.len()).map(|_| self.draw(rng)));
+            // The model's draw in its own loop (one match a frame, not one a return).
+            let n = frame.range.len();
+            match self.range_noise {
+                RangeNoise::Mavs => draws.extend((0..n).map(|_| self.draw(rng))),
+                RangeNoise::Goodin | RangeNoise::Lisa => {
+                    draws.extend((0..n).map(|_| Distribution::<f64>::sample(&StandardNormal, rng)))
+                }
+            }
             let columns = (&mut frame.range[..], &mut frame.power[..], &frame.fate[..]);
             let sigma_per_m = self.sigma_per_m;
             // One loop per noise model, so each is branch-free.

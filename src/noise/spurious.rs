@@ -1038,20 +1038,12 @@ mod tests {
 
     fn ret(packet: u32, block: u8, laser: u8, kind: ReturnKind) -> Return {
         Return {
-            x: 1.0,
-            y: 0.0,
-            z: 0.0,
             range: 1.0,
-            azimuth: 0.0,
-            elevation: 0.0,
-            time: 0.0,
             packet,
-            raw_distance: 500,
-            intensity: 10,
             laser,
-            ring: laser,
             block,
             kind,
+            ..crate::hdl32e::decode::BLANK
         }
     }
 

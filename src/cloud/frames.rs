@@ -79,7 +79,7 @@ impl CloudReader {
     pub fn open(path: &Path, options: &CloudOptions) -> Result<Self> {
         let (frame, format, summary, order, points) = load(path, options)?;
         drop(frame);
-        let truth = truth_of(path, options, &points, order)?.map(Box::new);
+        let truth = truth_of(path, options, &points, &order)?.map(Box::new);
         Ok(CloudReader {
             path: path.to_path_buf(),
             options: Box::new(options.clone()),
@@ -119,7 +119,7 @@ impl CloudReader {
 /// Also gives the scan's ground truth, when labels were given or found beside it.
 pub fn read_frame(path: &Path, options: &CloudOptions) -> Result<ReadFrame> {
     let (frame, format, summary, order, points) = load(path, options)?;
-    let truth = truth_of(path, options, &points, order.clone())?;
+    let truth = truth_of(path, options, &points, &order)?;
     Ok((frame, format, summary, order, truth))
 }
 
@@ -129,7 +129,7 @@ fn truth_of(
     path: &Path,
     options: &CloudOptions,
     points: &[CloudPoint],
-    order: Vec<u32>,
+    order: &[u32],
 ) -> Result<Option<CloudTruth>> {
     let found = match &options.labels {
         Some(p) => Some(LabelsBeside::PerPoint(p.clone())),
@@ -139,7 +139,8 @@ fn truth_of(
         Some(labels) => Some(CloudTruth {
             truth: read_truth(&labels, points)?,
             labels: labels.shown(),
-            order,
+            // A copy only when the scan has labels.
+            order: order.to_vec(),
         }),
         None => None,
     })

@@ -83,3 +83,14 @@ pub fn read_text_bounded(path: &std::path::Path) -> Result<String> {
         ),
     })
 }
+
+/// The first ten of `items` joined by commas, then ", and N more" for the rest: how an
+/// error names a long list of missing parts.
+pub(crate) fn first_ten(items: &[String]) -> String {
+    let shown: Vec<&str> = items.iter().take(10).map(String::as_str).collect();
+    let mut text = shown.join(", ");
+    if items.len() > 10 {
+        text.push_str(&format!(", and {} more", items.len() - 10));
+    }
+    text
+}

@@ -520,18 +520,12 @@ fn merge(
     }
     if !missing.is_empty() {
         let n = missing.len();
-        let shown: Vec<&str> = missing.iter().take(10).map(String::as_str).collect();
         bail!(
             "run --merge: {n} capture chunk part{} missing, unfinished or computed with other \
              settings (run the shards that own them, or rerun without --merge to compute them \
-             here): {}{}",
+             here): {}",
             if n == 1 { " is" } else { "s are" },
-            shown.join(", "),
-            if n > 10 {
-                format!(", and {} more", n - 10)
-            } else {
-                String::new()
-            }
+            crate::error::first_ten(&missing),
         );
     }
     let mut lines = Vec::new();

@@ -551,7 +551,6 @@ pub fn run_mode(
     }
     if !missing.is_empty() {
         let n = missing.len();
-        let shown: Vec<&str> = missing.iter().take(10).map(String::as_str).collect();
         let what = if s.chunk_frames.is_some() {
             "cell part"
         } else {
@@ -560,14 +559,9 @@ pub fn run_mode(
         return Err(Error::Invalid(format!(
             "sweep --merge: {n} {what}{} missing, unfinished or computed with other settings \
              (run the shards that own them, or rerun without --merge to compute them here): \
-             {}{}",
+             {}",
             if n == 1 { " is" } else { "s are" },
-            shown.join(", "),
-            if n > 10 {
-                format!(", and {} more", n - 10)
-            } else {
-                String::new()
-            }
+            crate::error::first_ten(&missing),
         )));
     }
     Ok(outcome)

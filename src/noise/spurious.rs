@@ -37,6 +37,14 @@ pub struct Echo {
     pub power: f64,
 }
 
+impl Echo {
+    /// No echo: the entry of a return without one in [`NoisyFrame::propose_each`].
+    pub const NONE: Echo = Echo {
+        range: f32::NAN,
+        power: f64::NAN,
+    };
+}
+
 /// Index of a firing slot in [`Slots`]: `firing * 32 + laser`.
 pub type SlotId = u32;
 
@@ -493,13 +501,7 @@ impl NoisyFrame {
                 e.power = f64::NAN;
             }
         }
-        echo.resize(
-            self.clean_len,
-            Echo {
-                range: f32::NAN,
-                power: f64::NAN,
-            },
-        );
+        echo.resize(self.clean_len, Echo::NONE);
         self.dense = Some(DenseEchoes {
             stage: self.stage,
             echo,

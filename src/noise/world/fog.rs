@@ -778,10 +778,7 @@ impl NoiseStage for Fog {
         let far_ok = frame.detectable(far.range, far.power);
         let far_from = table.far_from;
         // One echo a recorded return, as a column (`propose_each`).
-        let none = Echo {
-            range: f32::NAN,
-            power: f64::NAN,
-        };
+        let none = Echo::NONE;
         let (threshold, min_range) = (frame.threshold, frame.min_range);
         let m = frame.clean_len;
         let each: Vec<Echo> = frame.range[..m]

@@ -145,7 +145,7 @@ fn bench_chain(c: &mut Criterion) {
     // Of which the firing-slot table every echo-proposing stage needs (built once per
     // frame, shared by all of them).
     c.bench_function("firing-slot table, 50k returns", |b| {
-        b.iter(|| black_box(lidar_noise::noise::Slots::of(black_box(&frame.returns))))
+        b.iter(|| black_box(lidar_noise::noise::Slots::of(black_box(&frame.returns), 32)))
     });
     // The p-diagram part 2 chain (configs/pdiagram-world.toml) as far as it exists.
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/pdiagram-world.toml");

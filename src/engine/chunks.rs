@@ -109,7 +109,7 @@ impl ExactTotals {
             returns_in: n.returns_in,
             returns_out: n.returns_out,
             dropped: n.dropped,
-            dropped_by_laser: n.dropped_by_laser,
+            dropped_by_laser: n.dropped_by_laser.clone(),
             range_change: n.range_change.state(),
             spurious: n.spurious,
             stages: t.stages.clone(),
@@ -122,7 +122,7 @@ impl ExactTotals {
             returns_in: self.returns_in,
             returns_out: self.returns_out,
             dropped: self.dropped,
-            dropped_by_laser: self.dropped_by_laser,
+            dropped_by_laser: self.dropped_by_laser.clone(),
             range_change: RangeChange::from_state(&self.range_change)?,
             spurious: self.spurious,
         })

@@ -208,8 +208,7 @@ fn check_options(plan: &Plan, request: &RunRequest) -> Result<()> {
 
 /// The settings that decide a dataset run's bytes: a rerun with the same ones resumes.
 fn settings(plan: &Plan, request: &RunRequest, data: &Dataset) -> Result<serde_json::Value> {
-    let first = data.scans.first().expect("a dataset has scans");
-    let cloud = cloud_options(request, first, data.layout.format())?;
+    let cloud = cloud_options(request, data.layout.format())?;
     Ok(serde_json::json!({
         "tool": "lidar-noise",
         "version": env!("CARGO_PKG_VERSION"),
@@ -226,6 +225,8 @@ fn settings(plan: &Plan, request: &RunRequest, data: &Dataset) -> Result<serde_j
 pub fn run(plan: &Plan, request: &RunRequest, dir: &Path, global: Global) -> Result<()> {
     check_options(plan, request)?;
     let data = Dataset::find(dir)?;
+    // The noise chain for the dataset's sensor, checked before anything is written.
+    let plan = &plan.for_sensor(cloud_options(request, data.layout.format())?.sensor)?;
     let out_dir = request.output.join(data.layout.scan_folder());
     // Written into the input folder, the noisy scans would replace the clean ones.
     if let (Ok(a), Ok(b)) = (
@@ -366,7 +367,7 @@ fn run_file(
     inputs: &[&Path],
 ) -> Result<FileDone> {
     let path = &data.scans[i];
-    let options = cloud_options(request, path, data.layout.format())?;
+    let options = cloud_options(request, data.layout.format())?;
     let (mut frame, format, _, order, truth) = read_frame(path, &options)?;
     // The file's index in sorted order is its frame index: its random streams derive from
     // (seed, index, stage), the same whether it runs in a shard or in the whole run.

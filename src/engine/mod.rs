@@ -39,6 +39,7 @@ use std::sync::Arc;
 pub use stream::stream_frames;
 
 /// Validated settings of a run: what is computed and written for every frame.
+#[derive(Clone)]
 pub struct Plan {
     /// The experiment configuration.
     pub config: Config,
@@ -63,6 +64,20 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// The plan for frames of `sensor` (its noise chain's firing slots hold its lasers);
+    /// an error naming the stage and option when a stage's per-laser options do not fit
+    /// it.
+    pub fn for_sensor(&self, sensor: &crate::sensor::SensorModel) -> Result<Plan> {
+        let pipeline = self
+            .pipeline
+            .for_lasers(sensor.lasers)
+            .map_err(|e| anyhow::anyhow!("the {} ({} lasers): {e}", sensor.name, sensor.lasers))?;
+        Ok(Plan {
+            pipeline,
+            ..self.clone()
+        })
+    }
+
     /// The settings `run` uses when no option is given: every frame, binary PLY point
     /// clouds, point-cloud scans written back in their own format.
     pub fn new(config: Config) -> Self {
@@ -168,10 +183,14 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
         }
     }
     if let Some(m) = request.chunk_frames {
-        return chunks::run(request, plan, m, &inputs, global);
+        // Chunked runs take captures, decoded for the HDL-32E.
+        let plan = plan.for_sensor(&crate::sensor::HDL32E)?;
+        return chunks::run(request, &plan, m, &inputs, global);
     }
     // Every input and target is checked before anything is written.
-    let mut jobs: Vec<(Source, String, String, Option<&Path>)> = Vec::new();
+    // Each job with the plan for its sensor (the noise chain's firing slots hold its
+    // lasers).
+    let mut jobs: Vec<(Source, String, String, Option<&Path>, Plan)> = Vec::new();
     if request.captures.is_empty() {
         let reader = FrameReader::from_bytes(
             Arc::from(DEFAULT_CAPTURE),
@@ -183,6 +202,7 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
             DEFAULT_CAPTURE_NAME.into(),
             "crossroad".into(),
             None,
+            plan.for_sensor(&crate::sensor::HDL32E)?,
         ));
     }
     for ((path, name), cloud) in request
@@ -191,14 +211,29 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
         .zip(inputs::output_names(&request.captures))
         .zip(&clouds)
     {
-        let reader = match cloud {
-            Some(format) => Source::Cloud(CloudReader::open(
-                path,
-                &cloud_options(request, path, *format)?,
-            )?),
-            None => Source::Capture(Box::new(inputs::open_capture(path, &plan.decoder)?)),
+        let (reader, job_plan) = match cloud {
+            Some(format) => {
+                let options = cloud_options(request, *format)?;
+                let job_plan = plan.for_sensor(options.sensor).map_err(|e| {
+                    anyhow::anyhow!("{}: {e:#}; nothing was written", path.display())
+                })?;
+                (Source::Cloud(CloudReader::open(path, &options)?), job_plan)
+            }
+            // Captures are decoded for the HDL-32E.
+            None => (
+                Source::Capture(Box::new(inputs::open_capture(path, &plan.decoder)?)),
+                plan.for_sensor(&crate::sensor::HDL32E).map_err(|e| {
+                    anyhow::anyhow!("{}: {e:#}; nothing was written", path.display())
+                })?,
+            ),
         };
-        jobs.push((reader, inputs::capture_label(path), name, Some(path)));
+        jobs.push((
+            reader,
+            inputs::capture_label(path),
+            name,
+            Some(path),
+            job_plan,
+        ));
     }
     if let Some(shard) = request.shard {
         let total = jobs.len();
@@ -220,7 +255,7 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
         }
     }
     let check = || -> Result<()> {
-        for (reader, source, name, capture) in &jobs {
+        for (reader, source, name, capture, _) in &jobs {
             if let (true, Source::Capture(reader)) = (plan.pcap_out, reader) {
                 let mode = reader.summary().return_mode;
                 // Named by the path as given, as in every message of `run`.
@@ -259,7 +294,7 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
     folder.remove_leftovers(&is_run_path);
     let mut staged = Vec::new();
     let mut reports = Vec::new();
-    for (reader, source, name, capture) in jobs {
+    for (reader, source, name, capture, job_plan) in jobs {
         let stage = match folder.stage(&name) {
             Ok(s) => s,
             Err(e) => {
@@ -270,7 +305,7 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
         };
         let settings = run_settings(plan, &source);
         let result = run_source(
-            plan,
+            &job_plan,
             reader,
             (&source, capture),
             stage.path(),
@@ -335,41 +370,19 @@ pub(crate) fn cloud_format(path: &Path) -> Option<crate::cloud::Format> {
 /// How a point-cloud file of `format` is read, from `--sensor` and `--rotation-hz`.
 pub(crate) fn cloud_options(
     request: &RunRequest,
-    path: &Path,
     format: crate::cloud::Format,
 ) -> Result<CloudOptions> {
-    use crate::cloud::guess::{guess_sensor, sensor_by_name, SENSOR_NAMES};
+    use crate::cloud::guess::{sensor_by_name, SENSOR_NAMES};
     use crate::cloud::Format;
     let sensor = match request.sensor.as_deref() {
         Some(name) => sensor_by_name(name).ok_or_else(|| {
             anyhow::anyhow!("--sensor {name}: not a sensor modelled here ({SENSOR_NAMES})")
         })?,
-        None if format == Format::Kitti => {
-            // KITTI's sensor is an HDL-64E: the default once the stages run 64 lasers. The
-            // data's own evidence is shown beside it.
-            let cloud = crate::cloud::read_file(path, &Default::default())?;
-            let data = match guess_sensor(&cloud.points) {
-                Ok(g) => g.reason,
-                Err(e) => format!("the sensor cannot be told from the data: {e}"),
-            };
-            anyhow::bail!(
-                "{}: a KITTI scan comes from an HDL-64E, whose 64 lasers the noise stages do \
-                 not model yet (they model 32): nothing was written; the data: {data}; pass \
-                 --sensor hdl32e only if an HDL-32E recorded this scan",
-                path.display()
-            )
-        }
+        // KITTI and SemanticKITTI were recorded with an HDL-64E (S2), nuScenes with an
+        // HDL-32E; other formats say nothing of their sensor: the HDL-32E unless said.
+        None if format == Format::Kitti => &crate::sensor::HDL64E_S2,
         None => &crate::sensor::HDL32E,
     };
-    if sensor.name != crate::sensor::HDL32E.name {
-        anyhow::bail!(
-            "--sensor {}: {} scans are converted by the library (cloud::returns), but the noise \
-             stages' firing slots are those of the HDL-32E's 32 lasers so far: run takes \
-             --sensor hdl32e only; nothing was written",
-            request.sensor.as_deref().unwrap_or_default(),
-            sensor.name
-        );
-    }
     let rotation_hz = request
         .rotation_hz
         .unwrap_or(if format == Format::NuScenes {

@@ -171,6 +171,9 @@ pub struct NoisyFrame {
     pub recorded_intensity: Option<Vec<u8>>,
     /// The firing slots of the frame, built when a stage first asks for them.
     pub slots: Option<Arc<Slots>>,
+    /// Lasers a firing of the sensor that recorded the frame (the slots a firing; set by
+    /// the chain from its sensor, [`spurious::DEFAULT_LASERS`] until then).
+    pub lasers: usize,
     /// The ideal-power model, for the intensity of spurious echoes.
     pub power_model: Option<Arc<IdealPower>>,
     /// Per-return state that only sensor stages change; `None` until one does, so that a
@@ -189,7 +192,8 @@ pub struct NoisyFrame {
 /// columns are 50-400 kB.
 #[derive(Clone, Debug, Default)]
 pub struct Layout {
-    /// Laser id modulo 32 of each return.
+    /// Laser id of each return (modulo [`spurious::MAX_LASERS`], so per-laser tables of
+    /// that size need no bounds check).
     pub laser: Vec<u8>,
     /// Clean intensity byte of each return.
     pub intensity: Vec<u8>,
@@ -244,7 +248,7 @@ impl Layout {
             also(chunk);
             let m = chunk.len();
             for (j, r) in chunk.iter().enumerate() {
-                laser[j] = r.laser % 32;
+                laser[j] = r.laser & LASER_MASK;
                 intensity[j] = r.intensity;
                 time[j] = r.time;
                 azimuth[j] = r.azimuth;
@@ -279,6 +283,21 @@ impl Layout {
         self.laser.is_empty()
     }
 }
+
+/// Why laser ids (or rings) given at `key` do not all exist on a sensor of `lasers`
+/// lasers, if they do not.
+pub fn check_ids(key: &str, ids: Option<&[u8]>, lasers: usize) -> Result<(), String> {
+    match ids.and_then(|ids| ids.iter().find(|&&i| usize::from(i) >= lasers)) {
+        Some(i) => Err(format!(
+            "{key} names {i}, but the sensor has {lasers} lasers (0 to {})",
+            lasers - 1
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Keeps a laser id within a per-laser table of [`spurious::MAX_LASERS`] entries.
+pub const LASER_MASK: u8 = (spurious::MAX_LASERS - 1) as u8;
 
 /// Returns per chunk of [`Layout`]'s pass (a multiple of 4, see [`TimeExtremes`]).
 const LAYOUT_CHUNK: usize = 256;
@@ -415,7 +434,7 @@ fn room_for_added(n: usize) -> usize {
 }
 
 /// The ranges, ideal powers and intensity bytes of `returns`, and their firing slots
-/// when `slots` (and the frame is of the usual kind, [`spurious::SlotsBuilder`]), with a
+/// when `slots` gives the lasers a firing (and the frame is of the usual kind, [`spurious::SlotsBuilder`]), with a
 /// copy of the returns appended to `copy` when given: one pass over the returns, a
 /// chunk at a time, where separate passes each streamed a frame's 2.4 MB of returns from
 /// beyond the L2 cache.
@@ -424,17 +443,13 @@ fn start_columns(
     returns: &[Return],
     mut copy: Option<&mut Vec<Return>>,
     ideal: &IdealPower,
-    slots: bool,
+    slots: Option<usize>,
 ) -> ((Vec<f32>, Vec<f64>, Vec<u8>), Option<Slots>) {
     let n = returns.len();
     let mut range = Vec::with_capacity(n + room_for_added(n));
     let mut power = Vec::with_capacity(n + room_for_added(n));
     let mut bytes = Vec::with_capacity(n);
-    let mut builder = if slots {
-        spurious::SlotsBuilder::new(returns)
-    } else {
-        None
-    };
+    let mut builder = slots.and_then(|lasers| spurious::SlotsBuilder::new(returns, lasers));
     for chunk in returns.chunks(LAYOUT_CHUNK) {
         if let Some(c) = copy.as_mut() {
             c.extend_from_slice(chunk);
@@ -468,12 +483,12 @@ impl NoisyFrame {
 
     /// Same as [`NoisyFrame::new`], also returning the recorded intensity bytes, read in
     /// the same pass (for the intensity rule), and with the firing slots built in it
-    /// when `slots` (for chains whose stages propose echoes).
+    /// when `slots` gives the lasers a firing (for chains whose stages propose echoes).
     fn new_keeping_bytes(
         index: u32,
         clean: Vec<Return>,
         ideal: &IdealPower,
-        slots: bool,
+        slots: Option<usize>,
     ) -> (Self, Vec<u8>) {
         let (columns, built) = start_columns(&clean, None, ideal, slots);
         NoisyFrame::of_columns(index, clean, columns, built)
@@ -484,7 +499,7 @@ impl NoisyFrame {
         index: u32,
         returns: &[Return],
         ideal: &IdealPower,
-        slots: bool,
+        slots: Option<usize>,
     ) -> (Self, Vec<u8>) {
         let n = returns.len();
         let mut clean = Vec::with_capacity(n + room_for_added(n));
@@ -546,6 +561,7 @@ impl NoisyFrame {
             dense: None,
             recorded_intensity: None,
             slots: None,
+            lasers: spurious::DEFAULT_LASERS,
             power_model: None,
             moved: Moved::default(),
             layout,
@@ -961,6 +977,11 @@ pub trait NoiseStage: Send + Sync + std::fmt::Debug {
     fn uses_layout(&self) -> bool {
         false
     }
+    /// Why the stage's options do not fit a sensor with `lasers` lasers (per-laser
+    /// values or laser ids beyond it), if they do not.
+    fn check_lasers(&self, _lasers: usize) -> Result<(), String> {
+        Ok(())
+    }
 }
 
 /// Frame index reserved for per-unit draws: the unit stream of a stage is
@@ -1010,6 +1031,8 @@ pub struct NoiseChain {
     /// True when a stage may propose echoes: the firing slots are built as the frame
     /// starts.
     echoes: bool,
+    /// Lasers a firing of the sensor whose frames the chain processes.
+    lasers: usize,
 }
 
 impl NoiseChain {
@@ -1037,7 +1060,37 @@ impl NoiseChain {
             stages,
             tags,
             detection: config.detection.clone(),
+            lasers: spurious::DEFAULT_LASERS,
         }
+    }
+
+    /// The chain for frames of a sensor with `lasers` lasers (an HDL-32E's 32 unless
+    /// said); an error, naming the stage and option, when a stage's per-laser options
+    /// do not fit that sensor (a list of 32 values for a 64-laser sensor).
+    pub fn for_lasers(mut self, lasers: usize) -> Result<Self, String> {
+        if !(1..=spurious::MAX_LASERS).contains(&lasers) {
+            return Err(format!(
+                "a sensor with {lasers} lasers: the noise stages model 1 to {}",
+                spurious::MAX_LASERS
+            ));
+        }
+        for (i, stage) in self.stages.iter().enumerate() {
+            stage
+                .check_lasers(lasers)
+                .map_err(|e| format!("[[noise]] #{} ({}): {e}", i + 1, stage.kind()))?;
+        }
+        self.lasers = lasers;
+        Ok(self)
+    }
+
+    /// Lasers a firing of the sensor the chain is for.
+    pub fn lasers(&self) -> usize {
+        self.lasers
+    }
+
+    /// The lasers a firing when the frame's slots are built as it starts.
+    fn slots(&self) -> Option<usize> {
+        self.echoes.then_some(self.lasers)
     }
 
     /// The ideal-power model and its constants.
@@ -1065,7 +1118,7 @@ impl NoiseChain {
         }
         // The copy made in the pass that reads the returns.
         let (noisy, bytes) =
-            NoisyFrame::copy_keeping_bytes(frame.index, &frame.returns, &self.power, self.echoes);
+            NoisyFrame::copy_keeping_bytes(frame.index, &frame.returns, &self.power, self.slots());
         self.process_started(frame.index, (noisy, Some(bytes)))
     }
 
@@ -1088,7 +1141,7 @@ impl NoiseChain {
         } else if self.stages.is_empty() {
             (NoisyFrame::new(index, returns, &self.power), None)
         } else {
-            let (f, b) = NoisyFrame::new_keeping_bytes(index, returns, &self.power, self.echoes);
+            let (f, b) = NoisyFrame::new_keeping_bytes(index, returns, &self.power, self.slots());
             (f, Some(b))
         };
         self.process_started(index, started)
@@ -1102,6 +1155,7 @@ impl NoiseChain {
         (mut noisy, recorded): (NoisyFrame, Option<Vec<u8>>),
     ) -> NoisyFrame {
         noisy.recorded_intensity = recorded;
+        noisy.lasers = self.lasers;
         noisy.threshold = self.detection.min_power;
         noisy.min_range = self.detection.min_range_m;
         noisy.power_model = Some(Arc::clone(&self.power));
@@ -1403,7 +1457,7 @@ mod tests {
                 .all(|(x, y)| x.to_bits() == y.to_bits()));
             let l = a.layout.as_ref().expect("built");
             for (i, r) in clean.iter().enumerate() {
-                assert_eq!(l.laser[i], r.laser % 32);
+                assert_eq!(l.laser[i], r.laser & LASER_MASK);
                 assert_eq!(l.intensity[i], r.intensity);
                 assert_eq!(l.time[i].to_bits(), r.time.to_bits());
                 assert_eq!(l.azimuth[i].to_bits(), r.azimuth.to_bits());

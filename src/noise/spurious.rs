@@ -45,7 +45,7 @@ impl Echo {
     };
 }
 
-/// Index of a firing slot in [`Slots`]: `firing * 32 + laser`.
+/// Index of a firing slot in [`Slots`]: `firing * lasers + laser`.
 pub type SlotId = u32;
 
 /// An echo waiting for [`resolve`].
@@ -99,8 +99,10 @@ pub struct Slots {
     pub mode: SlotMode,
     /// The firings, in capture order.
     pub firings: Vec<Firing>,
-    /// Per slot (`firing * 32 + laser`): up to two indices of returns in it (`u32::MAX`
-    /// for none); in dual mode the last return first.
+    /// Slots a firing (the sensor's lasers: 16, 32, 64 or 128).
+    lasers: usize,
+    /// Per slot (`firing * lasers + laser`): up to two indices of returns in it
+    /// (`u32::MAX` for none); in dual mode the last return first.
     occupants: Vec<[u32; 2]>,
     /// Slot of each recorded return.
     slot_of: Vec<SlotId>,
@@ -109,7 +111,10 @@ pub struct Slots {
 const NONE: u32 = u32::MAX;
 /// Marks an entry of `resolve`'s best echoes as the dense column's echo of a return.
 const DENSE: u32 = 1 << 31;
-const LASERS: usize = 32;
+/// Lasers of a firing when the sensor is not said (the HDL-32E's).
+pub const DEFAULT_LASERS: usize = 32;
+/// Most lasers a sensor model has (VLS-128): laser ids are below this.
+pub const MAX_LASERS: usize = 128;
 
 /// Firing number of each (packet, block) seen: a table indexed by packet and block when
 /// the frame's packets span a short range (always, for a decoded capture: a frame's
@@ -150,21 +155,24 @@ impl FiringIndex {
 }
 
 impl Slots {
-    /// The slots of a frame's recorded returns (the first `clean_len` of `returns`).
-    pub fn of(returns: &[Return]) -> Slots {
-        Slots::of_single_in_order(returns).unwrap_or_else(|| Slots::of_any(returns))
+    /// The slots of a frame's recorded returns (the first `clean_len` of `returns`), of
+    /// a sensor with `lasers` lasers a firing (1 to [`MAX_LASERS`]; a laser id beyond
+    /// counts as the last).
+    pub fn of(returns: &[Return], lasers: usize) -> Slots {
+        let lasers = lasers.clamp(1, MAX_LASERS);
+        Slots::of_single_in_order(returns, lasers).unwrap_or_else(|| Slots::of_any(returns, lasers))
     }
 
     /// [`Slots::of`] in one pass over the returns, for the usual frame (see
     /// [`SlotsBuilder`]); `None` for any other frame.
-    fn of_single_in_order(returns: &[Return]) -> Option<Slots> {
-        let mut b = SlotsBuilder::new(returns)?;
+    fn of_single_in_order(returns: &[Return], lasers: usize) -> Option<Slots> {
+        let mut b = SlotsBuilder::new(returns, lasers)?;
         b.push(returns).then_some(())?;
         b.finish()
     }
 
     /// [`Slots::of`] for any frame.
-    fn of_any(returns: &[Return]) -> Slots {
+    fn of_any(returns: &[Return], lasers: usize) -> Slots {
         // A dual capture decoded with one of its two returns behaves like that single
         // mode: its slots hold one return of that kind.
         // One pass for the kinds and the span of packets (the returns are 48 bytes each:
@@ -193,7 +201,7 @@ impl Slots {
             0
         };
         let mut firings: Vec<Firing> = Vec::with_capacity(expected);
-        let mut occupants: Vec<[u32; 2]> = Vec::with_capacity(expected * LASERS);
+        let mut occupants: Vec<[u32; 2]> = Vec::with_capacity(expected * lasers);
         let mut slot_of = Vec::with_capacity(returns.len());
         let mut index = FiringIndex::new(lo, hi, returns.len());
         // A dual pair of blocks is one firing.
@@ -209,12 +217,12 @@ impl Slots {
                         packet: r.packet,
                         block,
                     });
-                    occupants.extend(std::iter::repeat_n([NONE; 2], LASERS));
+                    occupants.extend(std::iter::repeat_n([NONE; 2], lasers));
                     (firings.len() - 1) as u32
                 });
                 last_key = key;
             }
-            let slot = f * LASERS as u32 + u32::from(r.laser.min(31));
+            let slot = f * lasers as u32 + u32::from(r.laser).min(lasers as u32 - 1);
             let o = &mut occupants[slot as usize];
             // Dual: the last return in entry 0, the strongest in entry 1.
             let at = usize::from(r.kind == ReturnKind::DualStrongest || o[0] != NONE);
@@ -226,12 +234,18 @@ impl Slots {
         Slots {
             mode,
             firings,
+            lasers,
             occupants,
             slot_of,
         }
     }
 
-    /// Number of slots (firings times 32 lasers).
+    /// Slots a firing: the sensor's lasers.
+    pub fn lasers(&self) -> usize {
+        self.lasers
+    }
+
+    /// Number of slots (firings times the lasers).
     pub fn len(&self) -> usize {
         self.occupants.len()
     }
@@ -248,12 +262,13 @@ impl Slots {
 
     /// The slot of `laser` in firing `firing`.
     pub fn slot(&self, firing: usize, laser: u8) -> SlotId {
-        (firing * LASERS + usize::from(laser.min(31))) as SlotId
+        (firing * self.lasers + usize::from(laser).min(self.lasers - 1)) as SlotId
     }
 
     /// Firing index and laser of a slot.
-    pub fn split(slot: SlotId) -> (usize, u8) {
-        ((slot as usize) / LASERS, (slot as usize % LASERS) as u8)
+    pub fn split(&self, slot: SlotId) -> (usize, u8) {
+        let s = slot as usize;
+        (s / self.lasers, (s % self.lasers) as u8)
     }
 
     /// The recorded returns in a slot (none, one, or two in dual mode; last first).
@@ -262,6 +277,12 @@ impl Slots {
             .iter()
             .filter(|&&i| i != NONE)
             .map(|&i| i as usize)
+    }
+
+    /// A recorded return of firing `firing`, the lowest laser id's (its azimuth and time
+    /// are the firing's up to the lasers' offsets).
+    pub fn any_of_firing(&self, firing: usize) -> Option<usize> {
+        (0..self.lasers).find_map(|l| self.occupants(self.slot(firing, l as u8)).next())
     }
 
     /// True when no recorded return is in the slot.
@@ -279,7 +300,7 @@ impl Slots {
                 .flatten()
             {
                 if f < n {
-                    let o = self.occupants[f * LASERS + usize::from(laser)][0];
+                    let o = self.occupants[f * self.lasers + usize::from(laser)][0];
                     if o != NONE {
                         return Some(o as usize);
                     }
@@ -292,9 +313,10 @@ impl Slots {
     /// A return present in both firings (same laser), for carrying angles and times
     /// from one firing to the other.
     fn common(&self, a: usize, b: usize) -> Option<(usize, usize)> {
-        (0..LASERS).find_map(|l| {
-            let x = self.occupants[a * LASERS + l][0];
-            let y = self.occupants[b * LASERS + l][0];
+        let n = self.lasers;
+        (0..n).find_map(|l| {
+            let x = self.occupants[a * n + l][0];
+            let y = self.occupants[b * n + l][0];
             (x != NONE && y != NONE).then_some((x as usize, y as usize))
         })
     }
@@ -310,10 +332,10 @@ impl Slots {
         slot: SlotId,
         range: f32,
     ) -> Option<(Return, usize)> {
-        let (firing, laser) = Slots::split(slot);
+        let (firing, laser) = self.split(slot);
         let t = self.nearest_of_laser(firing, laser, 1000)?;
         let template = returns[t];
-        let tf = Slots::split(self.slot_of[t]).0;
+        let tf = self.split(self.slot_of[t]).0;
         let (mut azimuth, mut time) = (f64::from(template.azimuth), template.time);
         if tf != firing {
             let (here, there) = self.common(firing, tf)?;
@@ -379,6 +401,8 @@ impl Slots {
 /// the general path of [`Slots::of`].
 pub(crate) struct SlotsBuilder {
     lo: u32,
+    /// Slots a firing.
+    lasers: usize,
     /// Firing number of each (packet - lo, block), `NONE` for none yet.
     of: Vec<u32>,
     firings: Vec<Firing>,
@@ -393,7 +417,8 @@ pub(crate) struct SlotsBuilder {
 impl SlotsBuilder {
     /// For the frame `returns` (only its first and last are read); `None` when its
     /// packets do not ascend from the first to the last or span too many.
-    pub(crate) fn new(returns: &[Return]) -> Option<SlotsBuilder> {
+    pub(crate) fn new(returns: &[Return], lasers: usize) -> Option<SlotsBuilder> {
+        let lasers = lasers.clamp(1, MAX_LASERS);
         let (lo, hi) = (returns.first()?.packet, returns.last()?.packet);
         let span = u64::from(hi.checked_sub(lo)?) + 1;
         // The table's bound of `FiringIndex::new`.
@@ -403,9 +428,10 @@ impl SlotsBuilder {
         let expected = (span as usize).saturating_mul(12).min(returns.len());
         Some(SlotsBuilder {
             lo,
+            lasers,
             of: vec![NONE; span as usize * 256],
             firings: Vec::with_capacity(expected),
-            occupants: Vec::with_capacity(expected * LASERS),
+            occupants: Vec::with_capacity(expected * lasers),
             slot_of: Vec::with_capacity(returns.len()),
             last_key: u64::MAX,
             f: 0,
@@ -432,12 +458,12 @@ impl SlotsBuilder {
                         block: r.block,
                     });
                     self.occupants
-                        .extend(std::iter::repeat_n([NONE; 2], LASERS));
+                        .extend(std::iter::repeat_n([NONE; 2], self.lasers));
                 }
                 self.f = *at;
                 self.last_key = key;
             }
-            let slot = self.f * LASERS as u32 + u32::from(r.laser.min(31));
+            let slot = self.f * self.lasers as u32 + u32::from(r.laser).min(self.lasers as u32 - 1);
             let o = &mut self.occupants[slot as usize];
             let at = usize::from(o[0] != NONE);
             if o[at] == NONE {
@@ -462,6 +488,7 @@ impl SlotsBuilder {
         Some(Slots {
             mode,
             firings: self.firings,
+            lasers: self.lasers,
             occupants: self.occupants,
             slot_of: self.slot_of,
         })
@@ -472,7 +499,10 @@ impl NoisyFrame {
     /// The firing slots of the frame's recorded returns (built on first use).
     pub fn slots(&mut self) -> Arc<Slots> {
         if self.slots.is_none() {
-            self.slots = Some(Arc::new(Slots::of(&self.clean[..self.clean_len])));
+            self.slots = Some(Arc::new(Slots::of(
+                &self.clean[..self.clean_len],
+                self.lasers,
+            )));
         }
         Arc::clone(self.slots.as_ref().expect("just built"))
     }
@@ -514,7 +544,7 @@ impl NoisyFrame {
         let Some(d) = &self.dense else {
             return self.candidates.clone();
         };
-        let slots = Slots::of(&self.clean[..self.clean_len]);
+        let slots = Slots::of(&self.clean[..self.clean_len], self.lasers);
         let at = self.candidates.partition_point(|c| c.stage < d.stage);
         let mut all = self.candidates[..at].to_vec();
         all.extend(d.echo.iter().enumerate().filter_map(|(i, e)| {
@@ -917,7 +947,7 @@ fn resolve_slot(
     }
     // Occlusion removes the beam: no echo in an occluded slot.
     let occluded = if vacant {
-        let (firing, laser) = Slots::split(slot);
+        let (firing, laser) = slots.split(slot);
         slots
             .nearest_of_laser(firing, laser, 1000)
             .is_some_and(|t| frame.fate[t] == Fate::Occluded)
@@ -1021,7 +1051,7 @@ fn resolve_slot(
                 {
                     if let Some(kind) = kind {
                         ret.kind = kind;
-                        let firing = slots.firings[Slots::split(slot).0];
+                        let firing = slots.firings[slots.split(slot).0];
                         ret.block = firing.block + u8::from(kind == ReturnKind::DualStrongest);
                     }
                     ret.intensity = frame.echo_intensity(&echo);
@@ -1072,11 +1102,11 @@ mod tests {
                     v.push(ret(packet, block, 3, kind));
                 }
             }
-            let fast = Slots::of_single_in_order(&v).expect("the usual frame");
-            assert!(same(&fast, &Slots::of_any(&v)), "{kind:?}");
-            assert!(same(&Slots::of(&v), &fast));
+            let fast = Slots::of_single_in_order(&v, 32).expect("the usual frame");
+            assert!(same(&fast, &Slots::of_any(&v, 32)), "{kind:?}");
+            assert!(same(&Slots::of(&v, 32), &fast));
             // Chunk by chunk, as the chain builds it.
-            let mut b = SlotsBuilder::new(&v).unwrap();
+            let mut b = SlotsBuilder::new(&v, 32).unwrap();
             for chunk in v.chunks(100) {
                 assert!(b.push(chunk));
             }
@@ -1084,9 +1114,9 @@ mod tests {
             // A packet before the first one's: the general path, the same slots.
             let mut w = v.clone();
             w[40].packet = 3;
-            assert!(Slots::of_single_in_order(&w).is_none());
-            assert!(same(&Slots::of(&w), &Slots::of_any(&w)));
-            assert_eq!(Slots::of(&w).firings.len(), fast.firings.len() + 1);
+            assert!(Slots::of_single_in_order(&w, 32).is_none());
+            assert!(same(&Slots::of(&w, 32), &Slots::of_any(&w, 32)));
+            assert_eq!(Slots::of(&w, 32).firings.len(), fast.firings.len() + 1);
         }
         // Dual kinds: the general path.
         let v: Vec<Return> = (0..4u8)
@@ -1099,10 +1129,10 @@ mod tests {
                 (0..32u8).map(move |laser| ret(1, block, laser, kind))
             })
             .collect();
-        assert!(Slots::of_single_in_order(&v).is_none());
-        let s = Slots::of(&v);
+        assert!(Slots::of_single_in_order(&v, 32).is_none());
+        let s = Slots::of(&v, 32);
         assert_eq!(s.mode, SlotMode::Dual);
         assert_eq!(s.firings.len(), 2);
-        assert!(Slots::of_single_in_order(&[]).is_none());
+        assert!(Slots::of_single_in_order(&[], 32).is_none());
     }
 }

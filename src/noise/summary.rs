@@ -102,14 +102,58 @@ pub struct DropCounts {
 }
 
 /// Removed returns by cause and laser id (index = laser id).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+/// One entry a laser of the sensor (32 for the HDL-32E's frames, 64 for the HDL-64E's).
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct DropsByLaser {
     /// Removed by occlusion.
-    pub occluded: [u64; 32],
+    pub occluded: Vec<u64>,
     /// Under the power threshold.
-    pub below_power: [u64; 32],
+    pub below_power: Vec<u64>,
     /// Under the minimum range.
-    pub below_min_range: [u64; 32],
+    pub below_min_range: Vec<u64>,
+}
+
+impl DropsByLaser {
+    /// Zero counts for a sensor of `lasers` lasers (at least one).
+    pub fn new(lasers: usize) -> Self {
+        let zeros = vec![0; lasers.max(1)];
+        DropsByLaser {
+            occluded: zeros.clone(),
+            below_power: zeros.clone(),
+            below_min_range: zeros,
+        }
+    }
+
+    /// Counts a return of `laser` dropped with `fate` (other fates are not drops); a
+    /// laser id beyond the table counts as the last laser's.
+    #[inline]
+    fn add(&mut self, fate: Fate, laser: u8) {
+        let column = match fate {
+            Fate::Occluded => &mut self.occluded,
+            Fate::BelowPower => &mut self.below_power,
+            Fate::BelowMinRange => &mut self.below_min_range,
+            _ => return,
+        };
+        if let Some(last) = column.len().checked_sub(1) {
+            column[usize::from(laser).min(last)] += 1;
+        }
+    }
+
+    /// Adds another sensor's or part's counts, laser by laser (the longer table wins).
+    fn merge(&mut self, other: &DropsByLaser) {
+        for (mine, theirs) in [
+            (&mut self.occluded, &other.occluded),
+            (&mut self.below_power, &other.below_power),
+            (&mut self.below_min_range, &other.below_min_range),
+        ] {
+            if mine.len() < theirs.len() {
+                mine.resize(theirs.len(), 0);
+            }
+            for (m, t) in mine.iter_mut().zip(theirs) {
+                *m += t;
+            }
+        }
+    }
 }
 
 /// Statistics of R_n - R_i over kept returns (serialised as count, mean_m, rms_m,
@@ -314,6 +358,7 @@ impl NoiseSummary {
         let mut s = NoiseSummary {
             frames: 1,
             returns_in: frame.clean_len as u64,
+            dropped_by_laser: DropsByLaser::new(frame.lasers),
             ..Default::default()
         };
         let n = frame
@@ -351,13 +396,7 @@ impl NoiseSummary {
                 continue;
             }
             by_fate[fate as usize] += 1;
-            let laser = usize::from(r.laser).min(31);
-            match fate {
-                Fate::Occluded => s.dropped_by_laser.occluded[laser] += 1,
-                Fate::BelowPower => s.dropped_by_laser.below_power[laser] += 1,
-                Fate::BelowMinRange => s.dropped_by_laser.below_min_range[laser] += 1,
-                _ => {}
-            }
+            s.dropped_by_laser.add(fate, r.laser);
         }
         if n_small > 0 {
             rc.count += n_small;
@@ -390,10 +429,11 @@ impl NoiseSummary {
         let mut s = NoiseSummary {
             frames: 1,
             returns_in: frame.clean_len as u64,
+            dropped_by_laser: DropsByLaser::new(frame.lasers),
             ..Default::default()
         };
         for ((r, &fate), &rn) in frame.clean.iter().zip(&frame.fate).zip(&frame.range) {
-            let laser = usize::from(r.laser).min(31);
+            s.dropped_by_laser.add(fate, r.laser);
             match fate {
                 Fate::Kept => {
                     s.returns_out += 1;
@@ -407,18 +447,9 @@ impl NoiseSummary {
                     s.returns_out += 1;
                     s.spurious.added += 1;
                 }
-                Fate::Occluded => {
-                    s.dropped.occluded += 1;
-                    s.dropped_by_laser.occluded[laser] += 1;
-                }
-                Fate::BelowPower => {
-                    s.dropped.below_power += 1;
-                    s.dropped_by_laser.below_power[laser] += 1;
-                }
-                Fate::BelowMinRange => {
-                    s.dropped.below_min_range += 1;
-                    s.dropped_by_laser.below_min_range[laser] += 1;
-                }
+                Fate::Occluded => s.dropped.occluded += 1,
+                Fate::BelowPower => s.dropped.below_power += 1,
+                Fate::BelowMinRange => s.dropped.below_min_range += 1,
             }
         }
         s
@@ -432,11 +463,7 @@ impl NoiseSummary {
         self.dropped.occluded += other.dropped.occluded;
         self.dropped.below_power += other.dropped.below_power;
         self.dropped.below_min_range += other.dropped.below_min_range;
-        for i in 0..32 {
-            self.dropped_by_laser.occluded[i] += other.dropped_by_laser.occluded[i];
-            self.dropped_by_laser.below_power[i] += other.dropped_by_laser.below_power[i];
-            self.dropped_by_laser.below_min_range[i] += other.dropped_by_laser.below_min_range[i];
-        }
+        self.dropped_by_laser.merge(&other.dropped_by_laser);
         self.range_change.merge(&other.range_change);
         self.spurious.replaced += other.spurious.replaced;
         self.spurious.added += other.spurious.added;

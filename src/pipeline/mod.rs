@@ -100,6 +100,15 @@ impl Pipeline {
         }
     }
 
+    /// The pipeline for frames of a sensor with `lasers` lasers (see
+    /// [`NoiseChain::for_lasers`]).
+    pub fn for_lasers(&self, lasers: usize) -> Result<Self, String> {
+        Ok(Pipeline {
+            chain: self.chain.clone().for_lasers(lasers)?,
+            ..self.clone()
+        })
+    }
+
     /// The noise chain.
     pub fn chain(&self) -> &NoiseChain {
         &self.chain

@@ -382,6 +382,11 @@ pub fn run_mode(
                 continue;
             }
             let config = s.base.cell_config(&s.varies, &cell)?;
+            // A sweep runs captures, decoded for the HDL-32E: per-laser options must fit
+            // its lasers (`occlusion` lasers = [40] would select nothing).
+            crate::noise::NoiseChain::new(&config)
+                .for_lasers(crate::sensor::HDL32E.lasers)
+                .map_err(|e| Error::Invalid(format!("{}: {e}", cell.file_name(&s.varies))))?;
             let mut baseline = config.clone();
             baseline.noise.clear();
             // Without noise stages only RANSAC ground draws random numbers: otherwise the

@@ -16,11 +16,12 @@
 //! receiver defaults added 2.2 cm at 25 m, beyond the datasheet's 2 cm for the whole
 //! sensor).
 
-use super::{float, normal, per_laser, sigma};
+use super::{check_per_laser, float, normal, per_laser, sigma};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
-use crate::noise::{NoiseStage, NoisyFrame, StageKind};
+use crate::noise::spurious::MAX_LASERS;
+use crate::noise::{NoiseStage, NoisyFrame, StageKind, LASER_MASK};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 use toml::Value;
@@ -41,8 +42,9 @@ pub struct LaserDiode {
     pub sigma_azimuth_deg: f64,
     /// Given per-laser values (power factor, range bias, elevation, azimuth offset).
     pub given: [Option<Vec<f64>>; 4],
-    /// Values in use per laser: power factor, range bias m, elevation deg, azimuth deg.
-    pub values: [[f64; 32]; 4],
+    /// Values in use per laser id: power factor, range bias m, elevation deg, azimuth
+    /// deg (every id a sensor model may have).
+    pub values: [[f64; MAX_LASERS]; 4],
 }
 
 impl NoiseStage for LaserDiode {
@@ -74,19 +76,27 @@ impl NoiseStage for LaserDiode {
     }
     fn with_unit_draws(&self, rng: &mut ChaCha8Rng) -> Option<Arc<dyn NoiseStage>> {
         let mut s = self.clone();
-        for l in 0..32 {
+        // Laser by laser, so the first 32 lasers' values do not depend on how many more
+        // the sensor has.
+        for l in 0..MAX_LASERS {
             let d = [normal(rng), normal(rng), normal(rng), normal(rng)];
             s.values[0][l] = (self.sigma_power * d[0]).exp();
             s.values[1][l] = self.sigma_range_m * d[1];
             s.values[2][l] = self.sigma_elevation_deg * d[2];
             s.values[3][l] = self.sigma_azimuth_deg * d[3];
             for (k, g) in self.given.iter().enumerate() {
-                if let Some(g) = g {
-                    s.values[k][l] = g[l];
+                if let Some(&v) = g.as_ref().and_then(|g| g.get(l)) {
+                    s.values[k][l] = v;
                 }
             }
         }
         Some(Arc::new(s))
+    }
+    fn check_lasers(&self, lasers: usize) -> std::result::Result<(), String> {
+        for (key, g) in GIVEN_KEYS.iter().zip(&self.given) {
+            check_per_laser(key, g.as_deref(), lasers)?;
+        }
+        Ok(())
     }
     fn apply(&self, frame: &mut NoisyFrame, _rng: &mut ChaCha8Rng) {
         let [gain, bias, elev, azim] = &self.values;
@@ -117,7 +127,7 @@ impl NoiseStage for LaserDiode {
         // Columns no stage made yet are built together, in one walk over the firings
         // (two walks, one per column, cost a third more on a real frame, whose firings
         // are often incomplete); existing ones get the offsets added.
-        let mut fresh: Vec<(&mut Option<Vec<f32>>, &[f32; 32])> = Vec::new();
+        let mut fresh: Vec<(&mut Option<Vec<f32>>, &[f32; MAX_LASERS])> = Vec::new();
         for (on, v, off) in [
             (elevs, &mut moved.elevation_deg, &offsets[0]),
             (azims, &mut moved.azimuth_deg, &offsets[1]),
@@ -129,12 +139,12 @@ impl NoiseStage for LaserDiode {
                 None => fresh.push((v, off)),
                 Some(v) => {
                     for (d, &l) in v.iter_mut().zip(lasers) {
-                        *d += off[usize::from(l & 31)];
+                        *d += off[usize::from(l & LASER_MASK)];
                     }
                 }
             }
         }
-        let tables: Vec<&[f32; 32]> = fresh.iter().map(|(_, t)| *t).collect();
+        let tables: Vec<&[f32; MAX_LASERS]> = fresh.iter().map(|(_, t)| *t).collect();
         for ((v, _), column) in fresh
             .into_iter()
             .zip(per_laser_columns(lasers, firings, &tables))
@@ -152,7 +162,7 @@ impl NoiseStage for LaserDiode {
                     .zip(fate.iter())
                 {
                     if f.is_alive() {
-                        let l = usize::from(l & 31);
+                        let l = usize::from(l & LASER_MASK);
                         *p *= gain[l];
                         *r = (f64::from(*r) + bias[l]) as f32;
                     }
@@ -161,25 +171,26 @@ impl NoiseStage for LaserDiode {
             }
             for ((p, &l), f) in power.iter_mut().zip(lasers).zip(fate.iter()) {
                 if f.is_alive() {
-                    *p *= gain[usize::from(l & 31)];
+                    *p *= gain[usize::from(l & LASER_MASK)];
                 }
             }
         }
         if biases {
             for ((r, &l), f) in range.iter_mut().zip(lasers).zip(fate.iter()) {
                 if f.is_alive() {
-                    *r = (f64::from(*r) + bias[usize::from(l & 31)]) as f32;
+                    *r = (f64::from(*r) + bias[usize::from(l & LASER_MASK)]) as f32;
                 }
             }
         }
     }
 }
 
-/// The laser ids of a firing in which all 32 lasers returned, in firing order.
-const IN_ORDER: [u8; 32] = {
-    let mut ids = [0u8; 32];
+/// The laser ids of a firing in which every laser returned, in firing order (its
+/// first 16, 32, 64 or 128 for the sensor's lasers).
+const IN_ORDER: [u8; MAX_LASERS] = {
+    let mut ids = [0u8; MAX_LASERS];
     let mut l = 0;
-    while l < 32 {
+    while l < MAX_LASERS {
         ids[l] = l as u8;
         l += 1;
     }
@@ -187,9 +198,14 @@ const IN_ORDER: [u8; 32] = {
 };
 
 /// `table[l]` for every laser id `l` of `lasers` and every table of `tables`, firing by
-/// firing: a firing of the 32 lasers in order (every laser returned) is a copy of each
-/// table; the others are looked up return by return. The same values either way.
-fn per_laser_columns(lasers: &[u8], firings: &[[u32; 2]], tables: &[&[f32; 32]]) -> Vec<Vec<f32>> {
+/// firing: a firing of lasers 0, 1, 2, ... in order (every laser returned) is a copy of
+/// each table's start; the others are looked up return by return. The same values
+/// either way.
+fn per_laser_columns(
+    lasers: &[u8],
+    firings: &[[u32; 2]],
+    tables: &[&[f32; MAX_LASERS]],
+) -> Vec<Vec<f32>> {
     let mut out: Vec<Vec<f32>> = tables
         .iter()
         .map(|_| Vec::with_capacity(lasers.len()))
@@ -199,13 +215,13 @@ fn per_laser_columns(lasers: &[u8], firings: &[[u32; 2]], tables: &[&[f32; 32]])
     }
     for &[start, end] in firings {
         let ids = &lasers[start as usize..end as usize];
-        if ids == IN_ORDER {
+        if IN_ORDER.get(..ids.len()) == Some(ids) {
             for (column, table) in out.iter_mut().zip(tables) {
-                column.extend_from_slice(*table);
+                column.extend_from_slice(&table[..ids.len()]);
             }
         } else {
             for (column, table) in out.iter_mut().zip(tables) {
-                column.extend(ids.iter().map(|&l| table[usize::from(l & 31)]));
+                column.extend(ids.iter().map(|&l| table[usize::from(l & LASER_MASK)]));
             }
         }
     }
@@ -233,7 +249,12 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
         sigma_elevation_deg: sigma(opts, "sigma_elevation_deg", 0.01, 5.0)?,
         sigma_azimuth_deg: sigma(opts, "sigma_azimuth_deg", 0.01, 5.0)?,
         given,
-        values: [[1.0; 32], [0.0; 32], [0.0; 32], [0.0; 32]],
+        values: [
+            [1.0; MAX_LASERS],
+            [0.0; MAX_LASERS],
+            [0.0; MAX_LASERS],
+            [0.0; MAX_LASERS],
+        ],
     }))
 }
 
@@ -248,10 +269,10 @@ pub const KIND: StageKind = StageKind {
         OptionSpec { name: "sigma_range_m", unit: "m", default: "0.005", doc: "SD of the per-laser range bias b_l (spread between units)" },
         OptionSpec { name: "sigma_elevation_deg", unit: "deg", default: "0.01", doc: "SD of the per-laser elevation offset" },
         OptionSpec { name: "sigma_azimuth_deg", unit: "deg", default: "0.01", doc: "SD of the per-laser azimuth offset" },
-        OptionSpec { name: "power_factors", unit: "-", default: "drawn", doc: "32 given power factors (replace the draws)" },
-        OptionSpec { name: "range_bias_m", unit: "m", default: "drawn", doc: "32 given range biases" },
-        OptionSpec { name: "elevation_offsets_deg", unit: "deg", default: "drawn", doc: "32 given elevation offsets" },
-        OptionSpec { name: "azimuth_offsets_deg", unit: "deg", default: "drawn", doc: "32 given azimuth offsets" },
+        OptionSpec { name: "power_factors", unit: "-", default: "drawn", doc: "Given power factors (replace the draws), one per laser of the sensor" },
+        OptionSpec { name: "range_bias_m", unit: "m", default: "drawn", doc: "Given range biases, one per laser of the sensor" },
+        OptionSpec { name: "elevation_offsets_deg", unit: "deg", default: "drawn", doc: "Given elevation offsets, one per laser of the sensor" },
+        OptionSpec { name: "azimuth_offsets_deg", unit: "deg", default: "drawn", doc: "Given azimuth offsets, one per laser of the sensor" },
     ],
     build,
 };
@@ -262,14 +283,19 @@ mod tests {
 
     #[test]
     fn per_laser_columns_are_the_tables_of_each_return_s_laser() {
-        let table: [f32; 32] = std::array::from_fn(|l| 0.0 + (l as f32 - 15.5) * 1e-3);
-        // Firings in order, with lasers missing, out of order, and ids past 31.
+        let table: [f32; MAX_LASERS] = std::array::from_fn(|l| 0.0 + (l as f32 - 15.5) * 1e-3);
+        // Firings in order (of 32, 16, 64 and 128 lasers), with lasers missing, out of
+        // order, ids past 31 and past 127.
         let firings_ids: Vec<Vec<u8>> = vec![
             (0..32).collect(),
             (0..32).filter(|l| l % 5 != 0).collect(),
             (0..32).rev().collect(),
             (0..32).collect(),
             (32..64).collect(),
+            (0..16).collect(),
+            (0..64).collect(),
+            (0..128).collect(),
+            (120..=255).collect(),
             vec![],
             vec![7],
             (0..31).collect(),
@@ -281,7 +307,7 @@ mod tests {
             lasers.extend_from_slice(ids);
             firings.push([start, lasers.len() as u32]);
         }
-        let other: [f32; 32] = std::array::from_fn(|l| -(l as f32) * 2e-3);
+        let other: [f32; MAX_LASERS] = std::array::from_fn(|l| -(l as f32) * 2e-3);
         for tables in [
             vec![&table],
             vec![&table, &other],
@@ -291,7 +317,7 @@ mod tests {
             let got = per_laser_columns(&lasers, &firings, &tables);
             assert_eq!(got.len(), tables.len());
             for (got, t) in got.iter().zip(&tables) {
-                let want: Vec<f32> = lasers.iter().map(|&l| t[usize::from(l & 31)]).collect();
+                let want: Vec<f32> = lasers.iter().map(|&l| t[usize::from(l % 128)]).collect();
                 assert_eq!(got.len(), want.len());
                 assert!(got
                     .iter()

@@ -403,7 +403,8 @@ pub fn sigma(opts: &Section<'_>, key: &str, default: f64, hi: f64) -> Result<f64
     }
 }
 
-/// A list of 32 finite numbers in `[lo, hi]` at `key` (one per laser id), if given.
+/// A list of finite numbers in `[lo, hi]` at `key`, one per laser id of the sensor
+/// (its length is checked against the sensor by [`check_per_laser`]), if given.
 pub fn per_laser(opts: &Section<'_>, key: &str, lo: f64, hi: f64) -> Result<Option<Vec<f64>>> {
     let Some(v) = opts.value(key) else {
         return Ok(None);
@@ -411,16 +412,21 @@ pub fn per_laser(opts: &Section<'_>, key: &str, lo: f64, hi: f64) -> Result<Opti
     let bad = || {
         opts.error(
             key,
-            format!("must be a list of 32 numbers in [{lo}, {hi}], one per laser id"),
+            format!("must be a list of numbers in [{lo}, {hi}], one per laser id"),
         )
     };
     let toml::Value::Array(items) = v else {
         return Err(bad());
     };
-    if items.len() != 32 {
+    let most = crate::noise::spurious::MAX_LASERS;
+    if !(1..=most).contains(&items.len()) {
         return Err(opts.error(
             key,
-            format!("has {} entries; the HDL-32E has 32 lasers", items.len()),
+            format!(
+                "has {} entries; give one per laser of the sensor (16, 32, 64 or 128; \
+                 at most {most})",
+                items.len()
+            ),
         ));
     }
     items
@@ -432,6 +438,22 @@ pub fn per_laser(opts: &Section<'_>, key: &str, lo: f64, hi: f64) -> Result<Opti
         })
         .collect::<Result<Vec<f64>>>()
         .map(Some)
+}
+
+/// Why a per-laser list given at `key` does not fit a sensor of `lasers` lasers (it
+/// must have one entry per laser), if it does not.
+pub fn check_per_laser(
+    key: &str,
+    given: Option<&[f64]>,
+    lasers: usize,
+) -> std::result::Result<(), String> {
+    match given {
+        Some(g) if g.len() != lasers => Err(format!(
+            "{key} has {} entries, but the sensor has {lasers} lasers: give one per laser",
+            g.len()
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// A TOML float.

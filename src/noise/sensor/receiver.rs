@@ -25,7 +25,11 @@ use super::{fill_normals, float, normal, number, sigma, CHUNK};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
-use crate::noise::{Fate, NoiseStage, NoisyFrame, StageKind};
+use crate::noise::spurious::MAX_LASERS;
+use crate::noise::{Fate, NoiseStage, NoisyFrame, StageKind, LASER_MASK};
+
+/// Bits of a laser id in a per-laser table ([`MAX_LASERS`] entries).
+const LASER_BITS: u32 = MAX_LASERS.trailing_zeros();
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 use toml::Value;
@@ -48,8 +52,9 @@ pub struct Receiver {
     pub sigma_noise: f64,
     /// LISA's dR in metres.
     pub range_noise_m: f64,
-    /// Per-laser gains in use (all 1 until the unit draws are made).
-    pub gains: [f64; 32],
+    /// Per-laser gains in use, by laser id (all 1 until the unit draws are made; drawn
+    /// in id order, so the first 32 do not depend on how many the sensor has).
+    pub gains: [f64; MAX_LASERS],
 }
 
 impl NoiseStage for Receiver {
@@ -92,8 +97,8 @@ impl NoiseStage for Receiver {
             || self.range_noise_m != 0.0;
         if any {
             // Per-laser power factor, formed once per frame (same product as per return).
-            // Entries 32..64 are 1 for dead returns (see below).
-            let mut factor = [1.0f64; 64];
+            // Entries from MAX_LASERS on are 1 for dead returns (see below).
+            let mut factor = [1.0f64; 2 * MAX_LASERS];
             for (f, g) in factor.iter_mut().zip(self.gains) {
                 *f = self.responsivity * g;
             }
@@ -139,7 +144,7 @@ impl NoiseStage for Receiver {
                         .zip(&lay.laser[start..end])
                     {
                         let dead = usize::from(!f.is_alive());
-                        *p *= factor[usize::from(l & 31) | dead << 5];
+                        *p *= factor[usize::from(l & LASER_MASK) | dead << LASER_BITS];
                     }
                 }
                 let s_r = &mut s_r[..end - start];
@@ -246,7 +251,7 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
         noise_floor: number(opts, "noise_floor", 0.0, 0.0, 1e6)?,
         sigma_noise: sigma(opts, "sigma_noise", 0.3, 100.0)?,
         range_noise_m: sigma(opts, "range_noise_m", 0.03, 10.0)?,
-        gains: [1.0; 32],
+        gains: [1.0; MAX_LASERS],
     }))
 }
 

@@ -309,17 +309,18 @@ impl Crosstalk {
         }
         let slots = frame.slots();
         let full = self.sectors.iter().any(Sector::is_full);
-        // Firings in a sector, by the azimuth of any of their returns (the 32 lasers of a
-        // firing are within 0.17 degrees of each other).
+        // Firings in a sector, by the azimuth of any of their returns (the lasers of a
+        // firing are within 0.17 degrees of each other on the HDL-32E, 10 on the HDL-64E).
         let firings: Vec<u32> = (0..slots.firings.len())
             .filter(|&f| {
-                full || (0..32u8)
-                    .find_map(|l| slots.occupants(slots.slot(f, l)).next())
+                full || slots
+                    .any_of_firing(f)
                     .is_some_and(|i| self.covers(f64::from(frame.clean[i].azimuth)))
             })
             .map(|f| f as u32)
             .collect();
-        let n = firings.len() * 32;
+        let lasers = slots.lasers();
+        let n = firings.len() * lasers;
         if n == 0 {
             return;
         }
@@ -333,7 +334,7 @@ impl Crosstalk {
             .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2);
         let power = self.direct_power(kappa);
         for k in chosen {
-            let slot = slots.slot(firings[k / 32] as usize, (k % 32) as u8);
+            let slot = slots.slot(firings[k / lasers] as usize, (k % lasers) as u8);
             let range = (lo + (self.max_range_m - lo) * rng.random::<f64>()) as f32;
             frame.propose_slot(slot, Echo { range, power });
         }

@@ -35,7 +35,8 @@ use crate::error::Result;
 use crate::noise::registry::OptionSpec;
 use crate::noise::sensor::{float, number, scale_byte, sigma, CHUNK};
 use crate::noise::spurious::SlotMode;
-use crate::noise::{Fate, NoiseStage, NoisyFrame, Slots, StageKind};
+use crate::noise::spurious::MAX_LASERS;
+use crate::noise::{check_ids, Fate, NoiseStage, NoisyFrame, Slots, StageKind, LASER_MASK};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
@@ -51,8 +52,8 @@ const MAX_WALK: usize = 200;
 /// The lens-damage stage.
 #[derive(Clone, Debug)]
 pub struct LensDamage {
-    /// Laser ids behind the damaged spot.
-    pub lasers: Vec<u8>,
+    /// Laser ids behind the damaged spot; `None` for every laser of the sensor.
+    pub lasers: Option<Vec<u8>>,
     /// One-way transmission T of the damaged optics.
     pub transmission: f64,
     /// Probability p_s that a return's beam is scattered.
@@ -62,19 +63,24 @@ pub struct LensDamage {
     /// Share q of the deflected echo collected back.
     pub scatter_fraction: f64,
     /// Bit l set: laser l damaged.
-    mask: u32,
+    mask: u128,
 }
 
 impl LensDamage {
     /// Builds the stage (options already valid).
     pub fn new(
-        lasers: Vec<u8>,
+        lasers: Option<Vec<u8>>,
         transmission: f64,
         scatter_probability: f64,
         scatter_sigma_deg: f64,
         scatter_fraction: f64,
     ) -> Self {
-        let mask = lasers.iter().fold(0u32, |m, &l| m | (1u32 << (l & 31)));
+        let mask = match &lasers {
+            Some(ids) => ids
+                .iter()
+                .fold(0u128, |m, &l| m | (1u128 << (l & LASER_MASK))),
+            None => u128::MAX,
+        };
         LensDamage {
             lasers,
             transmission,
@@ -87,7 +93,7 @@ impl LensDamage {
 
     #[inline]
     fn damaged(&self, laser: u8) -> bool {
-        laser < 32 && self.mask & (1 << laser) != 0
+        usize::from(laser) < MAX_LASERS && self.mask & (1u128 << laser) != 0
     }
 }
 
@@ -105,9 +111,7 @@ fn normals(w: u64) -> (f64, f64) {
 
 /// Azimuth of a firing: that of its first recorded return.
 fn firing_azimuth(frame: &NoisyFrame, slots: &Slots, firing: usize) -> Option<f32> {
-    (0..32u8)
-        .find_map(|l| slots.occupants(slots.slot(firing, l)).next())
-        .map(|i| frame.clean[i].azimuth)
+    slots.any_of_firing(firing).map(|i| frame.clean[i].azimuth)
 }
 
 /// The firing whose azimuth is nearest to `d_az` degrees from firing `f`'s (walking from
@@ -158,9 +162,12 @@ impl NoiseStage for LensDamage {
         NAME
     }
     fn describe(&self) -> String {
+        let lasers = match &self.lasers {
+            Some(ids) => format!("{} lasers", ids.len()),
+            None => "all lasers".to_string(),
+        };
         format!(
-            "{} lasers: power x T^2 = {:.4}; {} of beams deflected by N(0, {}^2) deg, echo x {}",
-            self.lasers.len(),
+            "{lasers}: power x T^2 = {:.4}; {} of beams deflected by N(0, {}^2) deg, echo x {}",
             self.transmission * self.transmission,
             self.scatter_probability,
             self.scatter_sigma_deg,
@@ -168,21 +175,21 @@ impl NoiseStage for LensDamage {
         )
     }
     fn settings(&self) -> Vec<(&'static str, Value)> {
-        vec![
-            (
-                "lasers",
-                Value::Array(
-                    self.lasers
-                        .iter()
-                        .map(|&l| Value::Integer(l.into()))
-                        .collect(),
-                ),
-            ),
+        let mut v = Vec::new();
+        if let Some(ids) = &self.lasers {
+            let ids = ids.iter().map(|&l| Value::Integer(l.into())).collect();
+            v.push(("lasers", Value::Array(ids)));
+        }
+        v.extend([
             ("transmission", float(self.transmission)),
             ("scatter_probability", float(self.scatter_probability)),
             ("scatter_sigma_deg", float(self.scatter_sigma_deg)),
             ("scatter_fraction", float(self.scatter_fraction)),
-        ]
+        ]);
+        v
+    }
+    fn check_lasers(&self, lasers: usize) -> std::result::Result<(), String> {
+        check_ids("lasers", self.lasers.as_deref(), lasers)
     }
     fn proposes_echoes(&self) -> bool {
         // Scattered returns become `Replaced`: the PLY then carries fate and cause.
@@ -197,14 +204,14 @@ impl NoiseStage for LensDamage {
             let slots = frame.slots();
             let dual = slots.mode == SlotMode::Dual;
             // Elevation of each laser in this frame (the calibration's).
-            let mut elevation = [f32::NAN; 32];
+            let mut elevation = [f32::NAN; MAX_LASERS];
             let mut found = 0;
             for r in &frame.clean[..frame.clean_len] {
-                let l = usize::from(r.laser) % 32;
+                let l = usize::from(r.laser & LASER_MASK);
                 if elevation[l].is_nan() {
                     elevation[l] = r.elevation;
                     found += 1;
-                    if found == 32 {
+                    if found == slots.lasers() {
                         break;
                     }
                 }
@@ -230,9 +237,9 @@ impl NoiseStage for LensDamage {
                     }
                     let (n_az, n_el) = normals(w);
                     let r = &frame.clean[i];
-                    let (f, _) = Slots::split(slot);
+                    let (f, _) = slots.split(slot);
                     let target_el = r.elevation as f64 + self.scatter_sigma_deg * n_el;
-                    let laser = (0..32u8)
+                    let laser = (0..MAX_LASERS as u8)
                         .filter(|&l| !elevation[usize::from(l)].is_nan())
                         .min_by(|&a, &b| {
                             let da = (f64::from(elevation[usize::from(a)]) - target_el).abs();
@@ -263,7 +270,7 @@ impl NoiseStage for LensDamage {
         if t2 != 1.0 {
             // Power only: the byte follows by the chain's intensity rule.
             // With every laser damaged, skip reading the (large) returns for their laser.
-            let all = self.mask == u32::MAX;
+            let all = self.mask == u128::MAX;
             for ((p, fate), r) in frame.power.iter_mut().zip(&frame.fate).zip(&frame.clean) {
                 if fate.is_alive() && (all || self.damaged(r.laser)) {
                     *p *= t2;
@@ -301,10 +308,7 @@ impl NoiseStage for LensDamage {
 
 /// Reads the options of a `lens_damage` entry.
 pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
-    let lasers = match opts.id_list("lasers", 31)? {
-        Some(ids) => ids,
-        None => (0..32).collect(),
-    };
+    let lasers = opts.id_list("lasers", LASER_MASK)?;
     Ok(Arc::new(LensDamage::new(
         lasers,
         number(opts, "transmission", 0.9, 0.0, 1.0)?,

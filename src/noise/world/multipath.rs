@@ -209,11 +209,12 @@ impl NoiseStage for Multipath {
         let half_theta = self.divergence_mrad * 1e-3 / 2.0;
         // Decide every change from the state before this stage, then apply.
         let mut actions: Vec<(u32, usize, Mix)> = Vec::new();
-        let mut words = [0u64; 32];
+        let lasers = slots.lasers();
+        let mut words = vec![0u64; lasers];
         for f in 0..n_fir {
             rng.fill(&mut words[..]);
             for (l, &w) in words.iter().enumerate() {
-                let s = f * 32 + l;
+                let s = f * lasers + l;
                 let i = rep[s];
                 if i == NONE || unit(w) >= self.probability {
                     continue;
@@ -228,7 +229,7 @@ impl NoiseStage for Multipath {
                     if nf >= n_fir {
                         continue;
                     }
-                    let j = rep[nf * 32 + l];
+                    let j = rep[nf * lasers + l];
                     if j == NONE || !frame.fate[j as usize].is_alive() {
                         continue;
                     }

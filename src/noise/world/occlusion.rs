@@ -17,7 +17,7 @@
 
 use crate::config::reader::Section;
 use crate::error::Result;
-use crate::noise::{Fate, NoiseStage, NoisyFrame};
+use crate::noise::{check_ids, Fate, NoiseStage, NoisyFrame, LASER_MASK};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 use toml::Value;
@@ -31,7 +31,7 @@ const ELEVATION_SLACK_DEG: f64 = 0.005;
 /// Which beams are occluded.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Selection {
-    /// By laser id (firing order, 0..31).
+    /// By laser id (firing order, 0 to the sensor's lasers - 1).
     Lasers(Vec<u8>),
     /// By ring (elevation order, 0 = lowest).
     Rings(Vec<u8>),
@@ -49,16 +49,16 @@ pub struct Occlusion {
     /// One-way transmission T of the obstruction (power x T^2, out and back); 0 blocks.
     pub transmission: f64,
     /// Bit i set: laser id (or ring) i selected.
-    mask: u32,
+    mask: u128,
 }
 
 impl Occlusion {
     /// Builds the stage; `selection` and `azimuth_deg` must already be valid.
     pub fn new(selection: Selection, azimuth_deg: Option<[f64; 2]>, transmission: f64) -> Self {
         let mask = match &selection {
-            Selection::Lasers(ids) | Selection::Rings(ids) => {
-                ids.iter().fold(0u32, |m, &i| m | (1u32 << i))
-            }
+            Selection::Lasers(ids) | Selection::Rings(ids) => ids
+                .iter()
+                .fold(0u128, |m, &i| m | (1u128 << (i & LASER_MASK))),
             Selection::Elevation(_) => 0,
         };
         Occlusion {
@@ -72,8 +72,8 @@ impl Occlusion {
     /// True if the beam of this return passes through the obstruction.
     pub fn covers(&self, laser: u8, ring: u8, elevation: f32, azimuth: f32) -> bool {
         let beam = match &self.selection {
-            Selection::Lasers(_) => laser < 32 && self.mask & (1 << laser) != 0,
-            Selection::Rings(_) => ring < 32 && self.mask & (1 << ring) != 0,
+            Selection::Lasers(_) => laser <= LASER_MASK && self.mask & (1u128 << laser) != 0,
+            Selection::Rings(_) => ring <= LASER_MASK && self.mask & (1u128 << ring) != 0,
             Selection::Elevation([lo, hi]) => {
                 let e = f64::from(elevation);
                 e >= lo - ELEVATION_SLACK_DEG && e <= hi + ELEVATION_SLACK_DEG
@@ -138,6 +138,14 @@ impl NoiseStage for Occlusion {
         out
     }
 
+    fn check_lasers(&self, lasers: usize) -> std::result::Result<(), String> {
+        match &self.selection {
+            Selection::Lasers(ids) => check_ids("lasers", Some(ids), lasers),
+            Selection::Rings(ids) => check_ids("rings", Some(ids), lasers),
+            Selection::Elevation(_) => Ok(()),
+        }
+    }
+
     fn apply(&self, frame: &mut NoisyFrame, _rng: &mut ChaCha8Rng) {
         let stage = frame.stage;
         for (((r, fate), cause), power) in frame
@@ -176,9 +184,9 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
             ),
         ));
     }
-    let selection = if let Some(ids) = opts.id_list("lasers", 31)? {
+    let selection = if let Some(ids) = opts.id_list("lasers", LASER_MASK)? {
         Selection::Lasers(ids)
-    } else if let Some(rings) = opts.id_list("rings", 31)? {
+    } else if let Some(rings) = opts.id_list("rings", LASER_MASK)? {
         Selection::Rings(rings)
     } else if let Some([lo, hi]) = opts.pair("elevation_deg")? {
         if lo > hi {
@@ -242,7 +250,7 @@ pub const KIND: crate::noise::StageKind = crate::noise::StageKind {
     model: "beams of the selected lasers (optionally in an azimuth sector) are blocked, or their power multiplied by T^2 (one-way transmission T, out and back)",
     source: "the reference study (five occluded lasers); noise-models.md",
     options: &[
-        crate::noise::registry::OptionSpec { name: "lasers", unit: "laser id", default: "one of lasers/rings/elevation_deg required", doc: "occluded lasers (0-31, firing order)" },
+        crate::noise::registry::OptionSpec { name: "lasers", unit: "laser id", default: "one of lasers/rings/elevation_deg required", doc: "occluded lasers (ids from 0 in firing order, below the sensor's lasers)" },
         crate::noise::registry::OptionSpec { name: "rings", unit: "ring", default: "-", doc: "occluded rings (0 = lowest)" },
         crate::noise::registry::OptionSpec { name: "elevation_deg", unit: "deg", default: "-", doc: "occluded elevation interval [lo, hi]" },
         crate::noise::registry::OptionSpec { name: "azimuth_deg", unit: "deg", default: "all", doc: "sector [from, to), clockwise, may wrap" },

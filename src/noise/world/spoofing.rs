@@ -161,8 +161,7 @@ impl Spoofing {
         let mut out = Vec::new();
         for f in 0..slots.firings.len() {
             // The firing's azimuth from any of its returns.
-            let Some(first) = (0..32u8).find_map(|l| slots.occupants(slots.slot(f, l)).next())
-            else {
+            let Some(first) = slots.any_of_firing(f) else {
                 continue;
             };
             let mut d = f64::from(frame.clean[first].azimuth) - self.object.azimuth_deg;
@@ -170,7 +169,7 @@ impl Spoofing {
             if d.abs() > reach {
                 continue;
             }
-            for l in 0..32u8 {
+            for l in 0..slots.lasers() as u8 {
                 let slot = slots.slot(f, l);
                 let unit = match slots.occupants(slot).next() {
                     Some(i) => {

@@ -6,10 +6,10 @@
 
 mod common;
 
-use common::{bin2, crossroad};
+use common::{bin2, crossroad, refused_scan};
 use lidar_noise::frame::Frame;
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Frame `index` of the crossroad fixture, decoded as `run` decodes it.
 fn fixture_frame(index: u32) -> Frame {
@@ -34,18 +34,9 @@ fn write_pcd_bin(frame: &Frame, path: &Path) {
     std::fs::write(path, bytes).unwrap();
 }
 
-/// The frame as a KITTI `.bin`: x y z reflectance 0-1, float32 little-endian.
+/// The frame as a KITTI `.bin`.
 fn write_kitti_bin(frame: &Frame, path: &Path) {
-    let bytes: Vec<u8> = frame
-        .returns
-        .iter()
-        .flat_map(|r| {
-            [r.x, r.y, r.z, f32::from(r.intensity) / 255.0]
-                .into_iter()
-                .flat_map(f32::to_le_bytes)
-        })
-        .collect();
-    std::fs::write(path, bytes).unwrap();
+    std::fs::write(path, common::kitti_bytes(frame)).unwrap();
 }
 
 fn totals(summary: &Path) -> serde_json::Value {
@@ -121,52 +112,34 @@ fn the_summary_says_how_the_scan_was_placed_on_the_sensor() {
     assert!(out.join("t/frame_00000.pcd.bin").exists());
 }
 
-/// Runs `args` on `scan`, expects exit 1 with `what` in the message and no output folder.
-fn refused(scan: &PathBuf, args: &[&str], what: &str) {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("out");
-    let o = bin2()
-        .arg("run")
-        .arg(scan)
-        .args(args)
-        .arg("-o")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(1), "{err}");
-    assert!(err.contains(what), "{err}");
-    assert!(!out.exists(), "{} was written", out.display());
-}
-
 #[test]
 fn what_a_scan_cannot_do_is_refused_before_anything_is_written() {
     let dir = tempfile::tempdir().unwrap();
     let frame = fixture_frame(1);
     let scan = dir.path().join("s.pcd.bin");
     write_pcd_bin(&frame, &scan);
-    refused(&scan, &["--pcap-out"], "--pcap-out re-encodes a capture");
-    refused(
+    refused_scan(&scan, &["--pcap-out"], "--pcap-out re-encodes a capture");
+    refused_scan(
         &scan,
         &["--chunk-frames", "2"],
         "--chunk-frames splits captures",
     );
     // The paper's occlusion names laser 30, which a VLP-16 does not have; without it,
     // the HDL-32E's rings 16-31 are what the VLP-16 cannot have.
-    refused(&scan, &["--sensor", "vlp16"], "the VLP-16 (16 lasers)");
+    refused_scan(&scan, &["--sensor", "vlp16"], "the VLP-16 (16 lasers)");
     let clear = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/clear.toml");
     let clear = clear.to_str().unwrap();
-    refused(&scan, &["--sensor", "vlp16", "-c", clear], "ring 16");
-    refused(&scan, &["--frames", "3"], "a point-cloud scan is one frame");
+    refused_scan(&scan, &["--sensor", "vlp16", "-c", clear], "ring 16");
+    refused_scan(&scan, &["--frames", "3"], "a point-cloud scan is one frame");
     // A damaged file and a ring the sensor does not have: the file and the place.
     let cut = dir.path().join("cut.pcd.bin");
     std::fs::write(&cut, &std::fs::read(&scan).unwrap()[..47]).unwrap();
-    refused(&cut, &[], "cut.pcd.bin");
+    refused_scan(&cut, &[], "cut.pcd.bin");
     let ring = dir.path().join("ring.pcd.bin");
     let mut b = std::fs::read(&scan).unwrap();
     b[16..20].copy_from_slice(&40f32.to_le_bytes());
     std::fs::write(&ring, &b).unwrap();
-    refused(&ring, &[], "ring 40");
+    refused_scan(&ring, &[], "ring 40");
 }
 
 #[test]

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{bin2, files, fixtures};
+use common::{bin2, files, fixtures, kitti_bytes};
 use lidar_noise::frame::Frame;
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use std::path::{Path, PathBuf};
@@ -35,19 +35,6 @@ fn scans() -> Vec<Frame> {
     out.retain(|f| !f.returns.is_empty());
     assert!(out.len() >= 4, "the fixtures give {} scans", out.len());
     out
-}
-
-/// The frame as a KITTI `.bin`: x y z reflectance 0-1, float32 little-endian.
-fn kitti_bytes(frame: &Frame) -> Vec<u8> {
-    frame
-        .returns
-        .iter()
-        .flat_map(|r| {
-            [r.x, r.y, r.z, f32::from(r.intensity) / 255.0]
-                .into_iter()
-                .flat_map(f32::to_le_bytes)
-        })
-        .collect()
 }
 
 /// The frame as a nuScenes `.pcd.bin`: x y z intensity ring, float32 little-endian.

@@ -194,7 +194,7 @@ mod listing_tests {
             }
             if !matches!(
                 k.name,
-                "occlusion" | "laser_diode" | "rain" | "fog" | "crosstalk"
+                "occlusion" | "laser_diode" | "lens_damage" | "rain" | "fog" | "crosstalk"
             ) {
                 let set: Vec<&str> = config.noise[0]
                     .settings

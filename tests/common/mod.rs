@@ -257,3 +257,34 @@ pub fn repeated(src: &std::path::Path, n: u32, dst: &std::path::Path) {
     }
     std::fs::write(dst, out).unwrap();
 }
+
+/// The frame as a KITTI `.bin`: x y z reflectance 0-1, float32 little-endian.
+pub fn kitti_bytes(frame: &lidar_noise::frame::Frame) -> Vec<u8> {
+    frame
+        .returns
+        .iter()
+        .flat_map(|r| {
+            [r.x, r.y, r.z, f32::from(r.intensity) / 255.0]
+                .into_iter()
+                .flat_map(f32::to_le_bytes)
+        })
+        .collect()
+}
+
+/// Runs `args` on `scan`, expects exit 1 with `what` in the message and no output folder.
+pub fn refused_scan(scan: &std::path::Path, args: &[&str], what: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = bin2()
+        .arg("run")
+        .arg(scan)
+        .args(args)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains(what), "{err}");
+    assert!(!out.exists(), "{} was written", out.display());
+}

@@ -325,7 +325,7 @@ pub const KIND: StageKind = StageKind {
     model: "chosen lasers: P' = T^2 P; with probability p_s a beam is deflected by N(0, s_d^2) in azimuth and elevation and reports, at its nominal angles, the range of the surface in the deflected direction with power T^2 q P_d",
     source: "engineering assumption (pdiagram-models.md 10: no quantitative lens-damage study was found)",
     options: &[
-        OptionSpec { name: "lasers", unit: "laser id", default: "all", doc: "lasers behind the damaged spot (0-31, firing order)" },
+        OptionSpec { name: "lasers", unit: "laser id", default: "all", doc: "lasers behind the damaged spot (ids from 0 in firing order, below the sensor's lasers; all when left out)" },
         OptionSpec { name: "transmission", unit: "-", default: "0.9", doc: "one-way transmission T_l in [0, 1]; power x T^2" },
         OptionSpec { name: "scatter_probability", unit: "-", default: "0.01", doc: "probability p_s that a beam is deflected" },
         OptionSpec { name: "scatter_sigma_deg", unit: "deg", default: "0.5", doc: "SD s_d of the deflection per axis" },

@@ -86,7 +86,7 @@ fn wrong_types_and_impossible_values_are_named() {
         14,
     );
     assert_names(
-        &err(&GOOD.replace("[7, 5, 3, 1, 30]", "[7, 5, 32]")),
+        &err(&GOOD.replace("[7, 5, 3, 1, 30]", "[7, 5, 128]")),
         "noise[0].lasers[2]",
         11,
     );
@@ -119,7 +119,7 @@ fn wrong_types_and_impossible_values_are_named() {
     );
     assert_names(&err(&GOOD.replace("seed = 42", "seed = -1")), "seed", 1);
     assert_names(
-        &err(&GOOD.replace("lasers = [7, 5, 3, 1, 30]", "rings = [15, 40]")),
+        &err(&GOOD.replace("lasers = [7, 5, 3, 1, 30]", "rings = [15, 140]")),
         "noise[0].rings[1]",
         11,
     );
@@ -303,10 +303,10 @@ fn validate_command_accepts_good_and_rejects_bad() {
         print: false,
     };
     run(args(&good, &[]), QUIET).unwrap();
-    let e = run(args(&good, &["noise[0].lasers=[99]"]), QUIET)
+    let e = run(args(&good, &["noise[0].lasers=[199]"]), QUIET)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("--set noise[0].lasers=[99]"), "{e}");
+    assert!(e.contains("--set noise[0].lasers=[199]"), "{e}");
     let bad = dir.path().join("bad.toml");
     std::fs::write(&bad, GOOD.replace("rate_mm_h = 7.0", "rate_mm_h = -7")).unwrap();
     let e = run(args(&bad, &[]), QUIET).unwrap_err().to_string();

@@ -22,6 +22,7 @@ use crate::frame::Frame;
 use crate::hdl32e::frames::{DecoderOptions, FrameReader};
 use crate::options::Shard;
 use crate::pipeline::Pipeline;
+use crate::sensor::frames::ModelFrameReader;
 use crate::writers::scan::ScanPoint;
 use crate::writers::staging::{self, OutputFolder};
 use crate::writers::FrameOutput;
@@ -219,13 +220,7 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
                 })?;
                 (Source::Cloud(CloudReader::open(path, &options)?), job_plan)
             }
-            // Captures are decoded for the HDL-32E.
-            None => (
-                Source::Capture(Box::new(inputs::open_capture(path, &plan.decoder)?)),
-                plan.for_sensor(&crate::sensor::HDL32E).map_err(|e| {
-                    anyhow::anyhow!("{}: {e:#}; nothing was written", path.display())
-                })?,
-            ),
+            None => open_capture_source(path, plan)?,
         };
         jobs.push((
             reader,
@@ -256,11 +251,20 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
     }
     let check = || -> Result<()> {
         for (reader, source, name, capture, _) in &jobs {
-            if let (true, Source::Capture(reader)) = (plan.pcap_out, reader) {
-                let mode = reader.summary().return_mode;
-                // Named by the path as given, as in every message of `run`.
-                let shown = capture.map_or_else(|| source.clone(), inputs::capture_shown);
-                crate::writers::pcap::check_capture(&shown, mode, plan.decoder.dual)?;
+            // Named by the path as given, as in every message of `run`.
+            let shown = capture.map_or_else(|| source.clone(), inputs::capture_shown);
+            match (plan.pcap_out, reader) {
+                (true, Source::Capture(reader)) => {
+                    let mode = reader.summary().return_mode;
+                    crate::writers::pcap::check_capture(&shown, mode, plan.decoder.dual)?;
+                }
+                (true, Source::Model(reader)) => anyhow::bail!(
+                    "{shown}: --pcap-out re-encodes HDL-32E captures only so far, and this is \
+                     a {} capture; leave --pcap-out out (the noisy points are in the point \
+                     clouds written)",
+                    reader.model().name
+                ),
+                _ => {}
             }
             let target = request.output.join(name);
             check_target(&target, &inputs)?;
@@ -345,8 +349,50 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
 enum Source {
     /// A capture, decoded (boxed: its reader is large, and jobs are moved around).
     Capture(Box<FrameReader>),
+    /// A capture of another described sensor (VLP-16, VLP-32C, HDL-64E, VLS-128).
+    Model(Box<ModelFrameReader>),
     /// A point-cloud scan, placed on the sensor's firings.
     Cloud(CloudReader),
+}
+
+/// The frame source of the capture at `path` and the plan for its sensor: the HDL-32E
+/// reader, or, where that refuses the capture and another described sensor's structure
+/// fits it, that sensor's reader (files only: standard input and FIFOs are read once).
+fn open_capture_source(path: &Path, plan: &Plan) -> Result<(Source, Plan)> {
+    let nothing =
+        |e: anyhow::Error| anyhow::anyhow!("{}: {e:#}; nothing was written", path.display());
+    let e = match inputs::open_capture(path, &plan.decoder) {
+        Ok(r) => {
+            let plan = plan.for_sensor(&crate::sensor::HDL32E).map_err(nothing)?;
+            return Ok((Source::Capture(Box::new(r)), plan));
+        }
+        Err(e) => e,
+    };
+    if inputs::is_stdin(path) || crate::capture::is_stream(path) {
+        return Err(e);
+    }
+    let d = &plan.decoder;
+    let Ok(Some(reader)) = ModelFrameReader::open(
+        path,
+        d.interpolate_azimuth,
+        d.dual,
+        d.cut_angle_deg,
+        d.keep_partial,
+    ) else {
+        return Err(e);
+    };
+    let model = reader.model();
+    if d.calibration != crate::calibration::Calibration::builtin() {
+        anyhow::bail!(
+            "{}: a {} capture: --calibration reads an HDL-32E calibration, and the {}'s \
+             own table is built in; leave --calibration out",
+            path.display(),
+            model.name,
+            model.name
+        );
+    }
+    let plan = plan.for_sensor(model).map_err(nothing)?;
+    Ok((Source::Model(Box::new(reader)), plan))
 }
 
 /// The point-cloud format of `path`, or `None` for a capture: files that start like a
@@ -438,7 +484,7 @@ fn run_source(
     // A labelled scan's ground and object scores (one frame), for truth.json.
     let truth = match &mut reader {
         Source::Cloud(r) => r.take_truth(),
-        Source::Capture(_) => None,
+        Source::Capture(_) | Source::Model(_) => None,
     };
     let scored = std::sync::Mutex::new(None);
     let work = |f: Frame| -> Result<(SpoolEntry, Vec<crate::frame::Return>, Vec<ScanPoint>)> {
@@ -483,6 +529,19 @@ fn run_source(
                 done(e)
             },
         )?,
+        Source::Model(r) => stream_frames(
+            &mut **r,
+            &plan.frames,
+            warmup,
+            work,
+            |(e, returns, _), r| {
+                r.recycle(Frame {
+                    returns,
+                    ..Frame::default()
+                });
+                done(e)
+            },
+        )?,
         Source::Cloud(r) => {
             stream_frames(r, &plan.frames, warmup, work, |(e, _, rows), r| {
                 if native {
@@ -511,6 +570,19 @@ fn run_source(
                 return Err(no_frame_error(&shown, &plan.frames, r));
             }
             SourceSummary::Capture(&capture_summary)
+        }
+        Source::Model(r) => {
+            if spool.frames == 0 {
+                anyhow::bail!(
+                    "{shown}: no frame to process in {} of this {} capture ({} full and {} \
+                     partial sweeps; --keep-partial keeps the partial ones)",
+                    crate::options::frames_phrase(&plan.frames),
+                    r.model().name,
+                    r.summary().full_frames,
+                    r.summary().partial_frames
+                );
+            }
+            SourceSummary::Model(r.summary())
         }
         Source::Cloud(r) => {
             if spool.frames == 0 {

@@ -36,6 +36,8 @@ pub enum SourceSummary<'a> {
     Capture(&'a CaptureSummary),
     /// A point-cloud scan.
     Cloud(&'a CloudSummary),
+    /// A capture of another described sensor.
+    Model(&'a crate::sensor::frames::ModelCaptureSummary),
 }
 
 /// The cluster report written as clusters.json.

@@ -52,6 +52,7 @@
 pub mod calibration;
 pub mod decode;
 pub mod encode;
+pub mod frames;
 pub mod identify;
 
 pub use crate::hdl32e::packet::ReturnMode;

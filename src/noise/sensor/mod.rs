@@ -418,13 +418,13 @@ pub fn per_laser(opts: &Section<'_>, key: &str, lo: f64, hi: f64) -> Result<Opti
     let toml::Value::Array(items) = v else {
         return Err(bad());
     };
-    let most = crate::noise::spurious::MAX_LASERS;
-    if !(1..=most).contains(&items.len()) {
+    // The laser counts of the modelled sensors; which one is checked when the sensor is
+    // known ([`check_per_laser`]).
+    if ![16, 32, 64, 128].contains(&items.len()) {
         return Err(opts.error(
             key,
             format!(
-                "has {} entries; give one per laser of the sensor (16, 32, 64 or 128; \
-                 at most {most})",
+                "has {} entries; give one per laser of the sensor (16, 32, 64 or 128)",
                 items.len()
             ),
         ));

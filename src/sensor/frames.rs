@@ -1,0 +1,405 @@
+//! Frames of a capture of any described sensor but the HDL-32E (VLP-16, Puck Hi-Res,
+//! VLP-32C, HDL-64E S2/S3, VLS-128), for `run` (issue 31).
+//!
+//! The sensor is identified by structure ([`super::identify`]) from the first data
+//! packets; each data packet is decoded by [`ModelDecoder`] (the model's built-in
+//! table), and its returns go to frames firing by firing: a firing sequence's azimuth is
+//! its block's, plus its share of the step to the next block for the second sequence of
+//! a VLP-16 block, and a frame ends where that azimuth crosses the cut angle, as the
+//! HDL-32E reader cuts (`src/hdl32e/frames.rs`, whose sweep and partial-frame rules this
+//! follows). The first and last sweeps are partial unless they start and end at the cut.
+//!
+//! Why a reader of its own beside the HDL-32E's: that one's packet index (seeking for
+//! `--chunk-frames`), duplicate window and `--pcap-out` re-encoding are the HDL-32E's;
+//! `run` refuses those options for other sensors, and a capture's returns are the same
+//! however it is read.
+
+use super::decode::{DualSelect, ModelDecoder};
+use super::identify::{identify, Identified};
+use super::{ReturnMode, SensorModel};
+use crate::capture::CaptureReader;
+use crate::error::{Error, Result};
+use crate::frame::{Frame, Return};
+use serde::Serialize;
+use std::collections::VecDeque;
+use std::ops::RangeInclusive;
+use std::path::Path;
+
+/// Data packets read to identify the sensor.
+const SAMPLE_PACKETS: usize = 64;
+
+/// Size of a position (GPS) packet's payload.
+const POSITION_PACKET_BYTES: usize = 512;
+
+/// What was read from a capture of another sensor, for `summary.json`.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ModelCaptureSummary {
+    /// The sensor identified.
+    pub sensor: &'static str,
+    /// Product byte the packets carry (0 for the HDL-64E, whose packets have none).
+    pub product_id: u8,
+    /// False when the product byte names another model than the structure says.
+    pub product_byte_agrees: bool,
+    /// Return mode of the first data packet.
+    pub return_mode: Option<ReturnMode>,
+    /// Median time between data packets, microseconds.
+    pub packet_period_us: f64,
+    /// Rotation rate measured from the azimuth steps, Hz.
+    pub rotation_hz: f64,
+    /// Data packets decoded.
+    pub data_packets: u64,
+    /// Position packets seen.
+    pub position_packets: u64,
+    /// Other UDP payloads (not data packets of the sensor).
+    pub other_udp: u64,
+    /// Data packets that could not be decoded (named in a warning).
+    pub bad_data_packets: u64,
+    /// Complete sweeps.
+    pub full_frames: u64,
+    /// Partial sweeps (first and last).
+    pub partial_frames: u64,
+    /// Returns decoded.
+    pub returns: u64,
+    /// Returns per laser id.
+    pub returns_per_laser: Vec<u64>,
+    /// Why the product byte was overruled, empty when it was not.
+    pub note: String,
+}
+
+/// A frame being filled.
+struct Building {
+    frame: Frame,
+    /// Azimuth of its first and last firings relative to the cut, centidegrees.
+    first_rel: u32,
+    first_step: u32,
+    last_rel: u32,
+    last_step: u32,
+}
+
+/// Iterator over the frames of a capture of a described sensor other than the HDL-32E.
+pub struct ModelFrameReader {
+    capture: CaptureReader,
+    decoder: ModelDecoder,
+    model: &'static SensorModel,
+    keep_partial: bool,
+    cut: u32,
+    building: Option<Building>,
+    ready: VecDeque<Frame>,
+    next_index: u32,
+    prev_ts: Option<u32>,
+    hour_offset_us: f64,
+    prev_rel: Option<u32>,
+    /// The data packet before the current one (the VLS-128's dual-mode step).
+    previous: Vec<u8>,
+    packet: Vec<u8>,
+    scratch: Vec<Return>,
+    spare: Vec<Vec<Return>>,
+    done: bool,
+    past_range: bool,
+    summary: ModelCaptureSummary,
+}
+
+impl ModelFrameReader {
+    /// Identifies the sensor of the capture `open` reads (twice: a first reader for the
+    /// sample, a second to decode); `None` when it is an HDL-32E (its own reader takes
+    /// it), an error when no described sensor fits.
+    pub fn open_with(
+        open: impl Fn() -> Result<CaptureReader>,
+        interpolate: bool,
+        dual: DualSelect,
+        cut_angle_deg: f64,
+        keep_partial: bool,
+    ) -> Result<Option<Self>> {
+        let mut sample_reader = open()?;
+        let path = sample_reader.path().to_path_buf();
+        let mut sample: Vec<(Vec<u8>, u64)> = Vec::new();
+        while let Some(d) = sample_reader.next_datagram()? {
+            if d.payload.len() == super::LAYOUT_1206.payload_bytes {
+                sample.push((d.payload.to_vec(), d.ts_ns));
+                if sample.len() >= SAMPLE_PACKETS {
+                    break;
+                }
+            }
+        }
+        let refs: Vec<(&[u8], u64)> = sample.iter().map(|(p, t)| (p.as_slice(), *t)).collect();
+        let found: Identified =
+            identify(&refs).map_err(|message| Error::Capture { path, message })?;
+        if found.model.name == super::HDL32E.name {
+            return Ok(None);
+        }
+        let model = found.model;
+        let cut = ((cut_angle_deg.rem_euclid(360.0) * 100.0).round() as u32) % 36000;
+        Ok(Some(ModelFrameReader {
+            capture: open()?,
+            decoder: ModelDecoder::new(model, interpolate, dual),
+            model,
+            keep_partial,
+            cut,
+            building: None,
+            ready: VecDeque::new(),
+            next_index: 0,
+            prev_ts: None,
+            hour_offset_us: 0.0,
+            prev_rel: None,
+            previous: Vec::new(),
+            packet: Vec::new(),
+            scratch: Vec::new(),
+            spare: Vec::new(),
+            done: false,
+            past_range: false,
+            summary: ModelCaptureSummary {
+                sensor: model.name,
+                product_id: found.product_byte,
+                product_byte_agrees: found.product_byte_agrees,
+                return_mode: Some(found.mode),
+                packet_period_us: found.packet_period_us,
+                rotation_hz: found.rotation_hz,
+                returns_per_laser: vec![0; model.lasers],
+                note: found.note,
+                ..Default::default()
+            },
+        }))
+    }
+
+    /// [`ModelFrameReader::open_with`] of a capture file.
+    pub fn open(
+        path: &Path,
+        interpolate: bool,
+        dual: DualSelect,
+        cut_angle_deg: f64,
+        keep_partial: bool,
+    ) -> Result<Option<Self>> {
+        Self::open_with(
+            || CaptureReader::open(path),
+            interpolate,
+            dual,
+            cut_angle_deg,
+            keep_partial,
+        )
+    }
+
+    /// The sensor identified.
+    pub fn model(&self) -> &'static SensorModel {
+        self.model
+    }
+
+    /// What was read so far.
+    pub fn summary(&self) -> &ModelCaptureSummary {
+        &self.summary
+    }
+
+    /// Up to `max` next frames whose index lies in `frames`; empty once the capture (or
+    /// the range) is exhausted.
+    pub fn next_batch(&mut self, max: usize, frames: &RangeInclusive<u32>) -> Result<Vec<Frame>> {
+        let mut out = Vec::new();
+        while out.len() < max && !self.past_range {
+            let Some(frame) = self.next_frame()? else {
+                break;
+            };
+            if frame.index > *frames.end() {
+                self.past_range = true;
+            } else if frame.index >= *frames.start() {
+                out.push(frame);
+            } else {
+                self.recycle(frame);
+            }
+        }
+        Ok(out)
+    }
+
+    /// Hands a finished frame's buffer back for reuse.
+    pub fn recycle(&mut self, mut frame: Frame) {
+        frame.returns.clear();
+        if self.spare.len() < 4 {
+            self.spare.push(frame.returns);
+        }
+    }
+
+    fn next_frame(&mut self) -> Result<Option<Frame>> {
+        while self.ready.is_empty() && !self.done {
+            self.pump()?;
+        }
+        Ok(self.ready.pop_front())
+    }
+
+    /// Reads one datagram (or ends the capture).
+    fn pump(&mut self) -> Result<()> {
+        let Some(d) = self.capture.next_datagram()? else {
+            self.done = true;
+            if let Some(b) = self.building.take() {
+                self.finish_frame(b, true);
+            }
+            return Ok(());
+        };
+        if d.payload.len() == POSITION_PACKET_BYTES {
+            self.summary.position_packets += 1;
+            return Ok(());
+        }
+        if !self.model.layout.is_data_packet(d.payload) {
+            self.summary.other_udp += 1;
+            return Ok(());
+        }
+        let record = d.record;
+        let mut payload = std::mem::take(&mut self.packet);
+        payload.clear();
+        payload.extend_from_slice(d.payload);
+        self.decode_packet(&payload, record);
+        self.previous.clear();
+        self.previous.extend_from_slice(&payload);
+        self.packet = payload;
+        Ok(())
+    }
+
+    fn decode_packet(&mut self, payload: &[u8], record: u32) {
+        let lay = &self.model.layout;
+        let ts = lay.timestamp_us(payload);
+        if let Some(prev) = self.prev_ts {
+            // The sensor clock restarts every hour: keep time increasing (as the HDL-32E
+            // reader does).
+            if u64::from(ts) + 1_800_000_000 < u64::from(prev) {
+                self.hour_offset_us += 3_600_000_000.0;
+            }
+        }
+        self.prev_ts = Some(ts);
+        let mut scratch = std::mem::take(&mut self.scratch);
+        scratch.clear();
+        let previous = (!self.previous.is_empty()).then_some(self.previous.as_slice());
+        let decoded = self.decoder.decode_packet_after(
+            payload,
+            previous,
+            record,
+            self.hour_offset_us,
+            &mut scratch,
+        );
+        let mode = match decoded {
+            Ok(c) => c.mode.unwrap_or(ReturnMode::Strongest),
+            Err(_) => {
+                self.summary.bad_data_packets += 1;
+                self.scratch = scratch;
+                return;
+            }
+        };
+        self.summary.data_packets += 1;
+        let dual = mode == ReturnMode::Dual;
+        // Firing sequence of each return, and the returns in firing order (stable: each
+        // firing's returns keep the decoder's order).
+        let seq = |r: &Return| if dual { r.block / 2 } else { r.block };
+        scratch.sort_by_key(seq);
+        let firings = self.firing_azimuths(payload, mode);
+        let mut start = 0;
+        while start < scratch.len() {
+            let s = seq(&scratch[start]);
+            let end = start
+                + scratch[start..]
+                    .iter()
+                    .position(|r| seq(r) != s)
+                    .unwrap_or(scratch.len() - start);
+            let (azimuth, step) = firings.get(usize::from(s)).copied().unwrap_or((0, 0));
+            self.on_firing(azimuth, step);
+            let b = self
+                .building
+                .as_mut()
+                .expect("on_firing leaves a frame open");
+            for r in &scratch[start..end] {
+                if let Some(n) = self.summary.returns_per_laser.get_mut(usize::from(r.laser)) {
+                    *n += 1;
+                }
+            }
+            self.summary.returns += (end - start) as u64;
+            b.frame.returns.extend_from_slice(&scratch[start..end]);
+            start = end;
+        }
+        self.scratch = scratch;
+    }
+
+    /// Azimuth (centidegrees) and step to the next firing of every firing sequence of a
+    /// packet, in order.
+    fn firing_azimuths(&self, payload: &[u8], mode: ReturnMode) -> Vec<(u16, u32)> {
+        let m = self.model;
+        let lay = &m.layout;
+        let n = lay.blocks / m.blocks_per_firing(mode);
+        let az: Vec<u32> = (0..n)
+            .map(|f| u32::from(lay.block_azimuth(payload, lay.block_of(mode, f, 0, 0))) % 36000)
+            .collect();
+        let step = |f: usize| -> u32 {
+            let (a, b) = if f + 1 < n {
+                (az[f], az[f + 1])
+            } else if f > 0 {
+                (az[f - 1], az[f])
+            } else {
+                return 0;
+            };
+            let s = (b + 36000 - a) % 36000;
+            if s > super::decode::MAX_STEP_CENTIDEG {
+                0
+            } else {
+                s
+            }
+        };
+        let per = m.sequences_per_block.max(1);
+        let mut out = Vec::with_capacity(n * per);
+        for (f, &a) in az.iter().enumerate() {
+            let s = step(f);
+            for k in 0..per {
+                let within = (s as usize * k / per) as u32;
+                out.push((((a + within) % 36000) as u16, s / per as u32));
+            }
+        }
+        out
+    }
+
+    fn on_firing(&mut self, azimuth: u16, step: u32) {
+        let rel = (u32::from(azimuth) + 36000 - self.cut) % 36000;
+        let wrapped = self.prev_rel.is_some_and(|p| rel + 18000 < p);
+        self.prev_rel = Some(rel);
+        if wrapped {
+            if let Some(b) = self.building.take() {
+                self.finish_frame(b, false);
+            }
+        }
+        let (next_index, spare) = (&mut self.next_index, &mut self.spare);
+        let b = self.building.get_or_insert_with(|| {
+            let index = *next_index;
+            *next_index += 1;
+            Building {
+                frame: Frame {
+                    index,
+                    partial: false,
+                    returns: spare.pop().unwrap_or_default(),
+                },
+                first_rel: rel,
+                first_step: step,
+                last_rel: rel,
+                last_step: step,
+            }
+        });
+        b.last_rel = rel;
+        b.last_step = step;
+    }
+
+    fn finish_frame(&mut self, mut b: Building, last: bool) {
+        let first_ok = b.frame.index > 0 || b.first_rel <= b.first_step.max(1);
+        let last_ok = !last || b.last_rel + b.last_step.max(1) >= 36000;
+        b.frame.partial = !(first_ok && last_ok);
+        if b.frame.partial {
+            self.summary.partial_frames += 1;
+        } else {
+            self.summary.full_frames += 1;
+        }
+        if !b.frame.partial || self.keep_partial {
+            self.ready.push_back(b.frame);
+        } else {
+            self.recycle(b.frame);
+        }
+    }
+}
+
+impl crate::frame::FrameSource for ModelFrameReader {
+    fn next_batch(&mut self, max: usize, frames: &RangeInclusive<u32>) -> Result<Vec<Frame>> {
+        ModelFrameReader::next_batch(self, max, frames)
+    }
+
+    fn recycle(&mut self, frame: Frame) {
+        ModelFrameReader::recycle(self, frame)
+    }
+}

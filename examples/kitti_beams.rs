@@ -267,6 +267,7 @@ fn tune(scans: &[Scan]) {
             how[ring]
         );
     }
+    horizontal_offsets(scans);
     // By laser id: ring r is the laser the built-in table puts at ring r.
     let rings = HDL64E_S2.rings();
     let by_id = |t: &[f64; 64], scale: f64, digits: usize| -> String {
@@ -281,6 +282,48 @@ fn tune(scans: &[Scan]) {
         "vertical offset by laser id (mm): [{}]",
         by_id(&dz, 1000.0, 1)
     );
+}
+
+/// Per scan and line, the horizontal offset its points carry, where range edges show it:
+/// a laser's point at horizontal distance h lies atan(ho / h) off its firing's azimuth,
+/// so between consecutive firings the azimuth step minus the line's median step is about
+/// ho times the change of 1 / h. Fitted over the steps where 1 / h changes by more than
+/// 0.03 (a near object's edge); lines with fewer than 5 such steps are left out.
+fn horizontal_offsets(scans: &[Scan]) {
+    println!(
+        "horizontal offset by line from the top (m; edges), from azimuth steps at range edges:"
+    );
+    for s in scans {
+        let mut shown = Vec::new();
+        for line in 0..s.lines.min(64) {
+            let pts: Vec<(f64, f64)> = s
+                .points
+                .iter()
+                .zip(&s.line)
+                .filter(|(_, &l)| l == line)
+                .map(|(p, _)| {
+                    let (x, y) = (f64::from(p.x), f64::from(p.y));
+                    (y.atan2(x), (x * x + y * y).sqrt())
+                })
+                .collect();
+            let steps: Vec<(f64, f64)> = pts
+                .windows(2)
+                .filter(|w| {
+                    (w[1].0 - w[0].0).abs() < 1f64.to_radians() && w[0].1 > 2.0 && w[1].1 > 2.0
+                })
+                .map(|w| (1.0 / w[1].1 - 1.0 / w[0].1, w[1].0 - w[0].0))
+                .collect();
+            let step = median(steps.iter().map(|p| p.1).collect());
+            let edges: Vec<(f64, f64)> = steps.into_iter().filter(|p| p.0.abs() > 0.03).collect();
+            if edges.len() >= 5 {
+                let (uu, ud) = edges.iter().fold((0.0, 0.0), |a, p| {
+                    (a.0 + p.0 * p.0, a.1 + p.0 * (p.1 - step))
+                });
+                shown.push(format!("{line}:{:+.3}({})", ud / uu, edges.len()));
+            }
+        }
+        println!("  {}: {}", s.name, shown.join(" "));
+    }
 }
 
 /// Rings below this come from the SemanticKITTI scan alone (the object scans, cut to the

@@ -10,10 +10,12 @@
 //! Scan lines from the point order: KITTI stores each laser's sweep in turn, top beam
 //! first. A line ends where the azimuth (counter-clockwise, from the cut angle) falls back
 //! by more than 180 deg after passing 180 deg, so jitter at the cut does not start a line.
-//! Object-benchmark scans (cut to the camera's view) start their lines at azimuth 0,
-//! odometry (SemanticKITTI) scans at the back (180 deg); of the two cuts the one whose
-//! lines are the straightest in (horizontal distance, z) is taken. Line `k` is ring
-//! `63 - k`; lines past the 64th are counted, not compared.
+//! The lines of the object-benchmark scans (cut to the camera's view) and of the
+//! SemanticKITTI scan tried all start at azimuth 0; a cut at the back (180 deg, where the
+//! azimuth of atan2 jumps) is tried too, and of the two the one whose lines are the
+//! straightest in (horizontal distance, z) is taken: at the wrong cut a line holds half
+//! of two lasers. Line `k` is ring `63 - k`; lines past the 64th are counted, not
+//! compared.
 //!
 //! Why lines and not just elevations: KITTI's points carry each laser's vertical offset
 //! (they lie on z = h tan(el) + dz, dz about 0.2 m for the upper bank and 0.12 m for the
@@ -55,6 +57,7 @@ struct Scan {
 }
 
 impl Scan {
+    /// Reads a scan and finds its lines.
     fn read(path: &Path) -> Result<Scan, String> {
         let cloud = read_file(path, &ReadOptions::default()).map_err(|e| e.to_string())?;
         let points = cloud.points;
@@ -84,11 +87,13 @@ impl Scan {
     }
 }
 
+/// A point's horizontal distance and height.
 fn hz(p: &CloudPoint) -> (f64, f64) {
     let (x, y) = (f64::from(p.x), f64::from(p.y));
     ((x * x + y * y).sqrt(), f64::from(p.z))
 }
 
+/// Each point's line, lines cut at `cut_deg` (the module's documentation says how).
 fn split(points: &[CloudPoint], cut_deg: f64) -> Vec<usize> {
     let (mut line, mut armed, mut prev) = (0, false, f64::NAN);
     points
@@ -170,6 +175,7 @@ fn fit(v: &[(f64, f64)]) -> (f64, f64, f64) {
     (a, b, res)
 }
 
+/// Prints each ring's line and the table by laser id.
 fn tune(scans: &[Scan]) {
     for s in scans {
         println!(

@@ -498,8 +498,8 @@ pub const HDL64E_S3: SensorModel = SensorModel {
 /// camera's view: rings 17 to 63) and SemanticKITTI 000964 (all 64 rings).
 /// - Rings 25-63: a least-squares line z = h tan(el) + dz through the ring's points (h
 ///   the horizontal distance) beyond 2 m, from the scans where the points lie on one line
-///   (median residual under 5 mm: the object scans' residual is 0.2-0.3 mm, KITTI's
-///   points are computed from the unit's calibration) over at least 1 m of h.
+///   (median residual under 5 mm; the object scans' is 0.2-0.3 mm, as for points computed
+///   from the unit's calibration) over at least 1 m of h.
 /// - Rings 17-24 (ground near the car, under 1 m of h): the median of atan2(z - dz, h)
 ///   with the lower bank's median offset; 10-90 % spread 0.01 deg.
 /// - Rings 0-16, only in the SemanticKITTI scan, whose points lie off one line by 1-10 mm

@@ -179,17 +179,24 @@ fn a_kitti_scan_runs_as_an_hdl64e_and_misfit_options_write_nothing() {
     let out = dir.path().join("out");
     let cfg = dir.path().join("occ.toml");
     std::fs::write(&cfg, stage("occlusion", "lasers = [40]")).unwrap();
-    bin2()
-        .args(["--quiet", "run"])
-        .arg(&scan)
-        .arg("-c")
-        .arg(&cfg)
-        .arg("-o")
-        .arg(&out)
-        .assert()
-        .success();
-    let v: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("000000/summary.json")).unwrap()).unwrap();
+    let run = |out: &std::path::Path, sensor: &[&str]| -> serde_json::Value {
+        bin2()
+            .args(["--quiet", "run"])
+            .arg(&scan)
+            .args(sensor)
+            .arg("-c")
+            .arg(&cfg)
+            .arg("-o")
+            .arg(out)
+            .assert()
+            .success();
+        serde_json::from_slice(&std::fs::read(out.join("000000/summary.json")).unwrap()).unwrap()
+    };
+    // By default a KITTI scan is KITTI's HDL-64E (its unit's beams).
+    let v = run(&dir.path().join("default"), &[]);
+    assert_eq!(v["capture_summary"]["sensor"], "HDL-64E S2 (KITTI)");
+    // The points lie on the default S2 beams: said, every laser is found.
+    let v = run(&out, &["--sensor", "hdl64e"]);
     assert_eq!(v["capture_summary"]["sensor"], "HDL-64E S2");
     let occluded = &v["totals"]["noise"]["dropped_by_laser"]["occluded"];
     assert_eq!(occluded.as_array().unwrap().len(), 64);

@@ -20,11 +20,14 @@
 //!   Nothing is guessed from a cloud of fewer than 1000 such points.
 
 use super::CloudPoint;
-use crate::sensor::{SensorModel, HDL32E, HDL64E_S2, HDL64E_S3, PUCK_HI_RES, VLP16, VLP32C};
+use crate::sensor::{
+    SensorModel, HDL32E, HDL64E_KITTI, HDL64E_S2, HDL64E_S3, PUCK_HI_RES, VLP16, VLP32C,
+};
 
 /// The sensor model a `--sensor` name means (case and `-`/`_` ignored): `hdl32e`,
 /// `vlp16` (also `puck`, `puck-lite`), `puck-hi-res` (also `vlp16-hi-res`), `vlp32c`,
-/// `hdl64e` (the S2, KITTI's), `hdl64e-s2`, `hdl64e-s3`.
+/// `hdl64e` (the S2, KITTI's, with the default beams), `hdl64e-s2`, `hdl64e-s3`,
+/// `hdl64e-kitti` (also `kitti`: the S2 with the beams of KITTI's unit, for KITTI scans).
 pub fn sensor_by_name(name: &str) -> Option<&'static SensorModel> {
     let key: String = name
         .chars()
@@ -38,12 +41,14 @@ pub fn sensor_by_name(name: &str) -> Option<&'static SensorModel> {
         "vlp32c" | "vlp32" => &VLP32C,
         "hdl64e" | "hdl64" | "hdl64es2" => &HDL64E_S2,
         "hdl64es3" => &HDL64E_S3,
+        "hdl64ekitti" | "kitti" => &HDL64E_KITTI,
         _ => return None,
     })
 }
 
 /// The names [`sensor_by_name`] accepts, for messages.
-pub const SENSOR_NAMES: &str = "hdl32e, vlp16, puck-hi-res, vlp32c, hdl64e (S2), hdl64e-s3";
+pub const SENSOR_NAMES: &str =
+    "hdl32e, vlp16, puck-hi-res, vlp32c, hdl64e (S2), hdl64e-s3, hdl64e-kitti (KITTI's unit)";
 
 /// A guessed sensor and the evidence, as one sentence.
 #[derive(Clone, Debug, PartialEq)]

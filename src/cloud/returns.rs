@@ -9,9 +9,13 @@
 //!   the dataset stores them (its mounting already removed or never applied); a laser's
 //!   vertical offset (VLP-16 and Puck Hi-Res: at most 11.2 mm) is not subtracted, which
 //!   moves a point's elevation by under 0.13 deg at 5 m, far less than the 2 deg between
-//!   their beams. A laser's azimuth offset (VLP-32C: +-1.4 or +-4.2 deg; HDL-64E: up to
-//!   9.8 deg) is taken off the point's azimuth before its firing is found, as the
-//!   decoder adds it (point azimuth = firing azimuth + offset).
+//!   their beams. KITTI's HDL-64E ([`crate::sensor::HDL64E_KITTI`], measured on KITTI
+//!   scans) is the exception: its points carry offsets of 0.12 and 0.2 m, so its beams are
+//!   lines from the lasers' own origins and a point's laser is the beam whose line passes
+//!   nearest in height at its horizontal distance ([`BeamTable::nearest_at`]). A laser's
+//!   azimuth offset (VLP-32C: +-1.4 or +-4.2 deg; HDL-64E: up to 9.8 deg) is taken off
+//!   the point's azimuth before its firing is found, as the decoder adds it (point
+//!   azimuth = firing azimuth + offset).
 //! - the laser from the ring (0 = lowest beam, the sensor's rings) where the point has
 //!   one, else from the elevation: the laser whose table elevation is nearest (the
 //!   model's built-in table; a unit's own calibration differs, by up to 2.5 deg a laser
@@ -97,6 +101,20 @@ pub struct BeamTable {
     elevation: Vec<f64>,
     /// Midpoints between neighbouring beams.
     bounds: Vec<f64>,
+    /// Per beam (same order), tan of its elevation, where the beams are lines from their
+    /// lasers' own origins ([`beams_from_offset_origins`]); empty else.
+    slope: Vec<f64>,
+    /// Per beam, the height of its laser's origin above the points' origin in metres.
+    origin_m: Vec<f64>,
+}
+
+/// Whether `model`'s points carry its lasers' vertical offsets and its table gives the
+/// elevations from those offset origins, so that a beam is the line z = h tan(el) + dz
+/// (h the horizontal distance): KITTI's HDL-64E, whose offsets (0.12 and 0.2 m) lift a
+/// point at 10 m by 0.7 to 1.2 deg, more than two beam spacings. The other models' offsets
+/// (the VLP-16's at most 11.2 mm, under 0.13 deg at 5 m) are left in, as they were.
+fn beams_from_offset_origins(model: &SensorModel) -> bool {
+    model.name == crate::sensor::HDL64E_KITTI.name
 }
 
 impl BeamTable {
@@ -112,10 +130,24 @@ impl BeamTable {
             .map(|&l| model.elevation_deg[usize::from(l)])
             .collect();
         let bounds = elevation.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
+        let (slope, origin_m) = if beams_from_offset_origins(model) {
+            by_elevation
+                .iter()
+                .zip(&elevation)
+                .map(|(&l, e)| {
+                    let mm = model.vertical_offset_mm.get(usize::from(l)).copied();
+                    (e.to_radians().tan(), mm.unwrap_or(0.0) * 1e-3)
+                })
+                .unzip()
+        } else {
+            (Vec::new(), Vec::new())
+        };
         BeamTable {
             by_elevation,
             elevation,
             bounds,
+            slope,
+            origin_m,
         }
     }
 
@@ -125,10 +157,41 @@ impl BeamTable {
     /// beyond the outermost beams by more than half their spacing.
     pub fn nearest(&self, elevation_deg: f64) -> (u8, bool) {
         let i = self.bounds.partition_point(|&b| b < elevation_deg);
-        let e = self.elevation[i];
+        self.judged(i, elevation_deg, |k| self.elevation[k])
+    }
+
+    /// The laser of a point at horizontal distance `horizontal` and height `z` (metres)
+    /// whose elevation from the origin is `elevation_deg`: [`BeamTable::nearest`], except
+    /// where the beams are lines from offset origins (KITTI's HDL-64E), where it is the
+    /// beam whose line passes nearest in height at that distance, ambiguous by the same
+    /// rule in height.
+    pub fn nearest_at(&self, horizontal: f64, z: f64, elevation_deg: f64) -> (u8, bool) {
+        if self.origin_m.is_empty() {
+            return self.nearest(elevation_deg);
+        }
+        // The beams' heights at this distance rise with the ring beyond 0.12 m on KITTI's
+        // table (neighbouring beams 0.25 deg or more apart, their offsets by 2 mm at
+        // most), so the midpoints can be searched as `nearest` searches its bounds.
+        let at = |k: usize| horizontal * self.slope[k] + self.origin_m[k];
+        let (mut lo, mut hi) = (0, self.elevation.len() - 1);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if 0.5 * (at(mid) + at(mid + 1)) < z {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        self.judged(lo, z, at)
+    }
+
+    /// The laser of beam `i`, nearest to `value` (the point's elevation or height; `at`
+    /// gives each beam's), and whether the choice is ambiguous.
+    fn judged(&self, i: usize, value: f64, at: impl Fn(usize) -> f64) -> (u8, bool) {
+        let e = at(i);
         let n = self.elevation.len();
         // The neighbour on the point's side of the nearest beam, else the other one.
-        let j = if elevation_deg >= e {
+        let j = if value >= e {
             if i + 1 < n {
                 i + 1
             } else {
@@ -139,8 +202,8 @@ impl BeamTable {
         } else {
             (i + 1).min(n - 1)
         };
-        let gap = (self.elevation[j] - e).abs();
-        let ambiguous = gap > 0.0 && (elevation_deg - e).abs() > 0.25 * gap;
+        let gap = (at(j) - e).abs();
+        let ambiguous = gap > 0.0 && (value - e).abs() > 0.25 * gap;
         (self.by_elevation[i], ambiguous)
     }
 }
@@ -222,7 +285,7 @@ pub fn to_returns(
                 )))
             }
             None => {
-                let (laser, unsure) = beams.nearest(elevation);
+                let (laser, unsure) = beams.nearest_at(horizontal, z, elevation);
                 from_elevation += 1;
                 ambiguous += usize::from(unsure);
                 laser
@@ -461,6 +524,83 @@ mod tests {
         assert_eq!(beams.nearest(-9.36), (56, false));
         assert_eq!(beams.nearest(-9.2), (57, false));
         assert_eq!(beams.nearest(-9.29), (56, true));
+    }
+
+    #[test]
+    fn kittis_table_orders_its_64_lasers_as_the_default_within_the_hdl64e_span() {
+        use crate::sensor::{HDL64E_KITTI, HDL64E_S2};
+        let (el, dz) = (HDL64E_KITTI.elevation_deg, HDL64E_KITTI.vertical_offset_mm);
+        assert_eq!((el.len(), dz.len(), HDL64E_KITTI.lasers), (64, 64, 64));
+        // The lasers in the same order by elevation as the default table's, so a ring
+        // means the same laser with either.
+        assert_eq!(HDL64E_KITTI.rings(), HDL64E_S2.rings());
+        // Within the default span widened by 1.5 deg (+2.81 to -23.95); the HDL-64E
+        // manuals give +2 to -24.8 deg.
+        for (l, &e) in el.iter().enumerate() {
+            assert!((-25.45..=4.31).contains(&e), "laser {l}: {e} deg");
+        }
+        // Beams at least 0.2 deg apart, from the lowest up (the KITTI beams are 0.25 to
+        // 0.67 deg apart).
+        let beams = BeamTable::new(&HDL64E_KITTI);
+        for w in beams.elevation.windows(2) {
+            assert!(w[1] - w[0] >= 0.2, "{w:?}");
+        }
+        // Upper bank (lasers 0-31) about 0.2 m above the origin, lower bank about 0.12 m.
+        for (l, &mm) in dz.iter().enumerate() {
+            let want = if l < 32 { 190.0..=215.0 } else { 115.0..=130.0 };
+            assert!(want.contains(&mm), "laser {l}: {mm} mm");
+        }
+        // The beams' heights rise with the ring at every distance beyond 0.2 m, which the
+        // search of `nearest_at` needs.
+        for h in [0.2, 0.5, 1.0, 5.0, 30.0, 120.0] {
+            let at: Vec<f64> = (0..64)
+                .map(|k| h * beams.slope[k] + beams.origin_m[k])
+                .collect();
+            assert!(at.windows(2).all(|w| w[1] > w[0]), "at {h} m");
+        }
+    }
+
+    #[test]
+    fn only_kittis_beams_are_matched_in_height() {
+        use crate::sensor::{HDL64E_KITTI, HDL64E_S2, HDL64E_S3, PUCK_HI_RES, VLP16, VLP32C};
+        // Every other model: `nearest_at` is `nearest` on the elevation, whatever h and z.
+        for m in [
+            &HDL32E,
+            &VLP16,
+            &PUCK_HI_RES,
+            &VLP32C,
+            &HDL64E_S2,
+            &HDL64E_S3,
+        ] {
+            let beams = BeamTable::new(m);
+            for i in 0..2000 {
+                let h = 0.5 + f64::from(i % 97) * 0.7;
+                let z = -3.0 + f64::from(i % 89) * 0.05;
+                let e = z.atan2(h).to_degrees();
+                assert_eq!(beams.nearest_at(h, z, e), beams.nearest(e), "{}", m.name);
+            }
+        }
+        // KITTI's: a point of laser 29 (the top beam, +1.937 deg from 209.2 mm up) at 5 m
+        // is seen at +4.3 deg from the origin, above every beam of the elevation table.
+        let beams = BeamTable::new(&HDL64E_KITTI);
+        let (h, el, dz) = (5.0, 1.937_f64, 0.2092);
+        let z = h * el.to_radians().tan() + dz;
+        let e = z.atan2(h).to_degrees();
+        assert!(e > 4.2, "{e}");
+        assert_eq!(beams.nearest_at(h, z, e), (29, false));
+        // Laser 38 (the bottom beam, -25.163 deg, 124.7 mm) at 3 m, and halfway between
+        // laser 38 and the next beam up (laser 39, -24.648 deg): ambiguous.
+        let low = |el: f64| 3.0 * el.to_radians().tan() + 0.1247;
+        let z = low(-25.163);
+        assert_eq!(
+            beams.nearest_at(3.0, z, z.atan2(3.0).to_degrees()),
+            (38, false)
+        );
+        let z = 0.5 * (low(-25.163) + low(-24.648)) - 1e-4;
+        assert_eq!(
+            beams.nearest_at(3.0, z, z.atan2(3.0).to_degrees()),
+            (38, true)
+        );
     }
 
     #[test]

@@ -424,9 +424,10 @@ pub(crate) fn cloud_options(
         Some(name) => sensor_by_name(name).ok_or_else(|| {
             anyhow::anyhow!("--sensor {name}: not a sensor modelled here ({SENSOR_NAMES})")
         })?,
-        // KITTI and SemanticKITTI were recorded with an HDL-64E (S2), nuScenes with an
-        // HDL-32E; other formats say nothing of their sensor: the HDL-32E unless said.
-        None if format == Format::Kitti => &crate::sensor::HDL64E_S2,
+        // KITTI and SemanticKITTI were recorded with an HDL-64E S2 (its beams as KITTI's
+        // unit has them: `sensor::HDL64E_KITTI`), nuScenes with an HDL-32E; other formats
+        // say nothing of their sensor: the HDL-32E unless said.
+        None if format == Format::Kitti => &crate::sensor::HDL64E_KITTI,
         None => &crate::sensor::HDL32E,
     };
     let rotation_hz = request

@@ -489,6 +489,57 @@ pub const HDL64E_S3: SensorModel = SensorModel {
     ..HDL64E_S2
 };
 
+/// Elevations of KITTI's HDL-64E by laser id, in degrees from each laser's own origin
+/// (which lies [`HDL64E_KITTI_VERTICAL_MM`] above the scan's origin), measured on real
+/// scans by `examples/kitti_beams.rs tune` (docs/guide/datasets.md, "KITTI's beams"):
+/// KITTI stores each laser's sweep in turn, so the scan lines recovered from the point
+/// order name each point's laser (line `k` from the top is ring `63 - k`; a ring is
+/// mapped to the laser id the default table puts at that ring, so both tables order the
+/// lasers alike). Tuning scans: KITTI object 000000, 000001 and 000002 (cut to the
+/// camera's view: rings 17 to 63) and SemanticKITTI 000964 (all 64 rings).
+/// - Rings 25-63: a least-squares line z = h tan(el) + dz through the ring's points (h
+///   the horizontal distance) beyond 2 m, from the scans where the points lie on one line
+///   (median residual under 5 mm; the object scans' is 0.2-0.3 mm, as for points computed
+///   from the unit's calibration) over at least 1 m of h.
+/// - Rings 17-24 (ground near the car, under 1 m of h): the median of atan2(z - dz, h)
+///   with the lower bank's median offset; 10-90 % spread 0.01 deg.
+/// - Rings 0-16, only in the SemanticKITTI scan, whose points lie off one line by 1-10 mm
+///   (a moved or noisier scan): the same median, with a 10-90 % spread of about 0.9 deg
+///   against 0.5 deg between beams: the least sure part of the table.
+///
+/// The default table ([`HDL64E_S2`]) lies 0.87 to 1.33 deg above these (+2.81 to -23.95
+/// deg against +1.94 to -25.16); seen from the scan's origin at 10 m, where the offsets
+/// lift KITTI's beams, they differ from it by -0.73 to +0.32 deg.
+const HDL64E_KITTI_ELEVATION_DEG: [f64; 64] = [
+    -7.287, -6.999, 0.181, 0.579, -6.676, -6.329, -8.711, -8.311, -5.958, -5.611, -8.058, -7.679,
+    -3.236, -2.874, -5.251, -4.914, -2.547, -2.210, -4.588, -4.216, -1.836, -1.497, -3.937, -3.540,
+    0.872, 1.305, -1.204, -0.803, 1.574, 1.937, -0.452, -0.089, -23.083, -22.566, -11.599, -10.957,
+    -22.087, -21.417, -25.163, -24.648, -20.884, -20.328, -24.152, -23.554, -16.621, -16.211,
+    -19.852, -19.411, -15.686, -15.215, -18.903, -18.414, -14.620, -14.067, -17.807, -17.272,
+    -10.471, -10.063, -13.500, -13.054, -9.573, -9.026, -12.572, -12.116,
+];
+
+/// Vertical offsets of KITTI's HDL-64E lasers by laser id in millimetres: the height of
+/// each laser's origin above the scan's origin, which KITTI's points carry (the line fits
+/// of [`HDL64E_KITTI_ELEVATION_DEG`]; upper bank 197.8 to 209.2 mm, lower bank 123.7 to
+/// 125.9 mm; rings without a fit take the lower bank's median, 124.7 mm).
+const HDL64E_KITTI_VERTICAL_MM: [f64; 64] = [
+    198.9, 199.2, 206.8, 207.3, 199.5, 199.8, 197.8, 198.2, 200.1, 200.5, 198.4, 198.6, 203.2,
+    203.7, 200.8, 201.2, 203.5, 205.3, 201.5, 201.8, 205.8, 205.8, 202.3, 202.7, 207.7, 208.2,
+    206.0, 205.5, 208.7, 209.2, 206.0, 206.4, 124.7, 124.7, 124.0, 124.4, 124.7, 124.7, 124.7,
+    124.7, 124.7, 124.7, 124.7, 124.7, 124.7, 124.7, 124.7, 124.7, 124.7, 124.7, 124.7, 124.7,
+    124.7, 124.7, 124.7, 124.7, 124.7, 125.1, 124.7, 124.7, 125.2, 125.9, 124.7, 123.7,
+];
+
+/// KITTI's HDL-64E S2: the S2's timing and packets with the unit's own beams, measured on
+/// KITTI scans (elevation and vertical offset per laser); `--sensor hdl64e-kitti`.
+pub const HDL64E_KITTI: SensorModel = SensorModel {
+    name: "HDL-64E S2 (KITTI)",
+    elevation_deg: &HDL64E_KITTI_ELEVATION_DEG,
+    vertical_offset_mm: &HDL64E_KITTI_VERTICAL_MM,
+    ..HDL64E_S2
+};
+
 /// Elevations of the VLS-128 (Alpha Prime) by laser id in degrees: the manual's beam
 /// table as velodyne_decoder's `calib_db.cpp` (AlphaPrime) and the ROS driver's
 /// `VLS128.yaml` (VeloView's calibration) carry it.

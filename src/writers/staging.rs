@@ -745,13 +745,18 @@ fn list_files(dir: &Path, prefix: &str, owns: &dyn Fn(&str) -> bool, out: &mut V
                 continue;
             }
             list_files(&e.path(), &format!("{rel}/"), owns, out);
-        } else if temporary_of(&name)
-            .is_some_and(|f| f == MANIFEST || owns(&format!("{prefix}{f}")) || owns(&rel))
-        {
+        } else if temporary_of(&name).is_some_and(|f| {
+            f == MANIFEST
+                || owns(&format!("{prefix}{f}"))
+                || owns(&rel)
+                || e.metadata().is_ok_and(|m| m.len() == 0)
+        }) {
             // A temporary file is a leftover when its target is ours or it proves by
             // its own content that we wrote it (a streamed file killed before its
             // target first existed: `unlisted` reads it); no name pattern of ours ends
-            // in `.tmp`.
+            // in `.tmp`. An empty one too: a write killed before its first bytes left
+            // the buffer leaves one (a sweep shard killed as a cell starts), and it
+            // holds nothing to mix with results or lose.
             continue;
         } else {
             out.push(rel);
@@ -1035,6 +1040,13 @@ mod tests {
         // Leftovers of killed runs are not foreign; a file of someone else is.
         fs::write(t.join(".frame_00000.ply.x1Y2z3.tmp"), "").unwrap();
         check_replace(&t, "run", &a, &ours, &none, false, &[]).unwrap();
+        // An empty temporary, whatever its target: a write killed before its first bytes.
+        fs::write(t.join(".cell.json.Ab12Cd.tmp"), "").unwrap();
+        check_replace(&t, "run", &a, &ours, &none, false, &[]).unwrap();
+        fs::write(t.join(".cell.json.Ab12Cd.tmp"), "mine").unwrap();
+        let e = refused(check_replace(&t, "run", &a, &ours, &none, true, &[]));
+        assert!(e.contains(".cell.json.Ab12Cd.tmp"), "{e}");
+        fs::remove_file(t.join(".cell.json.Ab12Cd.tmp")).unwrap();
         fs::write(t.join("notes.txt"), "mine").unwrap();
         let e = refused(check_replace(&t, "run", &a, &ours, &none, true, &[]));
         assert!(

@@ -440,7 +440,7 @@ fn bad_options_name_key_and_line() {
         ("multipath", "pulse_ns = nan", "pulse_ns", "nan"),
         ("multipath", "fraction = \"gauss\"", "fraction", "gauss"),
         ("multipath", "edge_m = -1", "edge_m", "outside"),
-        ("lens_damage", "lasers = [40]", "lasers[0]", "40"),
+        ("lens_damage", "lasers = [140]", "lasers[0]", "140"),
         (
             "lens_damage",
             "transmission = 1.2",

@@ -11,9 +11,9 @@ Run on a folder of scans:
     python examples/python/torch_dataset.py /data/kitti/sequences/00/velodyne configs/adverse-weather.toml
     python examples/python/torch_dataset.py /data/nuscenes/samples/LIDAR_TOP configs/rain.toml --rotation-hz 20
 
-KITTI was recorded with an HDL-64E: the package models the HDL-32E, so KITTI points are
-placed on the HDL-32E's beams by elevation (an approximation); nuScenes' LIDAR_TOP is an
-HDL-32E at 20 Hz with rings, which is exact.
+KITTI was recorded with an HDL-64E (S2): KITTI points are placed on its 64 beams by
+elevation (the chain is built for sensor "hdl64e"); nuScenes' LIDAR_TOP is an HDL-32E at
+20 Hz with rings. `--sensor NAME` says otherwise (the names of `lidar-noise run --sensor`).
 """
 
 from __future__ import annotations
@@ -40,11 +40,15 @@ class CorruptedScans(Dataset):
     Item ``i`` is corrupted with seed ``base_seed`` and frame ``i``: reproducible per
     item, independent between items, and the same in any DataLoader worker."""
 
-    def __init__(self, folder, config, base_seed=0, rotation_hz=10.0, keep_dropped=False):
+    def __init__(self, folder, config, base_seed=0, rotation_hz=10.0, keep_dropped=False, sensor=None):
         self.files = sorted(Path(folder).glob("*.bin"))
         if not self.files:
             raise FileNotFoundError(f"{folder}: no .bin scans")
-        self.chain = ln.Chain.from_toml(config)
+        if sensor is None:
+            # The sensors the datasets were recorded with: nuScenes an HDL-32E, KITTI an
+            # HDL-64E (S2).
+            sensor = "hdl32e" if self.files[0].name.endswith(".pcd.bin") else "hdl64e"
+        self.chain = ln.Chain.from_toml(config, sensor=sensor)
         self.base_seed = base_seed
         self.rotation_hz = rotation_hz
         self.keep_dropped = keep_dropped
@@ -80,8 +84,9 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--rotation-hz", type=float, default=10.0)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--sensor", default=None, help="sensor name (default: hdl64e for KITTI, hdl32e for nuScenes)")
     args = ap.parse_args(argv)
-    data = CorruptedScans(args.folder, args.config, args.seed, args.rotation_hz)
+    data = CorruptedScans(args.folder, args.config, args.seed, args.rotation_hz, sensor=args.sensor)
     if torch is None:
         print("torch is not installed (pip install torch); iterating without a DataLoader", file=sys.stderr)
         items = (data[i] for i in range(min(len(data), 4)))

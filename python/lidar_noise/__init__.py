@@ -87,16 +87,16 @@ POINT_DTYPE = np.dtype(
 #: Fate codes, by value.
 FATES = ("kept", "occluded", "below_power", "below_min_range", "replaced", "added")
 
-_SENSORS = {"hdl32e": "HDL-32E", "hdl-32e": "HDL-32E"}
-
-
-def _check_sensor(sensor: Optional[str]) -> None:
-    if sensor is None:
-        return
-    if not isinstance(sensor, str) or sensor.lower() not in _SENSORS:
+def _sensor_model(sensor: Any) -> "tuple[str, int, List[float]]":
+    """The model a ``sensor=`` name means (the command line's ``--sensor`` names: hdl32e,
+    vlp16, puck-hi-res, vlp32c, hdl64e, hdl64e-s3; case, ``-`` and ``_`` ignored): its
+    model name, laser count and per-laser elevations. ValueError listing the names for
+    any other."""
+    if not isinstance(sensor, str):
         raise ValueError(
-            f"sensor {sensor!r}: the package models the HDL-32E only (give \"hdl32e\")"
+            f"sensor {sensor!r}: give a sensor name such as \"hdl32e\" or \"hdl64e\""
         )
+    return _core.sensor_model(sensor)
 
 
 def _strided_ok(col: np.ndarray) -> np.ndarray:
@@ -227,11 +227,22 @@ def read(
     ``keep_partial``, as arrays of ``RETURN_DTYPE``) or a point-cloud file (KITTI .bin,
     nuScenes .pcd.bin, PCD, CSV: one frame of ``POINT_DTYPE``-like fields as stored).
 
+    ``sensor`` names the sensor that recorded the file, any name ``Chain.from_toml``
+    takes (ValueError for others). A point-cloud file's points are returned as stored
+    whatever the sensor (place them on its firings with ``Chain.from_toml(...,
+    sensor=...).apply``); captures are decoded as the HDL-32E's only, so any other
+    sensor is refused for them.
+
     Raises OSError (FileNotFoundError) when the file cannot be read, ValueError when its
     content is malformed (the message names the file and the place)."""
-    _check_sensor(sensor)
+    model = _sensor_model(sensor)[0] if sensor is not None else None
     p = Path(path)
     if _looks_like_capture(p):
+        if model is not None and model != "HDL-32E":
+            raise ValueError(
+                f"{p}: sensor {sensor!r}: captures are decoded as the HDL-32E's only (the "
+                f"{model}'s packets are not decoded yet); give sensor=None or \"hdl32e\""
+            )
         frames = _core.read_capture(p, keep_partial)
         return [Frame(i, partial, _structured(c, RETURN_DTYPE)) for i, partial, c in frames]
     if not p.exists():
@@ -259,17 +270,23 @@ def _atomic_write_bytes(path: Path, data: bytes) -> None:
         raise
 
 
-def write(path: Union[str, "os.PathLike[str]"], points: np.ndarray, frame: int = 0) -> None:
+def write(
+    path: Union[str, "os.PathLike[str]"],
+    points: np.ndarray,
+    frame: int = 0,
+    sensor: str = "hdl32e",
+) -> None:
     """Writes ``points`` by the file's extension: ``.ply`` (binary PLY by the tool's own
-    writer, with fate/cause/range_clean/power columns when present), ``.pcd.bin``
-    (nuScenes: float32 x y z intensity ring), ``.bin`` (KITTI: float32 x y z
-    reflectance 0-1). Atomic: a failed write leaves nothing behind."""
+    writer, with fate/cause/range_clean/power columns when present; plain points are
+    first made returns of ``sensor``), ``.pcd.bin`` (nuScenes: float32 x y z intensity
+    ring), ``.bin`` (KITTI: float32 x y z reflectance 0-1). Atomic: a failed write leaves
+    nothing behind."""
     p = Path(path)
     name = p.name.lower()
     kind, cols = _columns(points)
     if name.endswith(".ply"):
         if kind == "points":
-            cols, _order = points_to_returns(points, _raw=True)
+            cols, _order = points_to_returns(points, sensor=sensor, _raw=True)
         else:
             if points.dtype.names is not None:
                 for extra, dt in (("range_clean", "<f4"), ("power", "<f8"), ("fate", "u1"), ("cause", "u1")):
@@ -299,14 +316,18 @@ def points_to_returns(
     points: np.ndarray,
     rotation_hz: float = 10.0,
     intensity_scale: str = "byte",
+    sensor: str = "hdl32e",
     _raw: bool = False,
 ) -> "tuple[np.ndarray, np.ndarray]":
-    """Plain points (x y z intensity [ring]) as HDL-32E returns, in firing order, and the
-    input index of each (see the library's ``cloud::returns``)."""
+    """Plain points (x y z intensity [ring]) as returns of ``sensor`` (default the
+    HDL-32E; any name ``Chain.from_toml`` takes), in firing order, and the input index of
+    each (see the library's ``cloud::returns``). A ring, where given, is 0 (lowest beam)
+    to the sensor's lasers - 1."""
+    _sensor_model(sensor)
     kind, cols = _columns(points)
     if kind == "returns":
         raise ValueError("points: already returns (every field of a return is present)")
-    out, order = _core.points_to_returns(cols, rotation_hz, intensity_scale)
+    out, order = _core.points_to_returns(cols, rotation_hz, intensity_scale, sensor)
     out.pop("moved")
     out.pop("shared")
     if _raw:
@@ -315,7 +336,8 @@ def points_to_returns(
 
 
 class Chain:
-    """A validated noise configuration (the TOML of ``lidar-noise run -c``)."""
+    """A validated noise configuration (the TOML of ``lidar-noise run -c``) for frames
+    of one sensor model (``sensor=``, the HDL-32E unless said)."""
 
     def __init__(self, core: Any) -> None:
         self._core = core
@@ -324,29 +346,49 @@ class Chain:
     def from_toml(
         cls, text_or_path: Union[str, "os.PathLike[str]"], sensor: str = "hdl32e"
     ) -> "Chain":
-        """Reads a configuration from TOML text or a file path. Raises ValueError naming
-        the key and line for an invalid one (the command line's message), OSError when
-        the file cannot be read."""
-        _check_sensor(sensor)
+        """Reads a configuration from TOML text or a file path, for frames of ``sensor``
+        (the command line's ``--sensor`` names: "hdl32e", "vlp16", "puck-hi-res",
+        "vlp32c", "hdl64e" (the S2, KITTI's), "hdl64e-s3"). The sensor's laser count
+        sizes the chain's firings, bounds per-laser options and places plain points in
+        ``apply``.
+
+        Raises ValueError naming the key and line for an invalid configuration (the
+        command line's message), for an unknown sensor (listing the names), and for
+        per-laser options that do not fit the sensor (naming the stage and option, e.g.
+        ``occlusion`` lasers = [40] on the HDL-32E); OSError when the file cannot be
+        read."""
+        _sensor_model(sensor)
         if isinstance(text_or_path, os.PathLike):
-            return cls(_core.Chain.from_path(Path(text_or_path)))
+            return cls(_core.Chain.from_path(Path(text_or_path), sensor=sensor))
         if not isinstance(text_or_path, str):
             raise ValueError(
                 f"config: expected TOML text or a path, got {type(text_or_path).__name__}"
             )
         looks_like_text = "\n" in text_or_path or "=" in text_or_path or text_or_path == ""
         if not looks_like_text:
-            return cls(_core.Chain.from_path(Path(text_or_path)))
-        return cls(_core.Chain.from_text(text_or_path))
+            return cls(_core.Chain.from_path(Path(text_or_path), sensor=sensor))
+        return cls(_core.Chain.from_text(text_or_path, sensor=sensor))
 
     @classmethod
     def from_dict(cls, config: Dict[str, Any], sensor: str = "hdl32e") -> "Chain":
         """Builds a configuration from a dict laid out as the TOML file (``noise`` a list
-        of stage dicts); the same names, defaults and errors as the TOML."""
-        _check_sensor(sensor)
+        of stage dicts), for frames of ``sensor`` (as ``from_toml``); the same names,
+        defaults and errors as the TOML."""
+        _sensor_model(sensor)
         if not isinstance(config, dict):
             raise ValueError(f"config: expected a dict, got {type(config).__name__}")
-        return cls(_core.Chain.from_table(config))
+        return cls(_core.Chain.from_table(config, sensor=sensor))
+
+    @property
+    def sensor(self) -> str:
+        """The model name of the sensor the chain is for ("HDL-32E", "HDL-64E S2", ...);
+        ``sensor=`` takes it back."""
+        return self._core.sensor
+
+    @property
+    def lasers(self) -> int:
+        """Lasers of the sensor the chain is for (its rings are 0 to ``lasers - 1``)."""
+        return self._core.lasers
 
     def validate(self) -> List[str]:
         """The configuration's warnings (the configuration was validated when read: an
@@ -381,11 +423,12 @@ class Chain:
         """Runs the chain and the detection filters on one frame.
 
         ``points``: a structured array with every field of ``RETURN_DTYPE`` (as ``read``
-        gives a capture's frames: the result is exactly the command line's), or plain
-        points, an (N, 4)/(N, 5) float array x y z intensity [ring] or a structured array
-        with those names, each made a return of the HDL-32E (``points_to_returns``;
-        ``rotation_hz`` places them on the firing grid, ``intensity_scale`` "byte" for
-        0-255 or "unit" for 0-1).
+        gives a capture's frames: the result is exactly the command line's; laser ids
+        below the sensor's lasers), or plain points, an (N, 4)/(N, 5) float array x y z
+        intensity [ring] or a structured array with those names, each made a return of
+        the chain's sensor (``points_to_returns``; a ring, where given, 0 to ``lasers -
+        1``; ``rotation_hz`` places them on the firing grid, ``intensity_scale`` "byte"
+        for 0-255 or "unit" for 0-1).
 
         Returns an ``APPLIED_DTYPE`` array: row i is input point i (reported returns at
         their noisy position, dropped ones where they were), then the returns stages
@@ -411,42 +454,50 @@ class Chain:
         self, points: np.ndarray, seed: Optional[int] = None, frame: int = 0, noise: bool = True
     ) -> "tuple[np.ndarray, List[Dict[str, Any]]]":
         """The whole per-frame pipeline of ``run`` (noise unless ``noise=False``, ground,
-        clusters, objects) on a frame of returns: the applied array with ``ground`` and
-        ``cluster`` fields, and the clusters as ``clusters.json`` describes them."""
+        clusters, objects) on a frame of returns (plain points are made returns of the
+        chain's sensor): the applied array with ``ground`` and ``cluster`` fields, and the
+        clusters as ``clusters.json`` describes them."""
         import json
 
-        cols = _returns_cols(points)
+        cols = _returns_cols(points, self.sensor)
         out, clusters = self._core.detect(cols, seed, int(frame), noise)
         fields = [(n, APPLIED_DTYPE[n]) for n in APPLIED_DTYPE.names]
         dtype = np.dtype(fields + [("ground", "?"), ("cluster", "<i4")], align=True)
         return _structured(out, dtype), json.loads(clusters)
 
     def __repr__(self) -> str:
-        return f"Chain(seed={self.seed}, stages={self.stages})"
+        return f"Chain(seed={self.seed}, stages={self.stages}, sensor={self.sensor!r})"
 
 
-def _returns_cols(points: np.ndarray) -> Dict[str, np.ndarray]:
+def _returns_cols(points: np.ndarray, sensor: str) -> Dict[str, np.ndarray]:
     kind, cols = _columns(points)
     if kind == "points":
-        cols, _ = points_to_returns(points, _raw=True)
+        cols, _ = points_to_returns(points, sensor=sensor, _raw=True)
     return cols
 
 
-def _config(section: str, options: Dict[str, Any]) -> Any:
-    return _core.Chain.from_table({section: options})
+def _config(section: str, options: Dict[str, Any], sensor: str = "hdl32e") -> Any:
+    return _core.Chain.from_table({section: options}, sensor=sensor)
 
 
 def ground(
-    points: np.ndarray, method: str = "patchwork", seed: int = 0, frame: int = 0, **options: Any
+    points: np.ndarray,
+    method: str = "patchwork",
+    seed: int = 0,
+    frame: int = 0,
+    sensor: str = "hdl32e",
+    **options: Any,
 ) -> np.ndarray:
     """Ground labels (True = ground) by the pipeline's ground step: ``method``
     "patchwork", "range-image", "ransac" or "none", other ``[ground]`` keys as keyword
-    arguments. Plain points are made HDL-32E returns first; the mask is in input order."""
+    arguments. Plain points are made returns of ``sensor`` first (default the HDL-32E;
+    any name ``Chain.from_toml`` takes); the mask is in input order."""
+    _sensor_model(sensor)
     kind, cols = _columns(points)
     order = None
     if kind == "points":
-        cols, order = points_to_returns(points, _raw=True)
-    core = _config("ground", {"method": method, **options})
+        cols, order = points_to_returns(points, sensor=sensor, _raw=True)
+    core = _config("ground", {"method": method, **options}, sensor)
     labels = core.ground(cols, seed, int(frame))
     if order is None:
         return labels
@@ -479,11 +530,21 @@ def detect_objects(
     seed: Optional[int] = None,
     frame: int = 0,
     noise: bool = False,
+    sensor: Optional[str] = None,
 ) -> "tuple[np.ndarray, List[Dict[str, Any]]]":
     """Ground, clusters and objects of a frame by the pipeline of ``config`` (defaults
-    when None), without the noise unless ``noise=True``; see ``Chain.detect``."""
-    chain = config if config is not None else Chain(_core.Chain.from_text(""))
-    return chain.detect(points, seed=seed, frame=frame, noise=noise)
+    when None), without the noise unless ``noise=True``; see ``Chain.detect``. Plain
+    points are made returns of ``config``'s sensor, or of ``sensor`` when no ``config``
+    is given (default the HDL-32E); a ``sensor`` other than ``config``'s is a
+    ValueError (give it to ``Chain.from_toml``)."""
+    if config is None:
+        config = Chain.from_toml("", sensor=sensor if sensor is not None else "hdl32e")
+    elif sensor is not None and _sensor_model(sensor)[0] != config.sensor:
+        raise ValueError(
+            f"sensor {sensor!r}: the configuration is for the {config.sensor} (give the "
+            f"sensor to Chain.from_toml or Chain.from_dict)"
+        )
+    return config.detect(points, seed=seed, frame=frame, noise=noise)
 
 
 def _parse_cell(text: str) -> Any:

@@ -31,15 +31,25 @@ class Frame(NamedTuple):
     intensity_scale: Optional[str] = ...
 
 class Chain:
-    """A validated noise configuration (the TOML of `lidar-noise run -c`)."""
+    """A validated noise configuration (the TOML of `lidar-noise run -c`) for frames of
+    one sensor model."""
 
     @classmethod
     def from_toml(cls, text_or_path: Union[str, "os.PathLike[str]"], sensor: str = "hdl32e") -> Chain:
-        """TOML text or a file path. ValueError (key and line) when invalid, OSError when
-        the file cannot be read."""
+        """TOML text or a file path, for frames of `sensor` ("hdl32e", "vlp16",
+        "puck-hi-res", "vlp32c", "hdl64e", "hdl64e-s3"). ValueError (key and line) when
+        invalid, for an unknown sensor, or for per-laser options that do not fit the
+        sensor (stage and option named); OSError when the file cannot be read."""
     @classmethod
     def from_dict(cls, config: Dict[str, Any], sensor: str = "hdl32e") -> Chain:
-        """A dict laid out as the TOML file (`noise`: a list of stage dicts)."""
+        """A dict laid out as the TOML file (`noise`: a list of stage dicts), for frames
+        of `sensor` (as `from_toml`)."""
+    @property
+    def sensor(self) -> str:
+        """Model name of the chain's sensor ("HDL-32E", "HDL-64E S2", ...)."""
+    @property
+    def lasers(self) -> int:
+        """Lasers of the chain's sensor (rings 0 to lasers - 1)."""
     def validate(self) -> List[str]:
         """The configuration's warnings (invalid configurations raise when read)."""
     @property
@@ -63,8 +73,9 @@ class Chain:
     ) -> npt.NDArray[Any]:
         """Noise and detection filters on one frame: RETURN_DTYPE arrays (as `read`
         gives, exact to the CLI) or plain (N, 4)/(N, 5) float / structured x y z
-        intensity [ring] points. Returns APPLIED_DTYPE rows: input rows in order, then
-        added returns. GIL released; the same bytes for any `threads`."""
+        intensity [ring] points, placed on the chain's sensor's firings. Returns
+        APPLIED_DTYPE rows: input rows in order, then added returns. GIL released; the
+        same bytes for any `threads`."""
     def detect(
         self,
         points: npt.NDArray[Any],
@@ -73,25 +84,38 @@ class Chain:
         noise: bool = True,
     ) -> Tuple[npt.NDArray[Any], List[Dict[str, Any]]]:
         """The run pipeline (noise, ground, clusters, objects): APPLIED_DTYPE plus
-        `ground` (bool) and `cluster` (int32, -1 none), and the clusters' descriptions."""
+        `ground` (bool) and `cluster` (int32, -1 none), and the clusters' descriptions.
+        Plain points are placed on the chain's sensor's firings."""
 
 def read(path: PathLike, sensor: Optional[str] = None, keep_partial: bool = False) -> List[Frame]:
     """Frames of an HDL-32E capture (RETURN_DTYPE) or one frame of a point-cloud file
-    (KITTI .bin, nuScenes .pcd.bin, PCD, CSV). OSError / ValueError on bad files."""
+    (KITTI .bin, nuScenes .pcd.bin, PCD, CSV). `sensor`: any modelled name (ValueError
+    for others); captures refuse all but "hdl32e". OSError / ValueError on bad files."""
 
-def write(path: PathLike, points: npt.NDArray[Any], frame: int = 0) -> None:
-    """.ply (tool's writer, fate columns when present), .pcd.bin, .bin; atomic."""
+def write(path: PathLike, points: npt.NDArray[Any], frame: int = 0, sensor: str = "hdl32e") -> None:
+    """.ply (tool's writer, fate columns when present; plain points as returns of
+    `sensor`), .pcd.bin, .bin; atomic."""
 
 def points_to_returns(
-    points: npt.NDArray[Any], rotation_hz: float = 10.0, intensity_scale: str = "byte"
+    points: npt.NDArray[Any],
+    rotation_hz: float = 10.0,
+    intensity_scale: str = "byte",
+    sensor: str = "hdl32e",
 ) -> Tuple[npt.NDArray[Any], npt.NDArray[np.uint32]]:
-    """Plain points as HDL-32E returns in firing order, and each return's input index."""
+    """Plain points as returns of `sensor` in firing order, and each return's input
+    index."""
 
 def ground(
-    points: npt.NDArray[Any], method: str = "patchwork", seed: int = 0, frame: int = 0, **options: Any
+    points: npt.NDArray[Any],
+    method: str = "patchwork",
+    seed: int = 0,
+    frame: int = 0,
+    sensor: str = "hdl32e",
+    **options: Any,
 ) -> npt.NDArray[np.bool_]:
     """Ground mask by the pipeline's ground step ("patchwork", "range-image", "ransac",
-    "none"; other [ground] keys as keywords), in input order."""
+    "none"; other [ground] keys as keywords), in input order; plain points placed on
+    `sensor`'s firings."""
 
 def cluster(points: npt.NDArray[Any], **options: Any) -> npt.NDArray[np.int32]:
     """Cluster labels (-1 noise) by the pipeline's clustering ([cluster] keys as keywords)."""
@@ -102,8 +126,10 @@ def detect_objects(
     seed: Optional[int] = None,
     frame: int = 0,
     noise: bool = False,
+    sensor: Optional[str] = None,
 ) -> Tuple[npt.NDArray[Any], List[Dict[str, Any]]]:
-    """Ground, clusters and objects of a frame (no noise unless noise=True)."""
+    """Ground, clusters and objects of a frame (no noise unless noise=True); plain
+    points on `config`'s sensor, or `sensor`'s when no config is given."""
 
 def sweep(
     captures: Union[PathLike, List[PathLike]],

@@ -11,12 +11,14 @@
 //! bad points, malformed files) or `OSError` (files that cannot be read or written), and
 //! the work runs with the GIL released (`Python::detach`).
 
+use lidar_noise::cloud::guess::{sensor_by_name, SENSOR_NAMES};
 use lidar_noise::cloud::{self, CloudPoint, IntensityScale};
 use lidar_noise::config::Config;
 use lidar_noise::error::Error;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::noise::{stage_rng, stage_tags, NoiseChain, NoisyFrame};
 use lidar_noise::pipeline::Pipeline;
+use lidar_noise::sensor::SensorModel;
 use numpy::ndarray::Zip;
 use numpy::{Element, PyArray1, PyReadonlyArray1};
 use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyValueError};
@@ -45,6 +47,27 @@ fn py_err(e: Error) -> PyErr {
     }
 }
 
+/// The sensor model a `sensor=` name means (the command line's `--sensor` names), or a
+/// ValueError listing the names.
+fn sensor_of(name: &str) -> PyResult<&'static SensorModel> {
+    sensor_by_name(name).ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "sensor {name:?}: not a sensor modelled here (give one of {SENSOR_NAMES})"
+        ))
+    })
+}
+
+/// A per-laser misfit of the noise chain (`for_lasers`'s message `e`) worded as `run`
+/// words it: the sensor, then the stage and option.
+fn misfit_message(sensor: &SensorModel, e: &str) -> String {
+    format!("the {} ({} lasers): {e}", sensor.name, sensor.lasers)
+}
+
+/// A per-laser misfit of the noise chain as the ValueError the package documents.
+fn misfit(sensor: &SensorModel, e: String) -> PyErr {
+    PyValueError::new_err(misfit_message(sensor, &e))
+}
+
 /// Column `name` of `cols`, with one value per point.
 fn column<'py, T: Element>(
     cols: &Bound<'py, PyDict>,
@@ -71,8 +94,9 @@ fn column<'py, T: Element>(
     Ok(a)
 }
 
-/// The returns of a column dictionary carrying every field of a `Return`.
-fn returns_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<Return>> {
+/// The returns of a column dictionary carrying every field of a `Return`, of a sensor
+/// with `lasers` lasers (a laser id past them would index past the chain's firing slots).
+fn returns_of(cols: &Bound<'_, PyDict>, lasers: usize) -> PyResult<Vec<Return>> {
     let x = column::<f32>(cols, "x", None)?;
     let n = x.as_array().len();
     let y = column::<f32>(cols, "y", Some(n))?;
@@ -148,10 +172,11 @@ fn returns_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<Return>> {
                 "points: point {i} (0-based): {field} is not a finite number"
             )));
         }
-        if r.laser >= 32 {
+        if usize::from(r.laser) >= lasers {
             return Err(PyValueError::new_err(format!(
-                "points: point {i} (0-based): laser {} is out of range (0 to 31)",
-                r.laser
+                "points: point {i} (0-based): laser {} is out of range (0 to {})",
+                r.laser,
+                lasers - 1
             )));
         }
         out.push(r);
@@ -532,24 +557,32 @@ fn on_threads<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + Send) 
     Ok(pool.install(work))
 }
 
-/// A validated configuration and its noise chain (built again for another seed: stages
-/// draw per-configuration values from the seed's streams when built).
+/// A validated configuration and its noise chain for one sensor (built again for
+/// another seed: stages draw per-configuration values from the seed's streams when
+/// built).
 #[pyclass(module = "lidar_noise._lidar_noise", frozen)]
 struct Chain {
     config: Config,
     warnings: Vec<String>,
+    /// The sensor the frames are of: its lasers size the chain's firing slots and bound
+    /// the per-laser options, and plain points are placed on its firings.
+    sensor: &'static SensorModel,
     /// Chains built so far by seed (a handful: the configuration's and the last asked).
     chains: Mutex<Vec<(u64, Arc<NoiseChain>)>>,
 }
 
 impl Chain {
-    fn new(config: Config, warnings: Vec<String>) -> Self {
-        let chain = Arc::new(NoiseChain::new(&config));
-        Chain {
+    /// The chain of `config` for `sensor`; a ValueError naming the stage and option when
+    /// a per-laser option does not fit the sensor (checked once here: the fit depends on
+    /// the options, not on the seed).
+    fn new(config: Config, warnings: Vec<String>, sensor: &'static SensorModel) -> PyResult<Self> {
+        let chain = Arc::new(build_chain(&config, sensor)?);
+        Ok(Chain {
             chains: Mutex::new(vec![(config.seed, chain)]),
             config,
             warnings,
-        }
+            sensor,
+        })
     }
 
     fn chain(&self, seed: Option<u64>) -> PyResult<Arc<NoiseChain>> {
@@ -569,7 +602,7 @@ impl Chain {
         }
         let mut config = self.config.clone();
         config.seed = seed;
-        let c = Arc::new(NoiseChain::new(&config));
+        let c = Arc::new(build_chain(&config, self.sensor)?);
         if chains.len() >= 4 {
             chains.remove(1);
         }
@@ -587,14 +620,29 @@ impl Chain {
     }
 }
 
-/// Config text `text` named `name` (a path or a label), validated as `run -c` does.
-fn load(text: Option<&str>, path: Option<&Path>, name: &str, sets: &[String]) -> PyResult<Chain> {
+/// The noise chain of `config` for frames of `sensor` (as `run` builds it per sensor).
+fn build_chain(config: &Config, sensor: &SensorModel) -> PyResult<NoiseChain> {
+    NoiseChain::new(config)
+        .for_lasers(sensor.lasers)
+        .map_err(|e| misfit(sensor, e))
+}
+
+/// Config text `text` named `name` (a path or a label), validated as `run -c` does, for
+/// frames of the sensor named `sensor`.
+fn load(
+    text: Option<&str>,
+    path: Option<&Path>,
+    name: &str,
+    sets: &[String],
+    sensor: &str,
+) -> PyResult<Chain> {
+    let sensor = sensor_of(sensor)?;
     let (config, warnings) = match (text, path) {
         (Some(t), _) => Config::from_toml_str(t, Path::new(name), sets, None),
         (None, p) => Config::load(p, sets, None),
     }
     .map_err(py_err)?;
-    Ok(Chain::new(config, warnings))
+    Chain::new(config, warnings, sensor)
 }
 
 /// A Python value as a TOML value (dicts, lists, str, bool, int, float); `key` names it.
@@ -655,29 +703,43 @@ fn to_toml(v: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
 
 #[pymethods]
 impl Chain {
-    /// Reads a configuration from TOML text; `name` names it in errors.
+    /// Reads a configuration from TOML text for frames of `sensor` (a `--sensor` name);
+    /// `name` names it in errors.
     #[staticmethod]
-    #[pyo3(signature = (text, name="<string>", sets=Vec::new()))]
-    fn from_text(text: &str, name: &str, sets: Vec<String>) -> PyResult<Self> {
-        load(Some(text), None, name, &sets)
+    #[pyo3(signature = (text, name="<string>", sets=Vec::new(), sensor="hdl32e"))]
+    fn from_text(text: &str, name: &str, sets: Vec<String>, sensor: &str) -> PyResult<Self> {
+        load(Some(text), None, name, &sets, sensor)
     }
 
-    /// Reads a configuration file.
+    /// Reads a configuration file for frames of `sensor`.
     #[staticmethod]
-    #[pyo3(signature = (path, sets=Vec::new()))]
-    fn from_path(path: PathBuf, sets: Vec<String>) -> PyResult<Self> {
+    #[pyo3(signature = (path, sets=Vec::new(), sensor="hdl32e"))]
+    fn from_path(path: PathBuf, sets: Vec<String>, sensor: &str) -> PyResult<Self> {
         let name = path.display().to_string();
-        load(None, Some(&path), &name, &sets)
+        load(None, Some(&path), &name, &sets, sensor)
     }
 
-    /// Builds a configuration from a dict laid out as the TOML file.
+    /// Builds a configuration from a dict laid out as the TOML file, for frames of
+    /// `sensor`.
     #[staticmethod]
-    #[pyo3(signature = (table, sets=Vec::new()))]
-    fn from_table(table: &Bound<'_, PyDict>, sets: Vec<String>) -> PyResult<Self> {
+    #[pyo3(signature = (table, sets=Vec::new(), sensor="hdl32e"))]
+    fn from_table(table: &Bound<'_, PyDict>, sets: Vec<String>, sensor: &str) -> PyResult<Self> {
         let value = to_toml(table.as_any(), "")?;
         let text = toml::to_string(&value)
             .map_err(|e| PyValueError::new_err(format!("config dict: {e}")))?;
-        load(Some(&text), None, "<dict>", &sets)
+        load(Some(&text), None, "<dict>", &sets, sensor)
+    }
+
+    /// The model name of the sensor the chain is for ("HDL-32E", "HDL-64E S2").
+    #[getter]
+    fn sensor(&self) -> &'static str {
+        self.sensor.name
+    }
+
+    /// Lasers of the sensor the chain is for.
+    #[getter]
+    fn lasers(&self) -> usize {
+        self.sensor.lasers
     }
 
     /// Warnings the configuration gave (as `run` prints them).
@@ -723,7 +785,7 @@ impl Chain {
         threads: Option<usize>,
         layout: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let returns = returns_of(cols)?;
+        let returns = returns_of(cols, self.sensor.lasers)?;
         let layout = layout.map(RecordLayout::of).transpose()?;
         let chain = self.chain(seed)?;
         let out = py.detach(|| {
@@ -743,7 +805,7 @@ impl Chain {
     }
 
     /// Runs the chain on plain points (x y z intensity, optional ring) made returns of the
-    /// HDL-32E (`cloud::returns`); rows in input order then the added returns.
+    /// chain's sensor (`cloud::returns`); rows in input order then the added returns.
     /// `layout` as for `apply_returns`.
     #[pyo3(signature = (cols, seed=None, frame=0, rotation_hz=10.0, intensity_scale="byte", threads=None, layout=None))]
     #[allow(clippy::too_many_arguments)]
@@ -762,12 +824,13 @@ impl Chain {
         let scale = intensity_scale_of(intensity_scale)?;
         let layout = layout.map(RecordLayout::of).transpose()?;
         let chain = self.chain(seed)?;
+        let sensor = self.sensor;
         let out = py
             .detach(|| {
                 on_threads(
                     threads,
                     || -> Result<Result<Vec<u8>, Box<Applied>>, Error> {
-                        let placed = points_as_returns(&points, rotation_hz, scale)?;
+                        let placed = points_as_returns(&points, sensor, rotation_hz, scale)?;
                         let n = placed.order.len();
                         let noisy = chain.process_returns(frame, placed.returns);
                         // Back to input order: row r of the output is the return of point r.
@@ -800,7 +863,7 @@ impl Chain {
         seed: Option<u64>,
         frame: u32,
     ) -> PyResult<Bound<'py, PyArray1<bool>>> {
-        let returns = returns_of(cols)?;
+        let returns = returns_of(cols, self.sensor.lasers)?;
         let config = self.config_with(seed);
         let labels = py.detach(|| {
             let tag = stage_tags(&["ground"])[0];
@@ -850,14 +913,17 @@ impl Chain {
         frame: u32,
         noise: bool,
     ) -> PyResult<(Bound<'py, PyDict>, String)> {
-        let returns = returns_of(cols)?;
+        let returns = returns_of(cols, self.sensor.lasers)?;
         let mut config = self.config_with(seed);
         if !noise {
             config.noise.clear();
         }
+        let sensor = self.sensor;
         let (applied, ground, labels, clusters) = py
             .detach(|| -> Result<_, Error> {
-                let pipeline = Pipeline::new(&config);
+                let pipeline = Pipeline::new(&config)
+                    .for_lasers(sensor.lasers)
+                    .map_err(|e| Error::Invalid(misfit_message(sensor, &e)))?;
                 let r = pipeline.process(Frame {
                     index: frame,
                     partial: false,
@@ -892,9 +958,10 @@ fn intensity_scale_of(name: &str) -> PyResult<IntensityScale> {
     }
 }
 
-/// Plain points as HDL-32E returns (the library's conversion).
+/// Plain points as returns of `sensor` (the library's conversion).
 fn points_as_returns(
     points: &[CloudPoint],
+    sensor: &SensorModel,
     rotation_hz: f64,
     intensity_scale: IntensityScale,
 ) -> Result<cloud::returns::CloudReturns, Error> {
@@ -903,28 +970,39 @@ fn points_as_returns(
         intensity_scale,
         start_time: 0.0,
     };
-    cloud::returns::to_returns(points, &lidar_noise::sensor::HDL32E, &options, "points")
+    cloud::returns::to_returns(points, sensor, &options, "points")
 }
 
-/// Plain points as HDL-32E returns, as the columns of `read`'s arrays in firing order,
-/// with the input index of each.
+/// Plain points as returns of the sensor named `sensor`, as the columns of `read`'s
+/// arrays in firing order, with the input index of each.
 #[pyfunction]
-#[pyo3(signature = (cols, rotation_hz=10.0, intensity_scale="byte"))]
+#[pyo3(signature = (cols, rotation_hz=10.0, intensity_scale="byte", sensor="hdl32e"))]
 fn points_to_returns<'py>(
     py: Python<'py>,
     cols: &Bound<'py, PyDict>,
     rotation_hz: f64,
     intensity_scale: &str,
+    sensor: &str,
 ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyArray1<u32>>)> {
+    let sensor = sensor_of(sensor)?;
     let points = cloud_points_of(cols)?;
     let scale = intensity_scale_of(intensity_scale)?;
     let placed = py
-        .detach(|| points_as_returns(&points, rotation_hz, scale))
+        .detach(|| points_as_returns(&points, sensor, rotation_hz, scale))
         .map_err(py_err)?;
     let d = ReturnColumns::of(placed.returns.iter()).into_dict(py)?;
     d.set_item("moved", placed.moved)?;
     d.set_item("shared", placed.shared)?;
     Ok((d, PyArray1::from_vec(py, placed.order)))
+}
+
+/// The sensor model a `sensor=` name means: its model name, laser count and the
+/// elevation of each laser id in degrees (the model's built-in table); a ValueError
+/// listing the names for one not modelled.
+#[pyfunction]
+fn sensor_model(name: &str) -> PyResult<(&'static str, usize, Vec<f64>)> {
+    let model = sensor_of(name)?;
+    Ok((model.name, model.lasers, model.elevation_deg.to_vec()))
 }
 
 /// The frames of a capture as return columns, with each frame's index and partial flag,
@@ -1004,7 +1082,8 @@ fn read_cloud<'py>(
 #[pyo3(signature = (path, cols, frame=0))]
 fn write_ply(path: PathBuf, cols: &Bound<'_, PyDict>, frame: u32) -> PyResult<()> {
     use lidar_noise::writers::ply::{PlyColumns, PlyFrame};
-    let returns = returns_of(cols)?;
+    // Returns of any modelled sensor: the writer keeps the laser ids as they are.
+    let returns = returns_of(cols, lidar_noise::noise::spurious::MAX_LASERS)?;
     let n = returns.len();
     let opt_f32 = |name: &str| -> PyResult<Option<Vec<f32>>> {
         match cols.get_item(name)? {
@@ -1086,6 +1165,7 @@ fn sweep_command(py: Python<'_>, args: Vec<String>) -> PyResult<()> {
 fn _lidar_noise(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Chain>()?;
     m.add_function(wrap_pyfunction!(points_to_returns, m)?)?;
+    m.add_function(wrap_pyfunction!(sensor_model, m)?)?;
     m.add_function(wrap_pyfunction!(read_capture, m)?)?;
     m.add_function(wrap_pyfunction!(read_cloud, m)?)?;
     m.add_function(wrap_pyfunction!(write_ply, m)?)?;

@@ -86,8 +86,10 @@ def test_validate_gives_the_warnings_and_bad_options_raise_with_key_and_line():
         ln.Chain.from_dict({"noise": [{"type": "rain", "rate_mm_h": -1.0}]})
     with pytest.raises(ValueError, match="nosuchstage"):
         ln.Chain.from_dict({"noise": [{"type": "nosuchstage"}]})
+    # Every modelled sensor is taken (test_sensors.py); other names are refused.
+    assert ln.Chain.from_toml(RAIN, sensor="vlp16").lasers == 16
     with pytest.raises(ValueError, match="sensor"):
-        ln.Chain.from_toml(RAIN, sensor="vlp16")
+        ln.Chain.from_toml(RAIN, sensor="vls128")
     with pytest.raises(FileNotFoundError):
         ln.Chain.from_toml("no/such/config.toml")
 
@@ -271,6 +273,7 @@ def test_read_a_capture_gives_its_frames():
     assert len(frames[0].points) > 20000
     p = frames[0].points
     assert np.allclose(np.hypot(np.hypot(p["x"], p["y"]), p["z"]), p["range"], atol=1e-3)
+    # Captures are decoded as the HDL-32E's only: another sensor is refused for them.
     with pytest.raises(ValueError, match="sensor"):
         ln.read(FIXTURES / "crossroad.pcap", sensor="vlp16")
 

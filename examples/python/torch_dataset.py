@@ -12,7 +12,7 @@ Run on a folder of scans:
     python examples/python/torch_dataset.py /data/nuscenes/samples/LIDAR_TOP configs/rain.toml --rotation-hz 20
 
 KITTI was recorded with an HDL-64E (S2): KITTI points are placed on its 64 beams by
-elevation (the chain is built for sensor "hdl64e"); nuScenes' LIDAR_TOP is an HDL-32E at
+elevation (the chain is built for sensor "hdl64e-kitti", as `run` does); nuScenes' LIDAR_TOP is an HDL-32E at
 20 Hz with rings. `--sensor NAME` says otherwise (the names of `lidar-noise run --sensor`).
 """
 
@@ -47,7 +47,7 @@ class CorruptedScans(Dataset):
         if sensor is None:
             # The sensors the datasets were recorded with: nuScenes an HDL-32E, KITTI an
             # HDL-64E (S2).
-            sensor = "hdl32e" if self.files[0].name.endswith(".pcd.bin") else "hdl64e"
+            sensor = "hdl32e" if self.files[0].name.endswith(".pcd.bin") else "hdl64e-kitti"
         self.chain = ln.Chain.from_toml(config, sensor=sensor)
         self.base_seed = base_seed
         self.rotation_hz = rotation_hz

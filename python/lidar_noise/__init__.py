@@ -201,6 +201,9 @@ class Frame(NamedTuple):
     points: np.ndarray
     #: Point-cloud files: how the intensity is scaled ("unit", "byte", "unstated").
     intensity_scale: Optional[str] = None
+    #: Captures: the sensor told by the packets ("HDL-32E", "VLP-16", ...), a name
+    #: ``Chain.from_toml(..., sensor=...)`` takes.
+    sensor: Optional[str] = None
 
 
 def _looks_like_capture(path: Path) -> bool:
@@ -230,21 +233,26 @@ def read(
     ``sensor`` names the sensor that recorded the file, any name ``Chain.from_toml``
     takes (ValueError for others). A point-cloud file's points are returned as stored
     whatever the sensor (place them on its firings with ``Chain.from_toml(...,
-    sensor=...).apply``); captures are decoded as the HDL-32E's only, so any other
-    sensor is refused for them.
+    sensor=...).apply``). A capture's sensor is told by its packets' structure (HDL-32E,
+    VLP-16, Puck Hi-Res, VLP-32C, HDL-64E S2/S3, VLS-128) and given as each frame's
+    ``sensor`` (a name ``Chain.from_toml`` takes); a ``sensor`` that names another is a
+    ValueError.
 
     Raises OSError (FileNotFoundError) when the file cannot be read, ValueError when its
     content is malformed (the message names the file and the place)."""
     model = _sensor_model(sensor)[0] if sensor is not None else None
     p = Path(path)
     if _looks_like_capture(p):
-        if model is not None and model != "HDL-32E":
+        found, frames = _core.read_capture(p, keep_partial)
+        if model is not None and model != found:
             raise ValueError(
-                f"{p}: sensor {sensor!r}: captures are decoded as the HDL-32E's only (the "
-                f"{model}'s packets are not decoded yet); give sensor=None or \"hdl32e\""
+                f"{p}: sensor {sensor!r}: the capture's packets are a {found}'s (told by "
+                f"their structure); give sensor=None or the {found}"
             )
-        frames = _core.read_capture(p, keep_partial)
-        return [Frame(i, partial, _structured(c, RETURN_DTYPE)) for i, partial, c in frames]
+        return [
+            Frame(i, partial, _structured(c, RETURN_DTYPE), None, found)
+            for i, partial, c in frames
+        ]
     if not p.exists():
         raise FileNotFoundError(f"{p}: No such file or directory")
     cols, _fmt, scale = _core.read_cloud(p)

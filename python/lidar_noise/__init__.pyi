@@ -29,6 +29,7 @@ class Frame(NamedTuple):
     partial: bool
     points: npt.NDArray[Any]
     intensity_scale: Optional[str] = ...
+    sensor: Optional[str] = ...
 
 class Chain:
     """A validated noise configuration (the TOML of `lidar-noise run -c`) for frames of

@@ -1006,39 +1006,65 @@ fn sensor_model(name: &str) -> PyResult<(&'static str, usize, Vec<f64>)> {
 }
 
 /// The frames of a capture as return columns, with each frame's index and partial flag,
-/// decoded with the command line's defaults (`keep_partial` as `--keep-partial`).
+/// decoded with the command line's defaults (`keep_partial` as `--keep-partial`), and
+/// the name of the sensor: an HDL-32E, or another described sensor told by its packets'
+/// structure, as `run` reads them.
 #[pyfunction]
 #[pyo3(signature = (path, keep_partial=false))]
+#[allow(clippy::type_complexity)]
 fn read_capture<'py>(
     py: Python<'py>,
     path: PathBuf,
     keep_partial: bool,
-) -> PyResult<Vec<(u32, bool, Bound<'py, PyDict>)>> {
-    let frames = py
-        .detach(|| -> Result<Vec<Frame>, Error> {
+) -> PyResult<(&'static str, Vec<(u32, bool, Bound<'py, PyDict>)>)> {
+    use lidar_noise::frame::FrameSource;
+    fn drain(reader: &mut impl FrameSource) -> Result<Vec<Frame>, Error> {
+        let mut all = Vec::new();
+        loop {
+            let batch = reader.next_batch(16, &(0..=u32::MAX))?;
+            if batch.is_empty() {
+                return Ok(all);
+            }
+            all.extend(batch);
+        }
+    }
+    let (sensor, frames) = py
+        .detach(|| -> Result<(&'static str, Vec<Frame>), Error> {
             let options = lidar_noise::hdl32e::frames::DecoderOptions {
                 keep_partial,
                 ..Default::default()
             };
-            let mut reader = lidar_noise::hdl32e::frames::FrameReader::open(&path, &options)?;
-            let mut all = Vec::new();
-            loop {
-                let batch = reader.next_batch(16, &(0..=u32::MAX))?;
-                if batch.is_empty() {
-                    break;
+            let e = match lidar_noise::hdl32e::frames::FrameReader::open(&path, &options) {
+                Ok(mut reader) => {
+                    return Ok((lidar_noise::sensor::HDL32E.name, drain(&mut reader)?))
                 }
-                all.extend(batch);
+                Err(e) => e,
+            };
+            // Another described sensor's packets: its own reader (`run`'s), else the
+            // HDL-32E reader's message.
+            match lidar_noise::sensor::frames::ModelFrameReader::open(
+                &path,
+                options.interpolate_azimuth,
+                options.dual,
+                options.cut_angle_deg,
+                keep_partial,
+            ) {
+                Ok(Some(mut reader)) => {
+                    let frames = drain(&mut reader)?;
+                    Ok((reader.model().name, frames))
+                }
+                _ => Err(e),
             }
-            Ok(all)
         })
         .map_err(py_err)?;
-    frames
+    let frames = frames
         .into_iter()
         .map(|f| {
             let d = ReturnColumns::of(f.returns.iter()).into_dict(py)?;
             Ok((f.index, f.partial, d))
         })
-        .collect()
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((sensor, frames))
 }
 
 /// The points of a point-cloud file as columns (x y z intensity, ring and time where the

@@ -89,7 +89,7 @@ def test_validate_gives_the_warnings_and_bad_options_raise_with_key_and_line():
     # Every modelled sensor is taken (test_sensors.py); other names are refused.
     assert ln.Chain.from_toml(RAIN, sensor="vlp16").lasers == 16
     with pytest.raises(ValueError, match="sensor"):
-        ln.Chain.from_toml(RAIN, sensor="vls128")
+        ln.Chain.from_toml(RAIN, sensor="vlp64")
     with pytest.raises(FileNotFoundError):
         ln.Chain.from_toml("no/such/config.toml")
 

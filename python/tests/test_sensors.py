@@ -132,19 +132,19 @@ def test_per_laser_options_that_do_not_fit_the_sensor_raise():
 
 def test_unknown_sensors_raise_value_error_listing_the_names(tmp_path):
     for call in (
-        lambda: ln.Chain.from_toml(RAIN, sensor="vls128"),
-        lambda: ln.Chain.from_dict({}, sensor="vls128"),
-        lambda: ln.points_to_returns(beam_scan("hdl32e", 10)[0], sensor="vls128"),
-        lambda: ln.ground(beam_scan("hdl32e", 10)[0], sensor="vls128"),
+        lambda: ln.Chain.from_toml(RAIN, sensor="vlp64"),
+        lambda: ln.Chain.from_dict({}, sensor="vlp64"),
+        lambda: ln.points_to_returns(beam_scan("hdl32e", 10)[0], sensor="vlp64"),
+        lambda: ln.ground(beam_scan("hdl32e", 10)[0], sensor="vlp64"),
     ):
-        with pytest.raises(ValueError, match="vls128.*hdl32e.*hdl64e"):
+        with pytest.raises(ValueError, match="vlp64.*hdl32e.*hdl64e"):
             call()
     with pytest.raises(ValueError, match="sensor"):
         ln.Chain.from_toml(RAIN, sensor=64)
     path = tmp_path / "scan.bin"
     ln.write(path, beam_scan("hdl64e", 50)[0])
-    with pytest.raises(ValueError, match="vls128"):
-        ln.read(path, sensor="vls128")
+    with pytest.raises(ValueError, match="vlp64"):
+        ln.read(path, sensor="vlp64")
 
 
 def test_read_takes_any_modelled_sensor_for_point_clouds_and_the_hdl32e_for_captures(tmp_path):

@@ -41,14 +41,16 @@ pub fn sensor_by_name(name: &str) -> Option<&'static SensorModel> {
         "vlp32c" | "vlp32" => &VLP32C,
         "hdl64e" | "hdl64" | "hdl64es2" => &HDL64E_S2,
         "hdl64es3" => &HDL64E_S3,
-        "hdl64ekitti" | "kitti" => &HDL64E_KITTI,
-        _ => return None,
+        "hdl64ekitti" | "kitti" | "hdl64es2(kitti)" => &HDL64E_KITTI,
+        // Any described model by its name (the VLS-128 and its fw5.1 timing too), so the
+        // name a capture's summary gives is one this takes.
+        _ => return crate::sensor::by_name(name).ok(),
     })
 }
 
 /// The names [`sensor_by_name`] accepts, for messages.
-pub const SENSOR_NAMES: &str =
-    "hdl32e, vlp16, puck-hi-res, vlp32c, hdl64e (S2), hdl64e-s3, hdl64e-kitti (KITTI's unit)";
+pub const SENSOR_NAMES: &str = "hdl32e, vlp16, puck-hi-res, vlp32c, hdl64e (S2), hdl64e-s3, \
+     hdl64e-kitti (KITTI's unit), vls128, vls128-fw5.1";
 
 /// A guessed sensor and the evidence, as one sentence.
 #[derive(Clone, Debug, PartialEq)]
@@ -232,7 +234,15 @@ mod tests {
         assert_eq!(sensor_by_name("Puck Hi-Res").unwrap().name, "Puck Hi-Res");
         assert_eq!(sensor_by_name("vlp-32c").unwrap().name, "VLP-32C");
         assert_eq!(sensor_by_name("vlp16").unwrap().name, "VLP-16");
-        assert!(sensor_by_name("vls128").is_none());
+        assert!(sensor_by_name("vlp64").is_none());
+        // Every model by the name a capture's summary gives.
+        for m in crate::sensor::MODELS
+            .iter()
+            .copied()
+            .chain([&crate::sensor::HDL64E_KITTI])
+        {
+            assert_eq!(sensor_by_name(m.name).unwrap().name, m.name);
+        }
     }
 
     #[test]

@@ -25,9 +25,11 @@
 //!   HDL-32E at 10 Hz, 1808 for the VLP-16, 2083 for the HDL-64E S2), firing k starting
 //!   at azimuth 360 k / n, and laser l of a firing fires `laser_offset_us(l)` after its
 //!   start (its group's time on the VLP-32C and HDL-64E, whose two banks fire together).
-//!   A point goes to the firing whose laser-l direction is nearest its azimuth (on the
-//!   circle: a point just before 360 deg may belong to firing 0 when its laser's offset
-//!   says so); when two points claim one slot (a dataset's motion compensation or a merged
+//!   A point goes to the firing in whose step its own firing started (its azimuth less
+//!   laser l's lead), the turn cut at 0 as a capture's sweeps are: a firing started just
+//!   before 0 (its lasers interpolated past the cut) is the turn's last, one past 360 (a
+//!   laser's offset) the next turn's first; so a capture's frame written as a scan keeps
+//!   its firings' order (`tests/cloud_equivalence.rs`). When two points claim one slot (a dataset's motion compensation or a merged
 //!   sweep), the later in file order moves to the nearest free firing within two on either
 //!   side, and shares the slot only when those are taken too (counted in
 //!   [`CloudReturns::shared`]). Slots no point claims are the sensor's empty slots (sky,
@@ -292,18 +294,26 @@ pub fn to_returns(
             }
         };
         let l = usize::from(laser);
-        // The firing on the circle: a laser fired ahead of its firing's azimuth (an
-        // offset, a late slot in the sequence) may belong to the turn's last firing.
-        // Within one turn of the grid either way (azimuth 0 to 360, offsets under one
-        // turn), so one add or subtract wraps it (no float remainder).
-        let mut k =
-            crate::noise::summary::round_to_i64((azimuth * us_per_deg - lead_us[l]) / sequence_us);
-        if k < 0 {
-            k += n;
-        } else if k >= n {
-            k -= n;
+        // The firing on the circle. The turn is cut where a firing starts at azimuth 0,
+        // as a capture's sweeps are cut: a firing that started before 0 (a laser of the
+        // turn's last firing, interpolated or offset past the cut) is the turn's last,
+        // one that starts at or past 360 the next turn's first (a laser fired ahead of
+        // its firing's azimuth by an offset); within the turn, the grid firing whose step
+        // holds the firing's start (grid firing k covers [k, k + 1) steps, as the turn
+        // covers [0, 360): the firings of a capture's sweep, cut at 0, keep their order
+        // and one each while the sensor turns no faster than the grid). Float noise at a
+        // step's start (a thousandth of a firing: float32 coordinates give azimuths to about 3e-5 of one) counts as the start itself. Within
+        // one turn of the grid either way (azimuths and offsets under one turn), so one
+        // add or subtract wraps it (no float remainder).
+        const AT_CUT: f64 = 1e-3;
+        let turn = n as f64;
+        let mut t = (azimuth * us_per_deg - lead_us[l]) / sequence_us;
+        if t < -AT_CUT {
+            t += turn;
+        } else if t >= turn - AT_CUT {
+            t -= turn;
         }
-        let k = k.clamp(0, n - 1);
+        let k = ((t + AT_CUT).floor() as i64).clamp(0, n - 1);
         let free = |f: i64| (0..n).contains(&f) && !taken[f as usize * lasers + l];
         let firing = if free(k) {
             k

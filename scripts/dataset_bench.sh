@@ -5,8 +5,9 @@
 # azimuths, ranges of a flat ground and a ring of walls, KITTI layout: float32 x y z
 # reflectance) and linked 500 times as velodyne/000000.bin ... 000499.bin (a sequence of
 # distinct scans reads the same bytes per scan; each is still read, placed, processed and
-# written on its own, with its own random streams). Points are placed on the HDL-32E
-# (--sensor hdl32e: the sensor point clouds run as so far).
+# written on its own, with its own random streams). Points are placed on the HDL-64E S2
+# (--sensor hdl64e: KITTI's sensor; its built-in beams, which the synthetic rings
+# approximate).
 #
 # Everything is in a temporary folder removed at the end (the outputs take about 2.7 GB:
 # 500 scans and their fate sidecars). Prints the wall time of the run and of a rerun that
@@ -47,8 +48,8 @@ for i in $(seq 0 $((scans - 1))); do
 done
 echo "dataset_bench: $scans scans of $(( $(stat -c %s "$tmp/scan.bin") / 16 )) points, $threads threads, configs/paper.toml, $bin"
 t0=$(date +%s.%N)
-"$bin" --threads "$threads" run "$tmp/seq" --sensor hdl32e -c configs/paper.toml -o "$tmp/out"
+"$bin" --threads "$threads" run "$tmp/seq" --sensor hdl64e -c configs/paper.toml -o "$tmp/out"
 t1=$(date +%s.%N)
-"$bin" --threads "$threads" run "$tmp/seq" --sensor hdl32e -c configs/paper.toml -o "$tmp/out"
+"$bin" --threads "$threads" run "$tmp/seq" --sensor hdl64e -c configs/paper.toml -o "$tmp/out"
 t2=$(date +%s.%N)
 echo "dataset_bench: run $(echo "$t1 - $t0" | bc) s ($(echo "($t1 - $t0) * 1000 / $scans" | bc) ms a scan), rerun with every file done $(echo "$t2 - $t1" | bc) s; outputs $(du -sh "$tmp/out" | cut -f1)"

@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::bin2;
+use common::{bin2, refused_scan};
 use lidar_noise::capture::CaptureReader;
 use lidar_noise::sensor::decode::{DualSelect, ModelDecoder};
 use lidar_noise::sensor::SensorModel;
@@ -51,6 +51,19 @@ fn decoded_per_laser(path: &Path, model: &SensorModel) -> Vec<u64> {
     per_laser
 }
 
+/// `run` of `capture` with `config` into `out`, partial sweeps too, reports only.
+fn run_every_sweep(capture: &Path, config: &Path, out: &Path) {
+    bin2()
+        .args(["--quiet", "run", "--keep-partial", "--no-ply"])
+        .arg(capture)
+        .arg("-c")
+        .arg(config)
+        .arg("-o")
+        .arg(out)
+        .assert()
+        .success();
+}
+
 fn summary(dir: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap()
 }
@@ -85,15 +98,7 @@ fn captures_of_every_other_sensor_run_with_their_own_lasers() {
             &format!("seed = 2\n[[noise]]\ntype = \"occlusion\"\nlasers = [{occluded}]\n"),
         );
         let out = tmp.path().join(format!("out-{name}"));
-        bin2()
-            .args(["--quiet", "run", "--keep-partial", "--no-ply"])
-            .arg(&capture)
-            .arg("-c")
-            .arg(&cfg)
-            .arg("-o")
-            .arg(&out)
-            .assert()
-            .success();
+        run_every_sweep(&capture, &cfg, &out);
         let dir = std::fs::read_dir(&out)
             .unwrap()
             .map(|e| e.unwrap().path())
@@ -135,30 +140,14 @@ fn captures_of_every_other_sensor_run_with_their_own_lasers() {
 fn what_a_capture_of_another_sensor_cannot_do_is_refused_before_writing() {
     let tmp = tempfile::tempdir().unwrap();
     let capture = synth(tmp.path(), "vlp16", &["--preset", "crossroad"], 1);
-    let path = capture.to_str().unwrap();
-    let refused = |args: &[&str], what: &str| {
-        let out = tmp.path().join("refused");
-        let o = bin2()
-            .arg("run")
-            .arg(path)
-            .args(args)
-            .arg("-o")
-            .arg(&out)
-            .output()
-            .unwrap();
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert_ne!(o.status.code(), Some(0), "{err}");
-        assert!(err.contains(what), "{err}");
-        assert!(!out.exists(), "{} was written", out.display());
-    };
     let cfg = config(
         tmp.path(),
         "seed = 1\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 5.0\n",
     );
     let cfg = cfg.to_str().unwrap();
-    refused(&["--pcap-out", "-c", cfg], "VLP-16 capture");
+    refused_scan(&capture, &["--pcap-out", "-c", cfg], "VLP-16 capture");
     // The paper's occlusion names laser 30: the VLP-16 has 16.
-    refused(&[], "the VLP-16 (16 lasers)");
+    refused_scan(&capture, &[], "the VLP-16 (16 lasers)");
 }
 
 #[test]
@@ -172,15 +161,7 @@ fn the_real_vlp16_capture_runs_as_a_vlp16() {
         "seed = 1\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 5.0\n",
     );
     let out = tmp.path().join("out");
-    bin2()
-        .args(["--quiet", "run", "--keep-partial", "--no-ply"])
-        .arg(&path)
-        .arg("-c")
-        .arg(&cfg)
-        .arg("-o")
-        .arg(&out)
-        .assert()
-        .success();
+    run_every_sweep(&path, &cfg, &out);
     let s = summary(&out.join("vlp16_mrpt"));
     assert_eq!(s["capture_summary"]["sensor"], "VLP-16");
     let want = decoded_per_laser(&path, &lidar_noise::sensor::VLP16);

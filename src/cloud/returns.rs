@@ -572,16 +572,9 @@ mod tests {
 
     #[test]
     fn only_kittis_beams_are_matched_in_height() {
-        use crate::sensor::{HDL64E_KITTI, HDL64E_S2, HDL64E_S3, PUCK_HI_RES, VLP16, VLP32C};
+        use crate::sensor::{HDL64E_KITTI, MODELS};
         // Every other model: `nearest_at` is `nearest` on the elevation, whatever h and z.
-        for m in [
-            &HDL32E,
-            &VLP16,
-            &PUCK_HI_RES,
-            &VLP32C,
-            &HDL64E_S2,
-            &HDL64E_S3,
-        ] {
+        for m in MODELS {
             let beams = BeamTable::new(m);
             for i in 0..2000 {
                 let h = 0.5 + f64::from(i % 97) * 0.7;

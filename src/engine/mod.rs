@@ -355,6 +355,17 @@ enum Source {
     Cloud(CloudReader),
 }
 
+impl Source {
+    /// The decoder of a capture (either sensor family's), `None` for a scan.
+    fn decoder(&mut self) -> Option<&mut dyn crate::frame::FrameSource> {
+        match self {
+            Source::Capture(r) => Some(&mut **r),
+            Source::Model(r) => Some(&mut **r),
+            Source::Cloud(_) => None,
+        }
+    }
+}
+
 /// The frame source of the capture at `path` and the plan for its sensor: the HDL-32E
 /// reader, or, where that refuses the capture and another described sensor's structure
 /// fits it, that sensor's reader (files only: standard input and FIFOs are read once).
@@ -517,21 +528,8 @@ fn run_source(
     };
     let warmup = crate::memory::worker_warmup_bytes();
     match &mut reader {
-        Source::Capture(r) => stream_frames(
-            &mut **r,
-            &plan.frames,
-            warmup,
-            work,
-            |(e, returns, _), r| {
-                r.recycle(Frame {
-                    returns,
-                    ..Frame::default()
-                });
-                done(e)
-            },
-        )?,
-        Source::Model(r) => stream_frames(
-            &mut **r,
+        Source::Capture(_) | Source::Model(_) => stream_frames(
+            reader.decoder().expect("a capture"),
             &plan.frames,
             warmup,
             work,

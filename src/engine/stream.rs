@@ -20,7 +20,7 @@ use std::ops::RangeInclusive;
 /// The workers are the threads of one rayon pool, one frame loop each, so that `work`'s
 /// forks ([`crate::par::join`]) can be taken by a worker that has no frame left: at the
 /// end of a capture the last frames then use every core, not one frame per core.
-pub fn stream_frames<T: Send, R: FrameSource>(
+pub fn stream_frames<T: Send, R: FrameSource + ?Sized>(
     reader: &mut R,
     frames: &RangeInclusive<u32>,
     warmup: usize,

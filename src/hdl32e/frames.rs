@@ -164,12 +164,42 @@ impl CaptureSummary {
     }
 }
 
-struct Building {
-    frame: Frame,
+/// A frame being filled, with the azimuths (relative to the cut, centidegrees) and steps
+/// of its first and last firings; shared with the other sensors' reader
+/// (`sensor::frames`), which cuts sweeps by the same rules.
+pub(crate) struct Building {
+    pub(crate) frame: Frame,
     first_rel: u32,
     first_step: u32,
     last_rel: u32,
     last_step: u32,
+}
+
+impl Building {
+    /// A frame whose first firing is at `rel` with azimuth step `step`.
+    pub(crate) fn new(frame: Frame, rel: u32, step: u32) -> Self {
+        Building {
+            frame,
+            first_rel: rel,
+            first_step: step,
+            last_rel: rel,
+            last_step: step,
+        }
+    }
+
+    /// Takes the next firing.
+    pub(crate) fn extend(&mut self, rel: u32, step: u32) {
+        self.last_rel = rel;
+        self.last_step = step;
+    }
+
+    /// True when the sweep is whole: not the capture's first unless it starts at the cut,
+    /// not its `last` unless it reaches the cut.
+    pub(crate) fn is_whole(&self, last: bool) -> bool {
+        let first_ok = self.frame.index > 0 || self.first_rel <= self.first_step.max(1);
+        let last_ok = !last || self.last_rel + self.last_step.max(1) >= 36000;
+        first_ok && last_ok
+    }
 }
 
 /// What decides frame boundaries and capture timing, carried from packet to packet:
@@ -453,16 +483,13 @@ impl FrameReader {
         self.skip_before = at.frame;
         // The frame open before the resume packet: only its tail is seen, and it is
         // dropped (its index is below `skip_before`).
-        self.building = at.open.then(|| Building {
-            frame: Frame {
+        self.building = at.open.then(|| {
+            let frame = Frame {
                 index: at.next_index.wrapping_sub(1),
                 partial: false,
                 returns: Vec::new(),
-            },
-            first_rel: 0,
-            first_step: 0,
-            last_rel: 0,
-            last_step: 0,
+            };
+            Building::new(frame, 0, 0)
         });
     }
 
@@ -526,9 +553,7 @@ impl FrameReader {
             return;
         }
         self.largest = self.largest.max(b.frame.returns.len());
-        let first_ok = b.frame.index > 0 || b.first_rel <= b.first_step.max(1);
-        let last_ok = !last || b.last_rel + b.last_step.max(1) >= 36000;
-        b.frame.partial = !(first_ok && last_ok);
+        b.frame.partial = !b.is_whole(last);
         // A middle frame (its start came from a wrap, its end from the next) covers about a
         // turn; far less means the azimuths jumped back (see `short_frames`).
         let covered = (b.last_rel + b.last_step.max(1)).saturating_sub(b.first_rel);
@@ -561,26 +586,20 @@ impl FrameReader {
         let b = self.building.get_or_insert_with(|| {
             let index = *next_index;
             *next_index += 1;
-            Building {
-                frame: Frame {
-                    index,
-                    partial: false,
-                    returns: spare.pop().unwrap_or_else(|| {
-                        // A fresh buffer (the first frames, before buffers come back):
-                        // its pages faulted in by one call, sized by the frames so far.
-                        let mut v = Vec::with_capacity(FRAME_CAPACITY);
-                        crate::memory::prefault(&mut v, largest);
-                        v
-                    }),
-                },
-                first_rel: rel,
-                first_step: step,
-                last_rel: rel,
-                last_step: step,
-            }
+            let frame = Frame {
+                index,
+                partial: false,
+                returns: spare.pop().unwrap_or_else(|| {
+                    // A fresh buffer (the first frames, before buffers come back): its
+                    // pages faulted in by one call, sized by the frames so far.
+                    let mut v = Vec::with_capacity(FRAME_CAPACITY);
+                    crate::memory::prefault(&mut v, largest);
+                    v
+                }),
+            };
+            Building::new(frame, rel, step)
         });
-        b.last_rel = rel;
-        b.last_step = step;
+        b.extend(rel, step);
     }
 
     /// Decodes datagrams until a frame is ready or the capture ends.

@@ -20,6 +20,7 @@ use super::{ReturnMode, SensorModel};
 use crate::capture::CaptureReader;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, Return};
+use crate::hdl32e::frames::Building;
 use serde::Serialize;
 use std::collections::VecDeque;
 use std::ops::RangeInclusive;
@@ -64,16 +65,6 @@ pub struct ModelCaptureSummary {
     pub returns_per_laser: Vec<u64>,
     /// Why the product byte was overruled, empty when it was not.
     pub note: String,
-}
-
-/// A frame being filled.
-struct Building {
-    frame: Frame,
-    /// Azimuth of its first and last firings relative to the cut, centidegrees.
-    first_rel: u32,
-    first_step: u32,
-    last_rel: u32,
-    last_step: u32,
 }
 
 /// Iterator over the frames of a capture of a described sensor other than the HDL-32E.
@@ -361,26 +352,18 @@ impl ModelFrameReader {
         let b = self.building.get_or_insert_with(|| {
             let index = *next_index;
             *next_index += 1;
-            Building {
-                frame: Frame {
-                    index,
-                    partial: false,
-                    returns: spare.pop().unwrap_or_default(),
-                },
-                first_rel: rel,
-                first_step: step,
-                last_rel: rel,
-                last_step: step,
-            }
+            let frame = Frame {
+                index,
+                partial: false,
+                returns: spare.pop().unwrap_or_default(),
+            };
+            Building::new(frame, rel, step)
         });
-        b.last_rel = rel;
-        b.last_step = step;
+        b.extend(rel, step);
     }
 
     fn finish_frame(&mut self, mut b: Building, last: bool) {
-        let first_ok = b.frame.index > 0 || b.first_rel <= b.first_step.max(1);
-        let last_ok = !last || b.last_rel + b.last_step.max(1) >= 36000;
-        b.frame.partial = !(first_ok && last_ok);
+        b.frame.partial = !b.is_whole(last);
         if b.frame.partial {
             self.summary.partial_frames += 1;
         } else {

@@ -271,7 +271,8 @@ pub fn kitti_bytes(frame: &lidar_noise::frame::Frame) -> Vec<u8> {
         .collect()
 }
 
-/// Runs `args` on `scan`, expects exit 1 with `what` in the message and no output folder.
+/// Runs `args` on `scan` (a point-cloud scan or a capture), expects exit 1 with `what` in
+/// the message and no output folder.
 pub fn refused_scan(scan: &std::path::Path, args: &[&str], what: &str) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");

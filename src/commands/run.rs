@@ -23,9 +23,10 @@ pub struct Args {
     /// written back in its own layout); none runs the built-in crossroad fixture.
     #[arg(value_name = "CAPTURE")]
     pub captures: Vec<PathBuf>,
-    /// Sensor that recorded the point-cloud scans given (captures name their sensor
-    /// themselves). Point clouds are placed on the HDL-32E's firings (`hdl32e`, the default
-    /// except for KITTI scans, which come from an HDL-64E and need it said).
+    /// Sensor that recorded the point-cloud scans given (captures are told by their
+    /// packets): hdl32e, vlp16, puck-hi-res, vlp32c, hdl64e, hdl64e-s3, hdl64e-kitti,
+    /// vls128. Default: hdl64e-kitti (KITTI's unit) for KITTI .bin scans, hdl32e for
+    /// every other format.
     #[arg(long, value_name = "NAME")]
     pub sensor: Option<String>,
     /// Rotation rate of the point-cloud scans in Hz: the firing grid their points are

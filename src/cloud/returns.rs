@@ -29,9 +29,10 @@
 //!   laser l's lead), the turn cut at 0 as a capture's sweeps are: a firing started just
 //!   before 0 (its lasers interpolated past the cut) is the turn's last, one past 360 (a
 //!   laser's offset) the next turn's first; so a capture's frame written as a scan keeps
-//!   its firings' order (`tests/cloud_equivalence.rs`). When two points claim one slot (a dataset's motion compensation or a merged
-//!   sweep), the later in file order moves to the nearest free firing within two on either
-//!   side, and shares the slot only when those are taken too (counted in
+//!   its firings' order (`tests/cloud_equivalence.rs`). When two points claim one slot
+//!   (a dataset's motion compensation or a merged sweep), the later in file order moves
+//!   to the nearest free firing within two on either side, and shares the slot only when
+//!   those are taken too (counted in
 //!   [`CloudReturns::shared`]). Slots no point claims are the sensor's empty slots (sky,
 //!   no echo), which the spurious-return rules of `noise::spurious` need.
 //! - packet and block from the firing (firings numbered from 0 at the turn's start,
@@ -300,11 +301,12 @@ pub fn to_returns(
         // one that starts at or past 360 the next turn's first (a laser fired ahead of
         // its firing's azimuth by an offset); within the turn, the grid firing whose step
         // holds the firing's start (grid firing k covers [k, k + 1) steps, as the turn
-        // covers [0, 360): the firings of a capture's sweep, cut at 0, keep their order
-        // and one each while the sensor turns no faster than the grid). Float noise at a
-        // step's start (a thousandth of a firing: float32 coordinates give azimuths to about 3e-5 of one) counts as the start itself. Within
-        // one turn of the grid either way (azimuths and offsets under one turn), so one
-        // add or subtract wraps it (no float remainder).
+        // covers [0, 360): the firings of a capture's sweep, cut at 0, keep their order,
+        // one a step while the sensor turns no slower than the grid). Float noise at a
+        // step's start (a thousandth of a firing: float32 coordinates give azimuths to
+        // about 3e-5 of one) counts as the start itself. Within one turn of the grid
+        // either way (azimuths and offsets under one turn), so one add or subtract wraps
+        // it (no float remainder).
         const AT_CUT: f64 = 1e-3;
         let turn = n as f64;
         let mut t = (azimuth * us_per_deg - lead_us[l]) / sequence_us;

@@ -434,10 +434,10 @@ fn room_for_added(n: usize) -> usize {
 }
 
 /// The ranges, ideal powers and intensity bytes of `returns`, and their firing slots
-/// when `slots` gives the lasers a firing (and the frame is of the usual kind, [`spurious::SlotsBuilder`]), with a
-/// copy of the returns appended to `copy` when given: one pass over the returns, a
-/// chunk at a time, where separate passes each streamed a frame's 2.4 MB of returns from
-/// beyond the L2 cache.
+/// when `slots` gives the lasers a firing (and the frame is of the usual kind,
+/// [`spurious::SlotsBuilder`]), with a copy of the returns appended to `copy` when
+/// given: one pass over the returns, a chunk at a time, where separate passes each
+/// streamed a frame's 2.4 MB of returns from beyond the L2 cache.
 #[allow(clippy::type_complexity)]
 fn start_columns(
     returns: &[Return],

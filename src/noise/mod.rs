@@ -296,6 +296,29 @@ pub fn check_ids(key: &str, ids: Option<&[u8]>, lasers: usize) -> Result<(), Str
     }
 }
 
+/// A set of laser ids (or rings) below [`spurious::MAX_LASERS`]: the lasers a stage
+/// acts on, tested per return with one shift.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LaserSet(u128);
+
+impl LaserSet {
+    /// Every id.
+    pub const ALL: LaserSet = LaserSet(u128::MAX);
+    /// No id.
+    pub const NONE: LaserSet = LaserSet(0);
+
+    /// The set of `ids` (ids from [`spurious::MAX_LASERS`] up are taken modulo it).
+    pub fn of(ids: &[u8]) -> Self {
+        LaserSet(ids.iter().fold(0, |m, &i| m | (1u128 << (i & LASER_MASK))))
+    }
+
+    /// True when `id` is in the set (never for an id from [`spurious::MAX_LASERS`] up).
+    #[inline]
+    pub fn contains(self, id: u8) -> bool {
+        id <= LASER_MASK && self.0 & (1u128 << id) != 0
+    }
+}
+
 /// Keeps a laser id within a per-laser table of [`spurious::MAX_LASERS`] entries.
 pub const LASER_MASK: u8 = (spurious::MAX_LASERS - 1) as u8;
 

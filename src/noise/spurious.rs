@@ -111,6 +111,13 @@ pub struct Slots {
 const NONE: u32 = u32::MAX;
 /// Marks an entry of `resolve`'s best echoes as the dense column's echo of a return.
 const DENSE: u32 = 1 << 31;
+/// The slot of `laser` in firing `firing` of a sensor with `lasers` lasers a firing (a
+/// laser id beyond counts as the last laser).
+#[inline]
+fn slot_id(firing: usize, laser: u8, lasers: usize) -> SlotId {
+    (firing * lasers + usize::from(laser).min(lasers - 1)) as SlotId
+}
+
 /// Lasers of a firing when the sensor is not said (the HDL-32E's).
 pub const DEFAULT_LASERS: usize = 32;
 /// Most lasers a sensor model has (VLS-128): laser ids are below this.
@@ -222,7 +229,7 @@ impl Slots {
                 });
                 last_key = key;
             }
-            let slot = f * lasers as u32 + u32::from(r.laser).min(lasers as u32 - 1);
+            let slot = slot_id(f as usize, r.laser, lasers);
             let o = &mut occupants[slot as usize];
             // Dual: the last return in entry 0, the strongest in entry 1.
             let at = usize::from(r.kind == ReturnKind::DualStrongest || o[0] != NONE);
@@ -262,7 +269,7 @@ impl Slots {
 
     /// The slot of `laser` in firing `firing`.
     pub fn slot(&self, firing: usize, laser: u8) -> SlotId {
-        (firing * self.lasers + usize::from(laser).min(self.lasers - 1)) as SlotId
+        slot_id(firing, laser, self.lasers)
     }
 
     /// Firing index and laser of a slot.
@@ -463,7 +470,7 @@ impl SlotsBuilder {
                 self.f = *at;
                 self.last_key = key;
             }
-            let slot = self.f * self.lasers as u32 + u32::from(r.laser).min(self.lasers as u32 - 1);
+            let slot = slot_id(self.f as usize, r.laser, self.lasers);
             let o = &mut self.occupants[slot as usize];
             let at = usize::from(o[0] != NONE);
             if o[at] == NONE {

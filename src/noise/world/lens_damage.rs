@@ -36,7 +36,9 @@ use crate::noise::registry::OptionSpec;
 use crate::noise::sensor::{float, number, scale_byte, sigma, CHUNK};
 use crate::noise::spurious::SlotMode;
 use crate::noise::spurious::MAX_LASERS;
-use crate::noise::{check_ids, Fate, NoiseStage, NoisyFrame, Slots, StageKind, LASER_MASK};
+use crate::noise::{
+    check_ids, Fate, LaserSet, NoiseStage, NoisyFrame, Slots, StageKind, LASER_MASK,
+};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
@@ -62,8 +64,8 @@ pub struct LensDamage {
     pub scatter_sigma_deg: f64,
     /// Share q of the deflected echo collected back.
     pub scatter_fraction: f64,
-    /// Bit l set: laser l damaged.
-    mask: u128,
+    /// The damaged lasers.
+    mask: LaserSet,
 }
 
 impl LensDamage {
@@ -75,12 +77,7 @@ impl LensDamage {
         scatter_sigma_deg: f64,
         scatter_fraction: f64,
     ) -> Self {
-        let mask = match &lasers {
-            Some(ids) => ids
-                .iter()
-                .fold(0u128, |m, &l| m | (1u128 << (l & LASER_MASK))),
-            None => u128::MAX,
-        };
+        let mask = lasers.as_deref().map_or(LaserSet::ALL, LaserSet::of);
         LensDamage {
             lasers,
             transmission,
@@ -93,7 +90,7 @@ impl LensDamage {
 
     #[inline]
     fn damaged(&self, laser: u8) -> bool {
-        usize::from(laser) < MAX_LASERS && self.mask & (1u128 << laser) != 0
+        self.mask.contains(laser)
     }
 }
 
@@ -270,7 +267,7 @@ impl NoiseStage for LensDamage {
         if t2 != 1.0 {
             // Power only: the byte follows by the chain's intensity rule.
             // With every laser damaged, skip reading the (large) returns for their laser.
-            let all = self.mask == u128::MAX;
+            let all = self.mask == LaserSet::ALL;
             for ((p, fate), r) in frame.power.iter_mut().zip(&frame.fate).zip(&frame.clean) {
                 if fate.is_alive() && (all || self.damaged(r.laser)) {
                     *p *= t2;

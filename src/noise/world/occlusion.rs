@@ -17,7 +17,7 @@
 
 use crate::config::reader::Section;
 use crate::error::Result;
-use crate::noise::{check_ids, Fate, NoiseStage, NoisyFrame, LASER_MASK};
+use crate::noise::{check_ids, Fate, LaserSet, NoiseStage, NoisyFrame, LASER_MASK};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 use toml::Value;
@@ -48,18 +48,16 @@ pub struct Occlusion {
     pub azimuth_deg: Option<[f64; 2]>,
     /// One-way transmission T of the obstruction (power x T^2, out and back); 0 blocks.
     pub transmission: f64,
-    /// Bit i set: laser id (or ring) i selected.
-    mask: u128,
+    /// The laser ids (or rings) selected.
+    mask: LaserSet,
 }
 
 impl Occlusion {
     /// Builds the stage; `selection` and `azimuth_deg` must already be valid.
     pub fn new(selection: Selection, azimuth_deg: Option<[f64; 2]>, transmission: f64) -> Self {
         let mask = match &selection {
-            Selection::Lasers(ids) | Selection::Rings(ids) => ids
-                .iter()
-                .fold(0u128, |m, &i| m | (1u128 << (i & LASER_MASK))),
-            Selection::Elevation(_) => 0,
+            Selection::Lasers(ids) | Selection::Rings(ids) => LaserSet::of(ids),
+            Selection::Elevation(_) => LaserSet::NONE,
         };
         Occlusion {
             selection,
@@ -72,8 +70,8 @@ impl Occlusion {
     /// True if the beam of this return passes through the obstruction.
     pub fn covers(&self, laser: u8, ring: u8, elevation: f32, azimuth: f32) -> bool {
         let beam = match &self.selection {
-            Selection::Lasers(_) => laser <= LASER_MASK && self.mask & (1u128 << laser) != 0,
-            Selection::Rings(_) => ring <= LASER_MASK && self.mask & (1u128 << ring) != 0,
+            Selection::Lasers(_) => self.mask.contains(laser),
+            Selection::Rings(_) => self.mask.contains(ring),
             Selection::Elevation([lo, hi]) => {
                 let e = f64::from(elevation);
                 e >= lo - ELEVATION_SLACK_DEG && e <= hi + ELEVATION_SLACK_DEG

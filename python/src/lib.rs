@@ -1018,6 +1018,7 @@ fn read_capture<'py>(
     keep_partial: bool,
 ) -> PyResult<(&'static str, Vec<(u32, bool, Bound<'py, PyDict>)>)> {
     use lidar_noise::frame::FrameSource;
+    use lidar_noise::sensor::frames::CaptureFrames;
     fn drain(reader: &mut impl FrameSource) -> Result<Vec<Frame>, Error> {
         let mut all = Vec::new();
         loop {
@@ -1034,26 +1035,15 @@ fn read_capture<'py>(
                 keep_partial,
                 ..Default::default()
             };
-            let e = match lidar_noise::hdl32e::frames::FrameReader::open(&path, &options) {
-                Ok(mut reader) => {
-                    return Ok((lidar_noise::sensor::HDL32E.name, drain(&mut reader)?))
+            // The reader `run` uses: the HDL-32E's, or another described sensor's.
+            match lidar_noise::sensor::frames::open_capture(&path, &options)? {
+                CaptureFrames::Hdl32e(mut r) => {
+                    Ok((lidar_noise::sensor::HDL32E.name, drain(&mut *r)?))
                 }
-                Err(e) => e,
-            };
-            // Another described sensor's packets: its own reader (`run`'s), else the
-            // HDL-32E reader's message.
-            match lidar_noise::sensor::frames::ModelFrameReader::open(
-                &path,
-                options.interpolate_azimuth,
-                options.dual,
-                options.cut_angle_deg,
-                keep_partial,
-            ) {
-                Ok(Some(mut reader)) => {
-                    let frames = drain(&mut reader)?;
-                    Ok((reader.model().name, frames))
+                CaptureFrames::Model(mut r) => {
+                    let frames = drain(&mut *r)?;
+                    Ok((r.model().name, frames))
                 }
-                _ => Err(e),
             }
         })
         .map_err(py_err)?;

@@ -370,30 +370,22 @@ impl Source {
 /// reader, or, where that refuses the capture and another described sensor's structure
 /// fits it, that sensor's reader (files only: standard input and FIFOs are read once).
 fn open_capture_source(path: &Path, plan: &Plan) -> Result<(Source, Plan)> {
+    use crate::sensor::frames::CaptureFrames;
     let nothing =
         |e: anyhow::Error| anyhow::anyhow!("{}: {e:#}; nothing was written", path.display());
-    let e = match inputs::open_capture(path, &plan.decoder) {
-        Ok(r) => {
-            let plan = plan.for_sensor(&crate::sensor::HDL32E).map_err(nothing)?;
-            return Ok((Source::Capture(Box::new(r)), plan));
-        }
-        Err(e) => e,
+    let hdl32e = |r| -> Result<(Source, Plan)> {
+        let plan = plan.for_sensor(&crate::sensor::HDL32E).map_err(nothing)?;
+        Ok((Source::Capture(r), plan))
     };
-    if inputs::is_stdin(path) || crate::capture::is_stream(path) {
-        return Err(e);
+    if inputs::is_stdin(path) {
+        return hdl32e(Box::new(inputs::open_capture(path, &plan.decoder)?));
     }
-    let d = &plan.decoder;
-    let Ok(Some(reader)) = ModelFrameReader::open(
-        path,
-        d.interpolate_azimuth,
-        d.dual,
-        d.cut_angle_deg,
-        d.keep_partial,
-    ) else {
-        return Err(e);
+    let reader = match crate::sensor::frames::open_capture(path, &plan.decoder)? {
+        CaptureFrames::Hdl32e(r) => return hdl32e(r),
+        CaptureFrames::Model(r) => r,
     };
     let model = reader.model();
-    if d.calibration != crate::calibration::Calibration::builtin() {
+    if plan.decoder.calibration != crate::calibration::Calibration::builtin() {
         anyhow::bail!(
             "{}: a {} capture: --calibration reads an HDL-32E calibration, and the {}'s \
              own table is built in; leave --calibration out",
@@ -403,7 +395,7 @@ fn open_capture_source(path: &Path, plan: &Plan) -> Result<(Source, Plan)> {
         );
     }
     let plan = plan.for_sensor(model).map_err(nothing)?;
-    Ok((Source::Model(Box::new(reader)), plan))
+    Ok((Source::Model(reader), plan))
 }
 
 /// The point-cloud format of `path`, or `None` for a capture: files that start like a

@@ -26,6 +26,40 @@ use std::collections::VecDeque;
 use std::ops::RangeInclusive;
 use std::path::Path;
 
+/// The frame reader of a capture: the HDL-32E's, or another described sensor's.
+pub enum CaptureFrames {
+    /// An HDL-32E capture (boxed: the reader is large).
+    Hdl32e(Box<crate::hdl32e::frames::FrameReader>),
+    /// A capture of another described sensor.
+    Model(Box<ModelFrameReader>),
+}
+
+/// The frame reader of the capture at `path`: the HDL-32E reader, or, where that refuses
+/// the capture and another described sensor's structure fits it, that sensor's reader
+/// (files only: a FIFO is read once); else the HDL-32E reader's error.
+pub fn open_capture(
+    path: &Path,
+    options: &crate::hdl32e::frames::DecoderOptions,
+) -> Result<CaptureFrames> {
+    let e = match crate::hdl32e::frames::FrameReader::open(path, options) {
+        Ok(r) => return Ok(CaptureFrames::Hdl32e(Box::new(r))),
+        Err(e) => e,
+    };
+    if crate::capture::is_stream(path) {
+        return Err(e);
+    }
+    match ModelFrameReader::open(
+        path,
+        options.interpolate_azimuth,
+        options.dual,
+        options.cut_angle_deg,
+        options.keep_partial,
+    ) {
+        Ok(Some(r)) => Ok(CaptureFrames::Model(Box::new(r))),
+        _ => Err(e),
+    }
+}
+
 /// Data packets read to identify the sensor.
 const SAMPLE_PACKETS: usize = 64;
 

@@ -67,35 +67,60 @@ fn the_total_is_the_frames_processed() {
 
 /// Runs `command` in a detached tmux terminal and returns every byte it wrote there
 /// (tmux's pipe-pane logs the pane from before the command starts to after it ends);
-/// None when tmux cannot run.
-fn in_tmux(command: &str, dir: &Path) -> Option<String> {
+/// None when tmux cannot start. Each call has its own server on its own socket in
+/// `dir`: with one shared socket, a new session could reach the server that the last
+/// call's kill-session was shutting down, and fail with "server exited unexpectedly"
+/// on a slow machine (seen in CI).
+fn in_tmux(command: &str, dir: &Path, call: usize) -> Option<String> {
+    let socket = dir.join(format!("tmux{call}.sock"));
     let tmux = |args: &[&str]| {
-        std::process::Command::new("tmux")
-            .args(["-L", "lidar-noise-progress-test"])
+        let out = std::process::Command::new("tmux")
+            .arg("-S")
+            .arg(&socket)
+            .args(["-f", "/dev/null"])
             .args(args)
             .current_dir(dir)
-            .status()
-            .is_ok_and(|s| s.success())
+            .output();
+        match out {
+            Ok(o) if o.status.success() => Ok(()),
+            Ok(o) => Err(format!(
+                "tmux {args:?}: {}",
+                String::from_utf8_lossy(&o.stderr).trim()
+            )),
+            Err(e) => Err(format!("tmux {args:?}: {e}")),
+        }
     };
     let session = format!("p{}", std::process::id());
-    let log = dir.join("pane.log");
-    if !tmux(&["new-session", "-d", "-s", &session, "-x", "160", "-y", "20"]) {
+    let log = dir.join(format!("pane{call}.log"));
+    if let Err(e) = tmux(&["new-session", "-d", "-s", &session, "-x", "160", "-y", "20"]) {
+        eprintln!("{e}");
         return None;
     }
-    let ok = tmux(&[
+    let ran = tmux(&[
         "pipe-pane",
         "-t",
         &session,
         &format!("cat >> '{}'", log.display()),
-    ]) && tmux(&[
-        "send-keys",
-        "-t",
-        &session,
-        &format!("{command}; tmux -L lidar-noise-progress-test wait-for -S {session}"),
-        "Enter",
-    ]) && tmux(&["wait-for", &session]);
-    tmux(&["kill-session", "-t", &session]);
-    ok.then(|| String::from_utf8_lossy(&std::fs::read(&log).unwrap_or_default()).into_owned())
+    ])
+    .and_then(|()| {
+        tmux(&[
+            "send-keys",
+            "-t",
+            &session,
+            &format!(
+                "{command}; tmux -S '{}' wait-for -S {session}",
+                socket.display()
+            ),
+            "Enter",
+        ])
+    })
+    .and_then(|()| tmux(&["wait-for", &session]));
+    let _ = tmux(&["kill-server"]);
+    // tmux started: a failure from here on is the test's, not a missing tmux.
+    if let Err(e) = ran {
+        panic!("{e}");
+    }
+    Some(String::from_utf8_lossy(&std::fs::read(&log).unwrap_or_default()).into_owned())
 }
 
 #[test]
@@ -106,15 +131,18 @@ fn the_bars_show_their_totals_in_a_terminal() {
     common::repeated(&common::crossroad(), 30, &long);
     let total = frames_total(&long, &DecoderOptions::default(), &(0..=u32::MAX)).unwrap();
     let exe = assert_cmd::cargo::cargo_bin("lidar-noise");
-    for (what, args) in [
+    for (call, (what, args)) in [
         ("run", format!("run {} -o out", long.display())),
         ("convert", format!("convert {} -o frames", long.display())),
         (
             "run --frames 2..9",
             format!("run {} --frames 2..9 -o out8", long.display()),
         ),
-    ] {
-        let Some(log) = in_tmux(&format!("'{}' {args}", exe.display()), dir.path()) else {
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let Some(log) = in_tmux(&format!("'{}' {args}", exe.display()), dir.path(), call) else {
             // `.ci/run` installs tmux and requires the check.
             assert!(
                 std::env::var_os("LIDAR_NOISE_REQUIRE_TMUX").is_none(),

@@ -120,12 +120,14 @@ impl Output for Fates<'_> {
 
     fn write_to(&self, out: &mut dyn Write) -> std::io::Result<()> {
         // Rows are built in a buffer with `itoa` for the integers (the formatting machinery
-        // through a `dyn Write` was a fifth of a dataset run); the range keeps `Display`,
-        // so the bytes are those `writeln!` wrote.
+        // through a `dyn Write` was a fifth of a dataset run) and `ryu` for the range
+        // (`Display`'s float formatting was then a sixth): the bytes are those `writeln!`
+        // wrote.
         let mut buf: Vec<u8> = Vec::with_capacity(64 * 1024);
         buf.extend_from_slice(FATES_HEADER.as_bytes());
         buf.push(b'\n');
         let mut ints = itoa::Buffer::new();
+        let mut floats = ryu::Buffer::new();
         for p in self.points {
             let point = p.point.map_or(-1, i64::from);
             buf.extend_from_slice(ints.format(point).as_bytes());
@@ -134,7 +136,7 @@ impl Output for Fates<'_> {
             buf.push(b',');
             buf.extend_from_slice(ints.format(p.cause).as_bytes());
             buf.push(b',');
-            write!(buf, "{}", p.range_clean)?;
+            push_display_f32(&mut buf, &mut floats, p.range_clean);
             buf.push(b',');
             buf.extend_from_slice(ints.format(p.ground).as_bytes());
             buf.push(b',');
@@ -149,9 +151,91 @@ impl Output for Fates<'_> {
     }
 }
 
+/// Appends `v` as `Display` writes it. ryu gives the same shortest round-trip digits,
+/// but for the ".0" it adds to whole numbers, the exponent it uses for very small and
+/// large ones, and the way it breaks an exact tie between two shortest texts (to even,
+/// where `Display` rounds up: 1.00390625 is "1.0039063", ryu's "1.0039062"). Whole
+/// numbers and floats that can tie go to `Display`.
+fn push_display_f32(buf: &mut Vec<u8>, floats: &mut ryu::Buffer, v: f32) {
+    if v.abs() < 1e6 && !may_tie(v) {
+        let s = floats.format_finite(v);
+        if !s.contains('e') {
+            buf.extend_from_slice(s.as_bytes());
+            return;
+        }
+    }
+    // Writing to a Vec cannot fail.
+    let _ = write!(buf, "{v}");
+}
+
+/// Whether `v` is whole (or zero, or not finite), or its exact decimal value has 10
+/// significant digits or fewer: only then can it lie halfway between two shortest
+/// texts, which are at most 9 digits for an f32.
+fn may_tie(v: f32) -> bool {
+    let bits = v.to_bits() & 0x7fff_ffff;
+    let biased = (bits >> 23) as i32;
+    if biased == 0 || biased == 0xff {
+        return true;
+    }
+    // v = m 2^e with m odd, so its exact decimal value is m 5^-e / 10^-e: the digits of
+    // m 5^-e, none of them trailing zeros.
+    let mantissa = u64::from((bits & 0x7f_ffff) | 0x80_0000);
+    let shift = mantissa.trailing_zeros() as i32;
+    let (m, e) = (mantissa >> shift, biased - 150 + shift);
+    if e >= 0 {
+        return true;
+    }
+    // m < 2^24 and 5^14 < 2^33: no overflow.
+    -e <= 14 && m * 5u64.pow((-e) as u32) < 10_000_000_000
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn floats_are_written_as_display_writes_them() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut floats = ryu::Buffer::new();
+        let mut check = |v: f32| {
+            let mut buf = Vec::new();
+            push_display_f32(&mut buf, &mut floats, v);
+            assert_eq!(String::from_utf8(buf).unwrap(), v.to_string(), "{v:e}");
+        };
+        for v in [
+            0.0f32,
+            -0.0,
+            1.0,
+            100.0,
+            21.574419,
+            1e-5,
+            1e-7,
+            1e16,
+            3.4e38,
+            3_136_939.2,
+            -342_417.62,
+            1.003_906_2,
+            999_999.94,
+            f32::MIN_POSITIVE,
+            1e-45,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        ] {
+            check(v);
+        }
+        // Every bit pattern is a float: 300,000 drawn at random, and as many ranges.
+        for _ in 0..300_000 {
+            check(f32::from_bits(rng.random()));
+            check(rng.random_range(0.0f32..300.0));
+            check(rng.random_range(-1e7f32..1e7));
+            // Few significant bits: where ties are.
+            let bits = rng.random_range(1..=24);
+            let m = rng.random_range(0..1u32 << bits) as f32;
+            check(m / (1u64 << rng.random_range(0..40)) as f32);
+        }
+    }
 
     #[test]
     fn fate_rows_are_those_of_the_format_string() {

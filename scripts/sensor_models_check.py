@@ -31,7 +31,15 @@ matches every point. Two more cases give both decoders a unit's full calibration
 S2 file), read by src/sensor/calibration.rs; their intensities are not compared
 (velodyne_decoder applies the focal intensity correction, lidar-noise keeps the byte).
 
-usage: sensor_models_check.py [DIR]      (run from the project root; DIR default /tmp)
+Real captures (`--captures FOLDER`): every classic pcap in FOLDER whose data packets
+are a VLP-32C's (product byte 0x28) or a VLS-128's (0xA1) is a case too, named
+real_<file stem>, its first 300 data packets decoded by both sides as above (model set
+from the product byte; for the VLS-128 the firmware timing nearest the packet spacing),
+and marked `real` in the manifest (the test's tolerances for real data). None is in the repository; the manual names the
+public ones checked and where they come from.
+
+usage: sensor_models_check.py [DIR] [--captures FOLDER]
+       (run from the project root; DIR default /tmp/sensor_models_check)
 """
 
 import os
@@ -44,7 +52,13 @@ import velodyne_decoder as vd
 import yaml
 
 root = pathlib.Path(__file__).resolve().parent.parent
-out = pathlib.Path(sys.argv[1] if len(sys.argv) > 1 else "/tmp/sensor_models_check")
+args = sys.argv[1:]
+captures = None
+if "--captures" in args:
+    k = args.index("--captures")
+    captures = pathlib.Path(args[k + 1])
+    del args[k : k + 2]
+out = pathlib.Path(args[0] if args else "/tmp/sensor_models_check")
 out.mkdir(parents=True, exist_ok=True)
 calib_dir = pathlib.Path(vd.__file__).parent / "calibrations"
 
@@ -160,6 +174,62 @@ for name, model_name, model, cal, firing_us, step, banks, dual in cases:
             )
     manifest.append(f"{name}\t{model_name}\t{calib_file}\t{'skip_first' if skip_first else ''}\n")
     print(f"velodyne_decoder {vd.__version__}: {name}: {len(points)} points -> {out / name}.csv")
+
+
+def pcap_payloads(path):
+    """The 1206-byte UDP payloads of a classic pcap (Ethernet, IPv4 without options)."""
+    data = path.read_bytes()
+    if data[:4] not in (b"\xd4\xc3\xb2\xa1", b"\x4d\x3c\xb2\xa1"):
+        return []
+    payloads, off = [], 24
+    while off + 16 <= len(data):
+        incl = int.from_bytes(data[off + 8 : off + 12], "little")
+        frame = data[off + 16 : off + 16 + incl]
+        off += 16 + incl
+        if len(frame) == 42 + 1206 and frame[42:44] == b"\xff\xee":
+            payloads.append(frame[42:])
+    return payloads
+
+
+for path in sorted(captures.glob("*.pcap")) if captures else []:
+    payloads = pcap_payloads(path)[:300]
+    if len(payloads) < 3:
+        continue
+    product, mode = payloads[0][1205], payloads[0][1204]
+    stamps = [int.from_bytes(p[1200:1204], "little") for p in payloads]
+    spacing = float(np.median([b - a for a, b in zip(stamps, stamps[1:]) if 0 < b - a < 5000]))
+    if product == 0x28:
+        model_name, model, cal = "VLP-32C", vd.Model.VLP32C, cal32
+    elif product == 0xA1:
+        fw51 = abs(spacing - 160.0) < abs(spacing - 173.4)
+        model_name, model, cal = ("VLS-128 fw5.1" if fw51 else "VLS-128"), vd.Model.VLS128, cal128
+    else:
+        print(f"{path}: product byte 0x{product:02x}: not a VLP-32C or VLS-128, left out")
+        continue
+    name = f"real_{path.stem}"
+    config = vd.Config(model=model, calibration=cal, min_range=0.0, max_range=1e4, timestamp_first_packet=True)
+    packets = [
+        vd.VelodynePacket(HOUR0 + int.from_bytes(p[1200:1204], "little") * 1e-6, np.frombuffer(p, dtype=np.uint8))
+        for p in payloads
+    ]
+    stamp, points = vd.ScanDecoder(config).decode(packets, as_pcl_structs=True)
+    base = stamp.device % 3600.0
+    skip_first = product == 0xA1
+    if skip_first:
+        points = points[points["column"] >= (1 if mode == 0x39 else 3)]
+    (out / f"{name}.bin").write_bytes(b"".join(payloads))
+    with open(out / f"{name}.csv", "w") as f:
+        f.write("x,y,z,intensity,time,ring,return_type\n")
+        for q in points:
+            f.write(
+                "%.9g,%.9g,%.9g,%d,%.9f,%d,%d\n"
+                % (q["x"], q["y"], q["z"], q["intensity"], base + float(q["time"]), q["ring"], q["return_type"])
+            )
+    manifest.append(f"{name}\t{model_name}\t\t{'real skip_first' if skip_first else 'real'}\n")
+    print(
+        f"velodyne_decoder {vd.__version__}: {name} ({path.name}, {model_name}, mode 0x{mode:02x}, "
+        f"packets {spacing:.0f} us apart): {len(points)} points -> {out / name}.csv"
+    )
 (out / "manifest.txt").write_text("".join(manifest))
 
 # HDL-64E S3 status-byte calibration: VeloView's S3 table written into the status bytes

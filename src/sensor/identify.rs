@@ -23,7 +23,7 @@
 //! dual mode), which no other model writes; its two firmware timings are told apart by
 //! the period (173.4 us a packet with the 2.89 us channel, 160 us with the 8/3 us one;
 //! a third in dual mode, where a packet holds one firing and the step per firing is
-//! measured from one packet's first block to the next's).
+//! measured from one packet's first block to the next's), the nearer one where both fit.
 
 use super::{ReturnMode, SensorModel, MODELS};
 
@@ -157,11 +157,18 @@ pub fn identify(packets: &[(&[u8], u64)]) -> Result<Identified, String> {
             && hz >= m.rotation_hz.0 * 0.9
             && hz <= m.rotation_hz.1 * 1.1
     };
-    let candidates: Vec<&'static SensorModel> = MODELS
+    let mut candidates: Vec<&'static SensorModel> = MODELS
         .iter()
         .copied()
         .filter(|m| m.layout == layout && fits(m))
         .collect();
+    // Nearest period first (stable: models of one timing keep their order). The two
+    // VLS-128 timings both fit a real capture's 166 us (tier4/nebula's test data):
+    // the nearer, 160 us, is the one velodyne_decoder also picks (below 167 us).
+    candidates.sort_by(|a, b| {
+        let off = |m: &SensorModel| (period - m.packet_period_us(mode)).abs();
+        off(a).total_cmp(&off(b))
+    });
     let product_name = match (layout.product_at, super::by_product(product)) {
         (None, _) => "none: status bytes",
         (_, Some(m)) => m.name,

@@ -3,7 +3,7 @@
 //! sweeps and run through the noise chain built for their lasers. Captures are
 //! synthesized here (`synth --sensor`); the real VLP-16 capture of ../shared is used
 //! when present. What `run` counts is checked against the returns the library's packet
-//! decoder gives packet by packet.
+//! decoder gives packet by packet, and `info` reports the same sensor and returns.
 
 mod common;
 
@@ -118,6 +118,23 @@ fn captures_of_every_other_sensor_run_with_their_own_lasers() {
             .map(|v| v.as_u64().unwrap())
             .collect();
         assert_eq!(got, want, "{name}");
+        // `info` tells the same sensor and counts the same returns.
+        let info = bin2()
+            .args(["info", "--json"])
+            .arg(&capture)
+            .assert()
+            .success();
+        let info: serde_json::Value = serde_json::from_slice(&info.get_output().stdout).unwrap();
+        assert_eq!(info["sensor"], model.name, "{name}: {info}");
+        assert_eq!(info["returns"], total, "{name}: {info}");
+        assert_eq!(info["file"], capture.display().to_string(), "{name}");
+        let text = bin2().arg("info").arg(&capture).assert().success();
+        let text = String::from_utf8_lossy(&text.get_output().stdout).into_owned();
+        assert!(
+            text.contains(&format!("sensor        {} (product id", model.name))
+                && text.contains(&format!("returns       {total} in all")),
+            "{name}: {text}"
+        );
         // The chain's slots and counts are the sensor's: laser `occluded` and only it.
         let by_laser = &s["totals"]["noise"]["dropped_by_laser"]["occluded"];
         assert_eq!(by_laser.as_array().unwrap().len(), model.lasers, "{name}");

@@ -1,8 +1,10 @@
-//! `lidar-noise info`: what a capture contains.
+//! `lidar-noise info`: what a capture contains (of an HDL-32E, or of another described
+//! sensor, told by its packets' structure as `run` tells it).
 
 use crate::cli::Global;
 use crate::hdl32e::frames::CaptureSummary;
 use crate::options::DecoderArgs;
+use crate::sensor::frames::{open_capture, CaptureFrames, ModelCaptureSummary};
 use anyhow::Result;
 use std::io::Write;
 use std::path::PathBuf;
@@ -28,7 +30,16 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     for path in &args.captures {
-        let mut reader = super::open_capture(path, &options)?;
+        let mut reader = match super::open_capture(path, &options) {
+            Ok(r) => r,
+            Err(e) => match other_sensor(path, &options) {
+                Some(summary) => {
+                    write_model(&mut out, path, &summary, args.json)?;
+                    continue;
+                }
+                None => return Err(e),
+            },
+        };
         for frame in reader.by_ref() {
             frame?;
         }
@@ -46,6 +57,81 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             write_text(&mut out, path, &summary)?;
         }
     }
+    Ok(())
+}
+
+/// The summary of a capture file of a described sensor other than the HDL-32E, read to
+/// its end; None when it is not one (standard input and FIFOs are not reopened).
+fn other_sensor(
+    path: &std::path::Path,
+    options: &crate::hdl32e::frames::DecoderOptions,
+) -> Option<ModelCaptureSummary> {
+    if super::is_stdin(path) || crate::capture::is_stream(path) {
+        return None;
+    }
+    let Ok(CaptureFrames::Model(mut reader)) = open_capture(path, options) else {
+        return None;
+    };
+    let everything = 0..=u32::MAX;
+    loop {
+        match reader.next_batch(16, &everything) {
+            Ok(batch) if batch.is_empty() => return Some(reader.summary().clone()),
+            Ok(batch) => batch.into_iter().for_each(|f| reader.recycle(f)),
+            Err(_) => return None,
+        }
+    }
+}
+
+/// Prints the summary of another sensor's capture as text or one JSON line.
+fn write_model(
+    out: &mut impl Write,
+    path: &std::path::Path,
+    s: &ModelCaptureSummary,
+    json: bool,
+) -> Result<()> {
+    let dead: Vec<u8> = (0..s.returns_per_laser.len())
+        .filter(|&l| s.returns_per_laser[l] == 0)
+        .map(|l| l as u8)
+        .collect();
+    if json {
+        let mut value = serde_json::to_value(s)?;
+        value["file"] = serde_json::Value::from(path.display().to_string());
+        value["dead_lasers"] = serde_json::to_value(&dead)?;
+        writeln!(out, "{}", serde_json::to_string(&value)?)?;
+        return Ok(());
+    }
+    writeln!(out, "{}", path.display())?;
+    let mode = s
+        .return_mode
+        .map_or_else(|| "unknown".to_string(), |m| format!("{m:?}"));
+    writeln!(
+        out,
+        "  sensor        {} (product id 0x{:02x}), return mode {mode}",
+        s.sensor, s.product_id
+    )?;
+    if !s.note.is_empty() {
+        writeln!(out, "  note          {}", s.note)?;
+    }
+    writeln!(
+        out,
+        "  packets       {} data, {} position, {} other UDP, {} bad data",
+        s.data_packets, s.position_packets, s.other_udp, s.bad_data_packets
+    )?;
+    if !dead.is_empty() {
+        writeln!(
+            out,
+            "  dead lasers   {} (no return over the capture)",
+            super::join_ids(&dead)
+        )?;
+    }
+    writeln!(out, "  packet period {:.0} us", s.packet_period_us)?;
+    writeln!(out, "  rotation      {:.2} Hz", s.rotation_hz)?;
+    writeln!(
+        out,
+        "  frames        {} full, {} partial",
+        s.full_frames, s.partial_frames
+    )?;
+    writeln!(out, "  returns       {} in all", s.returns)?;
     Ok(())
 }
 

@@ -4,6 +4,7 @@
 //! synthesized here (`synth --sensor`); the real VLP-16 capture of ../shared is used
 //! when present. What `run` counts is checked against the returns the library's packet
 //! decoder gives packet by packet, and `info` reports the same sensor and returns.
+//! `--pcap-out` writes each sensor's packets back: every kept return in its own slot.
 
 mod common;
 
@@ -162,7 +163,7 @@ fn what_a_capture_of_another_sensor_cannot_do_is_refused_before_writing() {
         "seed = 1\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 5.0\n",
     );
     let cfg = cfg.to_str().unwrap();
-    refused_scan(&capture, &["--pcap-out", "-c", cfg], "VLP-16 capture");
+    refused_scan(&capture, &["--chunk-frames", "1", "-c", cfg], "VLP-16");
     // The paper's occlusion names laser 30: the VLP-16 has 16.
     refused_scan(&capture, &[], "the VLP-16 (16 lasers)");
 }
@@ -190,4 +191,102 @@ fn the_real_vlp16_capture_runs_as_a_vlp16() {
             .len(),
         16
     );
+}
+
+/// Every return of every data packet, decoded one by one: (record, firing slot, laser,
+/// raw distance, intensity).
+fn slots(path: &Path, model: &SensorModel) -> Vec<(u32, u8, u8, u16, u8)> {
+    let dec = ModelDecoder::new(model, true, DualSelect::Both);
+    let mut reader = CaptureReader::open(path).unwrap();
+    let (mut all, mut out) = (Vec::new(), Vec::new());
+    while let Some(d) = reader.next_datagram().unwrap() {
+        if !model.layout.is_data_packet(d.payload) {
+            continue;
+        }
+        out.clear();
+        dec.decode_packet(d.payload, d.record, 0.0, &mut out)
+            .unwrap();
+        all.extend(
+            out.iter()
+                .map(|r| (d.record, r.block, r.laser, r.raw_distance, r.intensity)),
+        );
+    }
+    all
+}
+
+#[test]
+fn pcap_out_writes_every_other_sensors_packets_back() {
+    let tmp = tempfile::tempdir().unwrap();
+    let crossroad: &[&str] = &["--preset", "crossroad"];
+    let street: &[&str] = &["--random", "3"];
+    for (name, model, scene, occluded) in [
+        ("vlp16", &lidar_noise::sensor::VLP16, crossroad, 9u8),
+        (
+            "puck-hi-res",
+            &lidar_noise::sensor::PUCK_HI_RES,
+            crossroad,
+            2,
+        ),
+        ("vlp32c", &lidar_noise::sensor::VLP32C, crossroad, 31),
+        ("hdl64e s2", &lidar_noise::sensor::HDL64E_S2, street, 40),
+        ("hdl64e s3", &lidar_noise::sensor::HDL64E_S3, street, 63),
+        ("vls128", &lidar_noise::sensor::VLS128, crossroad, 100),
+        (
+            "vls128 fw5.1",
+            &lidar_noise::sensor::VLS128_FW51,
+            crossroad,
+            127,
+        ),
+    ] {
+        let capture = synth(tmp.path(), name, scene, 2);
+        let input = slots(&capture, model);
+        for (k, text) in [
+            "seed = 1\n".to_string(),
+            format!("seed = 1\n[[noise]]\ntype = \"occlusion\"\nlasers = [{occluded}]\n"),
+        ]
+        .iter()
+        .enumerate()
+        {
+            let cfg = tmp.path().join(format!("pcap-out-{k}.toml"));
+            std::fs::write(&cfg, text).unwrap();
+            let out = tmp.path().join(format!("pcap-out-{name}-{k}"));
+            bin2()
+                .args(["--quiet", "run", "--keep-partial", "--no-ply", "--pcap-out"])
+                .arg(&capture)
+                .arg("-c")
+                .arg(&cfg)
+                .arg("-o")
+                .arg(&out)
+                .assert()
+                .success();
+            let dir = std::fs::read_dir(&out)
+                .unwrap()
+                .map(|e| e.unwrap().path())
+                .find(|p| p.is_dir())
+                .unwrap();
+            let noisy = dir.join("noisy.pcap");
+            assert_eq!(
+                std::fs::metadata(&noisy).unwrap().len(),
+                std::fs::metadata(&capture).unwrap().len(),
+                "{name}"
+            );
+            // What the run kept is in the noisy capture, each return in the slot it
+            // was decoded from with its distance and intensity (no stage here changes
+            // them); what it dropped is not.
+            let written = slots(&noisy, model);
+            let s = summary(&dir);
+            assert_eq!(s["totals"]["noise"]["returns_out"], written.len(), "{name}");
+            let recorded: std::collections::HashSet<_> = input.iter().collect();
+            assert!(
+                written.iter().all(|w| recorded.contains(w)),
+                "{name}: a return the input does not hold"
+            );
+            assert!(written.len() * 10 > input.len() * 7, "{name}");
+            let on = |v: &[(u32, u8, u8, u16, u8)]| v.iter().filter(|w| w.2 == occluded).count();
+            if k == 1 {
+                assert!(on(&input) > 0, "{name}: laser {occluded} returns nothing");
+                assert_eq!(on(&written), 0, "{name}: laser {occluded} is occluded");
+            }
+        }
+    }
 }

@@ -350,7 +350,7 @@ fn a_streamed_capture_appears_only_when_finished() {
     let capture = NoisyCapture::create(
         source.clone(),
         Path::new("fixtures/empty.pcap"),
-        &calibration,
+        lidar_noise::writers::pcap::Wire::Hdl32e(&calibration),
         dir.path(),
         &[],
     )
@@ -375,7 +375,7 @@ fn a_streamed_capture_appears_only_when_finished() {
     let capture = NoisyCapture::create(
         source,
         Path::new("fixtures/empty.pcap"),
-        &calibration,
+        lidar_noise::writers::pcap::Wire::Hdl32e(&calibration),
         &out,
         &[],
     )
@@ -392,7 +392,7 @@ fn a_streamed_capture_appears_only_when_finished() {
     let err = NoisyCapture::create(
         lidar_noise::writers::pcap::Source::File(precious.clone()),
         &precious,
-        &calibration,
+        lidar_noise::writers::pcap::Wire::Hdl32e(&calibration),
         &input_dir,
         &[&precious],
     )

@@ -258,12 +258,11 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
                     let mode = reader.summary().return_mode;
                     crate::writers::pcap::check_capture(&shown, mode, plan.decoder.dual)?;
                 }
-                (true, Source::Model(reader)) => anyhow::bail!(
-                    "{shown}: --pcap-out re-encodes HDL-32E captures only so far, and this is \
-                     a {} capture; leave --pcap-out out (the noisy points are in the point \
-                     clouds written)",
-                    reader.model().name
-                ),
+                (true, Source::Model(reader)) => {
+                    let mode = reader.summary().return_mode;
+                    let mode = mode.unwrap_or(crate::sensor::ReturnMode::Strongest);
+                    crate::writers::pcap::check_capture(&shown, mode, plan.decoder.dual)?;
+                }
                 _ => {}
             }
             let target = request.output.join(name);
@@ -467,19 +466,16 @@ fn run_source(
     let mut spool = ReportSpool::new(dir, &cluster_document(source), inputs)?;
     // --pcap-out: workers patch the return slots, frames are written as they complete.
     let pcap = if plan.pcap_out {
-        use crate::writers::pcap::{NoisyCapture, Source};
+        use crate::writers::pcap::{NoisyCapture, Source, Wire};
+        let wire = match &reader {
+            self::Source::Model(r) => Wire::Model(r.model()),
+            _ => Wire::Hdl32e(&plan.decoder.calibration),
+        };
         let path = capture.unwrap_or(Path::new(DEFAULT_CAPTURE_NAME));
         let source = capture.map_or(Source::Bytes(Arc::from(DEFAULT_CAPTURE)), |p| {
             Source::File(p.to_path_buf())
         });
-        let calibration = &plan.decoder.calibration;
-        Some(NoisyCapture::create(
-            source,
-            path,
-            calibration,
-            dir,
-            inputs,
-        )?)
+        Some(NoisyCapture::create(source, path, wire, dir, inputs)?)
     } else {
         None
     };

@@ -1,6 +1,7 @@
-//! Noisy capture out (`run --pcap-out`): the input capture with every HDL-32E data packet
+//! Noisy capture out (`run --pcap-out`): the input capture with every data packet
 //! re-encoded from the noisy returns, written as `noisy.pcap` (`noisy.pcapng` for a
-//! pcapng input).
+//! pcapng input). The packets are the HDL-32E's, or those of another described sensor
+//! ([`Wire::Model`]: slots placed by the model's layout, `crate::sensor::encode`).
 //!
 //! The output is a byte-for-byte copy of the input in which only return slots (distance
 //! and intensity, 3 bytes each) of data packets change, plus the UDP checksum of a data
@@ -14,7 +15,8 @@
 //! - Every return slot of a data packet is first cleared (distance and intensity 0, "no
 //!   return"), then each return of a processed frame is written back: kept returns with
 //!   their noisy range `round((range - distance offset) / resolution)` and noisy
-//!   intensity, dropped returns as zero distance. Returns in no processed frame (the
+//!   intensity, dropped returns as zero distance (for another sensor, the slots of the
+//!   blocks the packet's return mode uses, and the range over the model's resolution). Returns in no processed frame (the
 //!   partial first and last sweeps without `--keep-partial`, frames outside `--frames`)
 //!   stay cleared, so the noisy capture holds exactly the processed frames' returns.
 //! - A kept return whose range the wire cannot hold (rounds to 0 or less, or above
@@ -48,6 +50,7 @@ use crate::hdl32e::decode::DualSelect;
 use crate::hdl32e::encode::{raw_distance, BLOCKS_PER_PACKET, BLOCK_LEN};
 use crate::hdl32e::packet::{self, ReturnMode};
 use crate::noise::{stage_rng, NoiseChain, NoisyFrame};
+use crate::sensor::SensorModel;
 use crate::writers::atomic::AtomicFile;
 use anyhow::{bail, Context, Result};
 use std::io::{BufReader, Read};
@@ -89,13 +92,24 @@ impl AsRef<[u8]> for BytesRef {
     }
 }
 
+/// The packets a capture carries: how slots are found and ranges written.
+#[derive(Clone, Copy, Debug)]
+pub enum Wire<'a> {
+    /// HDL-32E packets, ranges less the calibration's distance offsets.
+    Hdl32e(&'a Calibration),
+    /// Packets of another described sensor, with its built-in table (no offsets).
+    Model(&'static SensorModel),
+}
+
 /// One return slot to write: 12 bytes, whatever the slot held before.
 #[derive(Clone, Copy, Debug)]
 struct Patch {
     /// Capture record of the data packet.
     record: u32,
-    /// Byte offset of the slot in the payload (`block * 100 + 4 + 3 * laser`).
-    at: u16,
+    /// The return's firing slot in the packet (`Return::block`).
+    block: u8,
+    /// Its laser id.
+    laser: u8,
     /// Raw distance (never 0: cleared slots need no patch).
     raw: u16,
     /// Intensity byte.
@@ -142,6 +156,8 @@ struct Writer {
     sink: Sink,
     payload: Vec<u8>,
     chunk: Vec<u8>,
+    /// Another sensor's packets (None: the HDL-32E's).
+    model: Option<&'static SensorModel>,
 }
 
 impl Writer {
@@ -173,6 +189,28 @@ impl Writer {
         Ok(())
     }
 
+    /// Whether a payload is a data packet of the sensor (`None`: the HDL-32E).
+    fn is_data(model: Option<&SensorModel>, payload: &[u8]) -> bool {
+        match model {
+            Some(m) => m.layout.is_data_packet(payload),
+            None => packet::is_data_packet(payload),
+        }
+    }
+
+    /// Clears every return slot of a data packet (another sensor's: of the blocks its
+    /// mode uses, the mode returned); the HDL-32E's: all twelve blocks.
+    fn clear(&self, payload: &mut [u8]) -> Option<crate::sensor::ReturnMode> {
+        if let Some(m) = self.model {
+            if let Ok(mode) = crate::sensor::encode::clear_returns(m, payload) {
+                return Some(mode);
+            }
+        }
+        for b in 0..BLOCKS_PER_PACKET {
+            payload[b * BLOCK_LEN + 4..(b + 1) * BLOCK_LEN].fill(0);
+        }
+        None
+    }
+
     /// The next data packet (record, payload offset), or `None` at the end.
     fn next_data(&mut self) -> Result<Option<(u32, u64)>> {
         if let Some(h) = self.held.take() {
@@ -180,7 +218,7 @@ impl Writer {
         }
         while !self.scanned {
             match self.scanner.next_datagram()? {
-                Some(d) if packet::is_data_packet(d.payload) => {
+                Some(d) if Self::is_data(self.model, d.payload) => {
                     return Ok(Some((d.record, d.payload_offset)))
                 }
                 Some(_) => {}
@@ -207,18 +245,33 @@ impl Writer {
             self.raw.read_exact(&mut payload).with_context(|| {
                 format!("{}: cannot read the capture again", self.name.display())
             })?;
-            self.copied += PAYLOAD as u64;
-            for b in 0..BLOCKS_PER_PACKET {
-                payload[b * BLOCK_LEN + 4..(b + 1) * BLOCK_LEN].fill(0);
-            }
+            self.copied += payload.len() as u64;
+            let mode = self.clear(&mut payload);
             while next < ready.len() && ready[next].record < record {
                 next += 1;
             }
             while next < ready.len() && ready[next].record == record {
                 let p = ready[next];
-                let at = usize::from(p.at);
-                payload[at..at + 2].copy_from_slice(&p.raw.to_le_bytes());
-                payload[at + 2] = p.intensity;
+                let (block, laser) = (usize::from(p.block), usize::from(p.laser));
+                match (self.model, mode) {
+                    (Some(m), Some(mode)) => {
+                        // Slots come from this packet's own returns: always in it.
+                        let _ = crate::sensor::encode::write_slot(
+                            m,
+                            mode,
+                            &mut payload,
+                            block,
+                            laser,
+                            p.raw,
+                            p.intensity,
+                        );
+                    }
+                    _ => {
+                        let at = block * BLOCK_LEN + 4 + 3 * (laser & 31);
+                        payload[at..at + 2].copy_from_slice(&p.raw.to_le_bytes());
+                        payload[at + 2] = p.intensity;
+                    }
+                }
                 next += 1;
             }
             let written = self.sink.write_all(&payload);
@@ -243,6 +296,8 @@ pub struct NoisyCapture {
     pcapng: bool,
     offsets: [f32; 32],
     resolution: f32,
+    /// Another sensor's packets (None: the HDL-32E's).
+    model: Option<&'static SensorModel>,
     unencodable: AtomicU64,
     /// Patches of frames encoded but not yet written.
     pending: Mutex<Vec<FramePatches>>,
@@ -254,7 +309,12 @@ impl NoisyCapture {
     /// is [`NoisyCapture::into_bytes`]. For library use and tests; `run --pcap-out`
     /// streams to a file with [`NoisyCapture::create`].
     pub fn new(bytes: Vec<u8>, name: &Path, calibration: &Calibration) -> Result<Self> {
-        Self::with_sink(Source::Bytes(Arc::from(bytes)), name, calibration, |_| {
+        Self::new_for(bytes, name, Wire::Hdl32e(calibration))
+    }
+
+    /// [`NoisyCapture::new`] for a capture whose packets are `wire`'s.
+    pub fn new_for(bytes: Vec<u8>, name: &Path, wire: Wire) -> Result<Self> {
+        Self::with_sink(Source::Bytes(Arc::from(bytes)), name, wire, |_| {
             Ok(Sink::Memory(Vec::new()))
         })
     }
@@ -265,11 +325,11 @@ impl NoisyCapture {
     pub fn create(
         source: Source,
         name: &Path,
-        calibration: &Calibration,
+        wire: Wire,
         dir: &Path,
         inputs: &[&Path],
     ) -> Result<Self> {
-        Self::with_sink(source, name, calibration, |file_name| {
+        Self::with_sink(source, name, wire, |file_name| {
             Ok(Sink::File(AtomicFile::create(
                 &dir.join(file_name),
                 inputs,
@@ -280,7 +340,7 @@ impl NoisyCapture {
     fn with_sink(
         source: Source,
         name: &Path,
-        calibration: &Calibration,
+        wire: Wire,
         sink: impl FnOnce(&str) -> Result<Sink>,
     ) -> Result<Self> {
         let mut magic = [0u8; 4];
@@ -289,9 +349,15 @@ impl NoisyCapture {
         drop(head);
         let scanner = CaptureReader::from_reader(source.open(name)?, name)?;
         let mut offsets = [0.0f32; 32];
-        for (o, l) in offsets.iter_mut().zip(&calibration.lasers) {
-            *o = l.distance_offset_m as f32;
-        }
+        let (model, resolution) = match wire {
+            Wire::Hdl32e(calibration) => {
+                for (o, l) in offsets.iter_mut().zip(&calibration.lasers) {
+                    *o = l.distance_offset_m as f32;
+                }
+                (None, calibration.distance_resolution_m as f32)
+            }
+            Wire::Model(m) => (Some(m), m.distance_resolution_m as f32),
+        };
         let writer = Writer {
             name: name.to_path_buf(),
             scanner,
@@ -300,13 +366,15 @@ impl NoisyCapture {
             held: None,
             scanned: false,
             sink: sink(Self::name_for(pcapng))?,
-            payload: vec![0; PAYLOAD],
+            payload: vec![0; model.map_or(PAYLOAD, |m| m.layout.payload_bytes)],
             chunk: vec![0; 1 << 16],
+            model,
         };
         Ok(NoisyCapture {
             pcapng,
             offsets,
-            resolution: calibration.distance_resolution_m as f32,
+            resolution,
+            model,
             unencodable: AtomicU64::new(0),
             pending: Mutex::new(Vec::new()),
             writer: Mutex::new(writer),
@@ -347,14 +415,24 @@ impl NoisyCapture {
             .max();
         for (i, r) in frame.clean.iter().enumerate() {
             let block = usize::from(r.block);
-            if !frame.fate[i].is_alive() || block >= BLOCKS_PER_PACKET {
+            let fits = match self.model {
+                Some(m) => usize::from(r.laser) < m.lasers,
+                None => block < BLOCKS_PER_PACKET,
+            };
+            if !frame.fate[i].is_alive() || !fits {
                 continue;
             }
-            let laser = usize::from(r.laser) & 31;
-            match raw_distance(frame.range[i], self.offsets[laser], self.resolution) {
+            let laser = if self.model.is_some() {
+                r.laser
+            } else {
+                r.laser & 31
+            };
+            let offset = self.offsets.get(usize::from(laser)).copied().unwrap_or(0.0);
+            match raw_distance(frame.range[i], offset, self.resolution) {
                 Some(raw) => patches.push(Patch {
                     record: r.packet,
-                    at: (block * BLOCK_LEN + 4 + 3 * laser) as u16,
+                    block: r.block,
+                    laser,
                     raw,
                     intensity: intensity.map_or(r.intensity, |v| v[i]),
                 }),

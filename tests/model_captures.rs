@@ -290,3 +290,62 @@ fn pcap_out_writes_every_other_sensors_packets_back() {
         }
     }
 }
+
+#[test]
+fn a_capture_of_another_sensor_on_standard_input_runs_as_the_file_does() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = synth(tmp.path(), "vlp32c", &["--preset", "crossroad"], 2);
+    let cfg = config(
+        tmp.path(),
+        "seed = 4\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 8.0\n",
+    );
+    let run = |input: &str, out: &Path, stdin: Option<&Path>| {
+        let mut cmd = bin2();
+        cmd.args(["--quiet", "run", "--keep-partial", input, "-c"])
+            .arg(&cfg)
+            .arg("-o")
+            .arg(out);
+        if let Some(p) = stdin {
+            cmd.pipe_stdin(p).unwrap();
+        }
+        cmd.assert().success();
+    };
+    let (a, b) = (tmp.path().join("file"), tmp.path().join("stdin"));
+    run(capture.to_str().unwrap(), &a, None);
+    run("-", &b, Some(&capture));
+    let (a, b) = (a.join("crossroad"), b.join("stdin"));
+    assert_eq!(summary(&b)["capture_summary"]["sensor"], "VLP-32C");
+    assert_eq!(
+        summary(&a)["totals"]["noise"],
+        summary(&b)["totals"]["noise"]
+    );
+    let frames: Vec<_> = std::fs::read_dir(&a)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .filter(|n| n.to_string_lossy().ends_with(".ply"))
+        .collect();
+    assert!(frames.len() >= 2, "{frames:?}");
+    // The same points, byte for byte (the headers name the source).
+    let body = |p: PathBuf| {
+        let bytes = std::fs::read(p).unwrap();
+        let end = b"end_header\n";
+        let at = bytes.windows(end.len()).position(|w| w == end).unwrap();
+        bytes[at..].to_vec()
+    };
+    for f in frames {
+        assert!(body(a.join(&f)) == body(b.join(&f)), "{f:?} differs");
+    }
+    // `info -` reads it too.
+    let info = bin2()
+        .args(["info", "--json", "-"])
+        .pipe_stdin(&capture)
+        .unwrap()
+        .assert()
+        .success();
+    let info: serde_json::Value = serde_json::from_slice(&info.get_output().stdout).unwrap();
+    assert_eq!(info["sensor"], "VLP-32C");
+    assert_eq!(
+        info["returns"],
+        summary(&a)["totals"]["noise"]["returns_in"]
+    );
+}

@@ -13,6 +13,7 @@ use serde::Serialize;
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use link::Parsed;
 
@@ -182,6 +183,16 @@ struct Found {
     dst_port: u16,
     start: usize,
     len: usize,
+}
+
+/// Shared capture bytes as a `Cursor`'s buffer (a capture held in memory, read more
+/// than once).
+pub struct ArcBytes(pub Arc<[u8]>);
+
+impl AsRef<[u8]> for ArcBytes {
+    fn as_ref(&self) -> &[u8] {
+        &self.0
+    }
 }
 
 impl CaptureReader {

@@ -4,7 +4,7 @@
 use crate::cli::Global;
 use crate::hdl32e::frames::CaptureSummary;
 use crate::options::DecoderArgs;
-use crate::sensor::frames::{open_capture, CaptureFrames, ModelCaptureSummary};
+use crate::sensor::frames::{CaptureFrames, ModelCaptureSummary};
 use anyhow::Result;
 use std::io::Write;
 use std::path::PathBuf;
@@ -30,15 +30,20 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     for path in &args.captures {
-        let mut reader = match super::open_capture(path, &options) {
-            Ok(r) => r,
-            Err(e) => match other_sensor(path, &options) {
-                Some(summary) => {
-                    write_model(&mut out, path, &summary, args.json)?;
-                    continue;
+        let mut reader = match crate::engine::inputs::open_any_capture(path, &options)? {
+            CaptureFrames::Hdl32e(r) => r,
+            CaptureFrames::Model(mut r) => {
+                let everything = 0..=u32::MAX;
+                loop {
+                    let batch = r.next_batch(16, &everything)?;
+                    if batch.is_empty() {
+                        break;
+                    }
+                    batch.into_iter().for_each(|f| r.recycle(f));
                 }
-                None => return Err(e),
-            },
+                write_model(&mut out, path, r.summary(), args.json)?;
+                continue;
+            }
         };
         for frame in reader.by_ref() {
             frame?;
@@ -58,28 +63,6 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// The summary of a capture file of a described sensor other than the HDL-32E, read to
-/// its end; None when it is not one (standard input and FIFOs are not reopened).
-fn other_sensor(
-    path: &std::path::Path,
-    options: &crate::hdl32e::frames::DecoderOptions,
-) -> Option<ModelCaptureSummary> {
-    if super::is_stdin(path) || crate::capture::is_stream(path) {
-        return None;
-    }
-    let Ok(CaptureFrames::Model(mut reader)) = open_capture(path, options) else {
-        return None;
-    };
-    let everything = 0..=u32::MAX;
-    loop {
-        match reader.next_batch(16, &everything) {
-            Ok(batch) if batch.is_empty() => return Some(reader.summary().clone()),
-            Ok(batch) => batch.into_iter().for_each(|f| reader.recycle(f)),
-            Err(_) => return None,
-        }
-    }
 }
 
 /// Prints the summary of another sensor's capture as text or one JSON line.

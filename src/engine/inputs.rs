@@ -203,6 +203,26 @@ pub fn open_capture(
     )?)
 }
 
+/// The frame reader of a capture file or of standard input (`-`, held in memory as
+/// [`open_capture`] holds it): the HDL-32E's, or another described sensor's where that
+/// refuses the capture and the sensor's structure fits it (a FIFO is read once: only the
+/// HDL-32E's).
+pub fn open_any_capture(
+    path: &Path,
+    options: &crate::hdl32e::frames::DecoderOptions,
+) -> anyhow::Result<crate::sensor::frames::CaptureFrames> {
+    if !is_stdin(path) {
+        return Ok(crate::sensor::frames::open_capture(path, options)?);
+    }
+    let name = Path::new(STDIN_NAME);
+    let bytes = crate::capture::read_stream(std::io::stdin().lock(), name)?;
+    Ok(crate::sensor::frames::open_capture_bytes(
+        std::sync::Arc::from(bytes),
+        name,
+        options,
+    )?)
+}
+
 /// How messages name standard input.
 pub const STDIN_NAME: &str = "<stdin>";
 

@@ -367,7 +367,7 @@ impl Source {
 
 /// The frame source of the capture at `path` and the plan for its sensor: the HDL-32E
 /// reader, or, where that refuses the capture and another described sensor's structure
-/// fits it, that sensor's reader (files only: standard input and FIFOs are read once).
+/// fits it, that sensor's reader (files and standard input: a FIFO is read once).
 fn open_capture_source(path: &Path, plan: &Plan) -> Result<(Source, Plan)> {
     use crate::sensor::frames::CaptureFrames;
     let nothing =
@@ -376,10 +376,7 @@ fn open_capture_source(path: &Path, plan: &Plan) -> Result<(Source, Plan)> {
         let plan = plan.for_sensor(&crate::sensor::HDL32E).map_err(nothing)?;
         Ok((Source::Capture(r), plan))
     };
-    if inputs::is_stdin(path) {
-        return hdl32e(Box::new(inputs::open_capture(path, &plan.decoder)?));
-    }
-    let reader = match crate::sensor::frames::open_capture(path, &plan.decoder)? {
+    let reader = match inputs::open_any_capture(path, &plan.decoder)? {
         CaptureFrames::Hdl32e(r) => return hdl32e(r),
         CaptureFrames::Model(r) => r,
     };

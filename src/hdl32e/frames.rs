@@ -354,14 +354,7 @@ pub(super) fn identify_in(mut capture: CaptureReader) -> Result<Identity> {
     })
 }
 
-/// Shared bytes usable as a `Cursor` source.
-pub(super) struct ArcBytes(pub(super) Arc<[u8]>);
-
-impl AsRef<[u8]> for ArcBytes {
-    fn as_ref(&self) -> &[u8] {
-        &self.0
-    }
-}
+pub(super) use crate::capture::ArcBytes;
 
 impl FrameReader {
     /// Opens a capture, refusing it unless it is an HDL-32E capture. A FIFO (or device)

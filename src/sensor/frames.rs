@@ -60,6 +60,31 @@ pub fn open_capture(
     }
 }
 
+/// [`open_capture`] of a capture held in memory (standard input, read to its end), named
+/// `name` in messages.
+pub fn open_capture_bytes(
+    bytes: std::sync::Arc<[u8]>,
+    name: &Path,
+    options: &crate::hdl32e::frames::DecoderOptions,
+) -> Result<CaptureFrames> {
+    use crate::capture::ArcBytes;
+    let e = match crate::hdl32e::frames::FrameReader::from_bytes(bytes.clone(), name, options) {
+        Ok(r) => return Ok(CaptureFrames::Hdl32e(Box::new(r))),
+        Err(e) => e,
+    };
+    let open = || CaptureReader::from_reader(std::io::Cursor::new(ArcBytes(bytes.clone())), name);
+    match ModelFrameReader::open_with(
+        open,
+        options.interpolate_azimuth,
+        options.dual,
+        options.cut_angle_deg,
+        options.keep_partial,
+    ) {
+        Ok(Some(r)) => Ok(CaptureFrames::Model(Box::new(r))),
+        _ => Err(e),
+    }
+}
+
 /// Data packets read to identify the sensor.
 const SAMPLE_PACKETS: usize = 64;
 

@@ -43,7 +43,7 @@
 //! of frames in flight and one payload are held, never the capture.
 
 use crate::calibration::Calibration;
-use crate::capture::CaptureReader;
+use crate::capture::{ArcBytes, CaptureReader};
 use crate::error::Error;
 use crate::frame::{Return, ReturnKind};
 use crate::hdl32e::decode::DualSelect;
@@ -78,17 +78,8 @@ impl Source {
                 1 << 18,
                 std::fs::File::open(path).map_err(|e| Error::io(name, e))?,
             )),
-            Source::Bytes(bytes) => Box::new(std::io::Cursor::new(BytesRef(Arc::clone(bytes)))),
+            Source::Bytes(bytes) => Box::new(std::io::Cursor::new(ArcBytes(Arc::clone(bytes)))),
         })
-    }
-}
-
-/// `Arc<[u8]>` as a cursor's buffer.
-struct BytesRef(Arc<[u8]>);
-
-impl AsRef<[u8]> for BytesRef {
-    fn as_ref(&self) -> &[u8] {
-        &self.0
     }
 }
 

@@ -1063,8 +1063,9 @@ fn status_byte_calibration_matches_velodyne_decoder() {
     eprintln!("status-byte calibration: 64 lasers equal to velodyne_decoder's within {max:e}");
 }
 
-#[test]
-fn hdl64e_s2_status_bytes_give_the_units_calibration() {
+/// The status bytes (type, value) of an HDL-64E S2 stream carrying one calibration
+/// block, started mid-block and ending with its last byte.
+fn s2_status_stream() -> Vec<(u8, u8)> {
     // An S2 block (no `W` type; the check is the block length, 1820): "UNIT#", two noise
     // thresholds, 64 records of 28 bytes, 21-byte tail. Laser k's record: vertical
     // correction -k * 0.25 deg, rotational 0.01 k deg; laser 5 also 1.234 m far distance
@@ -1103,6 +1104,12 @@ fn hdl64e_s2_status_bytes_give_the_units_calibration() {
             }
         }
     }
+    status
+}
+
+#[test]
+fn hdl64e_s2_status_bytes_give_the_units_calibration() {
+    let status = s2_status_stream();
     let cal = ModelCalibration::from_status_bytes(status.iter().copied(), &HDL64E_S2).unwrap();
     for (k, l) in cal.lasers.iter().enumerate() {
         assert!(
@@ -1288,4 +1295,98 @@ fn vls128_packets_decode_by_bank_with_the_firing_table() {
         e.contains("block 6") && e.contains("0xFFCC") && e.contains("600"),
         "{e}"
     );
+}
+
+/// An HDL-64E S2 capture (single return, 288 us a packet, 0.17 deg a firing) whose
+/// packets carry `status` in bytes 1204-1205 and a return on every channel.
+fn s2_capture(path: &Path, status: &[(u8, u8)]) {
+    let mut w = lidar_noise::capture::writer::PcapWriter::new(std::fs::File::create(path).unwrap())
+        .unwrap();
+    for (i, &(kind, value)) in status.iter().enumerate() {
+        let ts = 500_000 + 288 * i as u32;
+        let p = packet(
+            |b| b % 2 == 1,
+            |b| (((i * 6 + b / 2) as u32 * 17) % 36_000) as u16,
+            ts,
+            [kind, value],
+            |b, c| (2000 + (10 * c + b) as u16, 40),
+        );
+        w.write_udp(1_700_000_000_000_000 + u64::from(ts), 2368, 2368, &p)
+            .unwrap();
+    }
+    w.into_inner().unwrap();
+}
+
+#[test]
+fn an_hdl64e_capture_is_decoded_with_the_calibration_of_its_status_bytes() {
+    use lidar_noise::sensor::frames::ModelFrameReader;
+    let tmp = tempfile::tempdir().unwrap();
+    let status = s2_status_stream();
+    let path = tmp.path().join("s2.pcap");
+    s2_capture(&path, &status);
+    let open = |p: &Path| {
+        ModelFrameReader::open(p, true, DualSelect::Both, 0.0, true)
+            .unwrap()
+            .expect("an HDL-64E capture")
+    };
+    let mut reader = open(&path);
+    assert_eq!(reader.model().name, HDL64E_S2.name);
+    assert_eq!(reader.summary().calibration, "the packets' status bytes");
+    let mut frames = Vec::new();
+    loop {
+        let batch = reader.next_batch(8, &(0..=u32::MAX)).unwrap();
+        if batch.is_empty() {
+            break;
+        }
+        frames.extend(batch);
+    }
+    // Every return where the unit's calibration puts it, packet by packet.
+    let cal = ModelCalibration::from_status_bytes(status.iter().copied(), &HDL64E_S2).unwrap();
+    let dec = ModelDecoder::new(&HDL64E_S2, true, DualSelect::Both)
+        .with_calibration(cal)
+        .unwrap();
+    let mut want = std::collections::HashMap::new();
+    let mut capture = CaptureReader::open(&path).unwrap();
+    let (mut out, mut previous): (Vec<Return>, Option<Vec<u8>>) = (Vec::new(), None);
+    while let Some(d) = capture.next_datagram().unwrap() {
+        out.clear();
+        dec.decode_packet_after(d.payload, previous.as_deref(), d.record, 0.0, &mut out)
+            .unwrap();
+        for r in &out {
+            want.insert((r.packet, r.block, r.laser), [r.x, r.y, r.z]);
+        }
+        previous = Some(d.payload.to_vec());
+    }
+    let got: Vec<&Return> = frames.iter().flat_map(|f| &f.returns).collect();
+    assert_eq!(got.len(), want.len());
+    for r in got {
+        assert_eq!(
+            want[&(r.packet, r.block, r.laser)],
+            [r.x, r.y, r.z],
+            "packet {} laser {}",
+            r.packet,
+            r.laser
+        );
+    }
+    // Laser 5 at its calibrated -1.25 deg, not the built-in table's.
+    let l5 = frames[1].returns.iter().find(|r| r.laser == 5).unwrap();
+    assert!(
+        (f64::from(l5.elevation) + 1.25).abs() < 1e-4,
+        "{}",
+        l5.elevation
+    );
+    assert!((HDL64E_S2.elevation_deg[5] + 1.25).abs() > 0.5);
+    // Without a block whose check holds: the built-in table.
+    let plain = tmp.path().join("plain.pcap");
+    let broken: Vec<(u8, u8)> = status.iter().map(|&(k, v)| (k, v ^ 1)).collect();
+    s2_capture(&plain, &broken);
+    assert_eq!(open(&plain).summary().calibration, "built-in");
+    // `run` and `info` say which calibration decoded the capture.
+    let info = common::bin2()
+        .args(["info", "--json"])
+        .arg(&path)
+        .assert()
+        .success();
+    let info: serde_json::Value = serde_json::from_slice(&info.get_output().stdout).unwrap();
+    assert_eq!(info["calibration"], "the packets' status bytes");
 }

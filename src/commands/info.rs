@@ -107,6 +107,7 @@ fn write_model(
             super::join_ids(&dead)
         )?;
     }
+    writeln!(out, "  calibration   {}", s.calibration)?;
     writeln!(out, "  packet period {:.0} us", s.packet_period_us)?;
     writeln!(out, "  rotation      {:.2} Hz", s.rotation_hz)?;
     writeln!(

@@ -85,6 +85,35 @@ pub fn open_capture_bytes(
     }
 }
 
+/// Data packets searched for an HDL-64E's calibration in their status bytes: three
+/// cycles of the status block (4,160 packets each), so one that starts anywhere in the
+/// first is whole within them, while a capture without one is not read to its end.
+const STATUS_PACKETS: usize = 3 * 4160;
+
+/// The unit's calibration from the status bytes of an HDL-64E capture (bytes 1204 and
+/// 1205 of its first [`STATUS_PACKETS`] data packets), as velodyne_decoder reads it;
+/// None for other sensors and where no block's check holds (the built-in table is then
+/// used).
+fn status_calibration(
+    open: &impl Fn() -> Result<CaptureReader>,
+    model: &'static SensorModel,
+) -> Result<Option<super::calibration::ModelCalibration>> {
+    if model.lasers != 64 || model.layout.product_at.is_some() {
+        return Ok(None);
+    }
+    let mut reader = open()?;
+    let mut status = Vec::new();
+    while let Some(d) = reader.next_datagram()? {
+        if model.layout.is_data_packet(d.payload) {
+            status.push((d.payload[1204], d.payload[1205]));
+            if status.len() >= STATUS_PACKETS {
+                break;
+            }
+        }
+    }
+    Ok(super::calibration::ModelCalibration::from_status_bytes(status, model).ok())
+}
+
 /// Data packets read to identify the sensor.
 const SAMPLE_PACKETS: usize = 64;
 
@@ -124,6 +153,9 @@ pub struct ModelCaptureSummary {
     pub returns_per_laser: Vec<u64>,
     /// Why the product byte was overruled, empty when it was not.
     pub note: String,
+    /// The calibration decoded with: "built-in" (the model's table), or the unit's own
+    /// read from an HDL-64E's status bytes.
+    pub calibration: String,
 }
 
 /// Iterator over the frames of a capture of a described sensor other than the HDL-32E.
@@ -172,16 +204,29 @@ impl ModelFrameReader {
             }
         }
         let refs: Vec<(&[u8], u64)> = sample.iter().map(|(p, t)| (p.as_slice(), *t)).collect();
-        let found: Identified =
-            identify(&refs).map_err(|message| Error::Capture { path, message })?;
+        let found: Identified = identify(&refs).map_err(|message| Error::Capture {
+            path: path.clone(),
+            message,
+        })?;
         if found.model.name == super::HDL32E.name {
             return Ok(None);
         }
         let model = found.model;
         let cut = ((cut_angle_deg.rem_euclid(360.0) * 100.0).round() as u32) % 36000;
+        let mut decoder = ModelDecoder::new(model, interpolate, dual);
+        let mut calibration = "built-in".to_string();
+        if let Some(cal) = status_calibration(&open, model)? {
+            calibration = cal.source.clone();
+            decoder = decoder
+                .with_calibration(cal)
+                .map_err(|message| Error::Capture {
+                    path: path.clone(),
+                    message,
+                })?;
+        }
         Ok(Some(ModelFrameReader {
             capture: open()?,
-            decoder: ModelDecoder::new(model, interpolate, dual),
+            decoder,
             model,
             keep_partial,
             cut,
@@ -206,6 +251,7 @@ impl ModelFrameReader {
                 rotation_hz: found.rotation_hz,
                 returns_per_laser: vec![0; model.lasers],
                 note: found.note,
+                calibration,
                 ..Default::default()
             },
         }))

@@ -349,3 +349,81 @@ fn a_capture_of_another_sensor_on_standard_input_runs_as_the_file_does() {
         summary(&a)["totals"]["noise"]["returns_in"]
     );
 }
+
+#[test]
+fn sweeps_run_on_captures_of_other_sensors_with_their_labels() {
+    let tmp = tempfile::tempdir().unwrap();
+    let crossroad: &[&str] = &["--preset", "crossroad"];
+    let street: &[&str] = &["--random", "3"];
+    for (name, scene) in [
+        ("vlp16", crossroad),
+        ("puck-hi-res", crossroad),
+        ("vlp32c", crossroad),
+        ("hdl64e s3", street),
+        ("vls128", crossroad),
+    ] {
+        let capture = synth(tmp.path(), name, scene, 3);
+        let out = tmp.path().join(format!("sweep-{name}"));
+        bin2()
+            .args(["--quiet", "sweep"])
+            .arg(&capture)
+            .args(["-c", "configs/rain.toml", "--vary", "rain.rate_mm_h=0,8"])
+            .args(["--seeds", "1..2", "-o"])
+            .arg(&out)
+            .assert()
+            .success();
+        // The synthesizer's labels line up with the sweeps the reader cuts (else the
+        // sweep refuses them), and every object of the scene is counted.
+        let text = std::fs::read_to_string(out.join("aggregate.csv")).unwrap();
+        let mut lines = text.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let col = |n: &str| header.iter().position(|h| *h == n).unwrap();
+        let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+        assert_eq!(rows.len(), 2, "{name}: {text}");
+        for r in &rows {
+            let objects: f64 = r[col("objects_mean")].parse().unwrap();
+            let detected: f64 = r[col("detected_share_mean")].parse().unwrap();
+            assert!(objects >= 3.0, "{name}: {objects} objects");
+            assert!(detected > 0.0, "{name}: nothing detected");
+        }
+    }
+    // What does not fit the sensor is refused before anything is written.
+    let capture = synth(tmp.path(), "vlp16", crossroad, 1);
+    let cfg = config(
+        tmp.path(),
+        "seed = 1\n[[noise]]\ntype = \"occlusion\"\nlasers = [20]\n",
+    );
+    let out = tmp.path().join("refused");
+    let err = bin2()
+        .args(["--quiet", "sweep"])
+        .arg(&capture)
+        .arg("-c")
+        .arg(&cfg)
+        .args(["--seeds", "1..2", "-o"])
+        .arg(&out)
+        .assert()
+        .failure();
+    let err = String::from_utf8_lossy(&err.get_output().stderr).into_owned();
+    assert!(err.contains("the VLP-16 (16 lasers)"), "{err}");
+    let err = bin2()
+        .args(["--quiet", "sweep"])
+        .arg(&capture)
+        .args([
+            "-c",
+            "configs/rain.toml",
+            "--chunk-frames",
+            "1",
+            "--seeds",
+            "1",
+            "-o",
+        ])
+        .arg(&out)
+        .assert()
+        .failure();
+    let err = String::from_utf8_lossy(&err.get_output().stderr).into_owned();
+    assert!(
+        err.contains("--chunk-frames") && err.contains("VLP-16"),
+        "{err}"
+    );
+    assert!(!out.join("aggregate.csv").exists());
+}

@@ -392,11 +392,11 @@ fn sweep_into(
         &settings.frames,
         args.figure_frame,
     )? {
-        Some(frame) => Some(BirdsEye {
+        Some((frame, lasers)) => Some(BirdsEye {
             capture: first.name.clone(),
             frame: frame.index,
             seed,
-            panels: birdseye_panels(&settings.base, seed, &frame)?,
+            panels: birdseye_panels(&settings.base, seed, &frame, lasers)?,
             extent_m: args.figure_extent,
         }),
         None => {

@@ -390,8 +390,8 @@ impl ModelFrameReader {
                     .iter()
                     .position(|r| seq(r) != s)
                     .unwrap_or(scratch.len() - start);
-            let (azimuth, step) = firings.get(usize::from(s)).copied().unwrap_or((0, 0));
-            self.on_firing(azimuth, step);
+            let (azimuth, within, step) = firings.get(usize::from(s)).copied().unwrap_or_default();
+            self.on_firing(azimuth, within, step);
             let b = self
                 .building
                 .as_mut()
@@ -408,9 +408,9 @@ impl ModelFrameReader {
         self.scratch = scratch;
     }
 
-    /// Azimuth (centidegrees) and step to the next firing of every firing sequence of a
-    /// packet, in order.
-    fn firing_azimuths(&self, payload: &[u8], mode: ReturnMode) -> Vec<(u16, u32)> {
+    /// Every firing sequence of a packet, in order: its block's azimuth (centidegrees),
+    /// how far past it the sequence fires, and the step to the next sequence.
+    fn firing_azimuths(&self, payload: &[u8], mode: ReturnMode) -> Vec<(u16, u32, u32)> {
         let m = self.model;
         let lay = &m.layout;
         let n = lay.blocks / m.blocks_per_firing(mode);
@@ -438,16 +438,21 @@ impl ModelFrameReader {
             let s = step(f);
             for k in 0..per {
                 let within = (s as usize * k / per) as u32;
-                out.push((((a + within) % 36000) as u16, s / per as u32));
+                out.push((a as u16, within, s / per as u32));
             }
         }
         out
     }
 
-    fn on_firing(&mut self, azimuth: u16, step: u32) {
-        let rel = (u32::from(azimuth) + 36000 - self.cut) % 36000;
-        let wrapped = self.prev_rel.is_some_and(|p| rel + 18000 < p);
-        self.prev_rel = Some(rel);
+    /// A firing sequence of the block at `azimuth`, `within` past it. The block's azimuth
+    /// decides the sweep, as the HDL-32E reader and the synthesizer's labels decide it:
+    /// a VLP-16 block just before the cut is wholly the sweep's, though its second
+    /// sequence fires past the cut.
+    fn on_firing(&mut self, azimuth: u16, within: u32, step: u32) {
+        let block_rel = (u32::from(azimuth) + 36000 - self.cut) % 36000;
+        let wrapped = self.prev_rel.is_some_and(|p| block_rel + 18000 < p);
+        self.prev_rel = Some(block_rel);
+        let rel = block_rel + within;
         if wrapped {
             if let Some(b) = self.building.take() {
                 self.finish_frame(b, false);

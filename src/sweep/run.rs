@@ -14,9 +14,12 @@ use super::plan::{BaseConfig, Cell, Vary};
 use crate::config::Config;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
+use crate::frame::FrameSource;
 use crate::hdl32e::frames::{DecoderOptions, FrameReader};
 use crate::hdl32e::index::FrameSeek;
 use crate::pipeline::{FrameResult, Pipeline};
+use crate::sensor::frames::CaptureFrames;
+use crate::sensor::SensorModel;
 use crate::synth::labels::{check_frame, read_labels_file, LabelRow, LabelRows};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -341,6 +344,7 @@ pub fn run_mode(
         chunks::check_parts(&dir, s.chunk_frames)?;
         let protected = protected_paths(capture);
         let protected: Vec<&Path> = protected.iter().map(PathBuf::as_path).collect();
+        let sensor = capture_sensor(s, capture)?;
         // Cells are keyed on the content of every input, not on names and sizes.
         let content = content_key(s, capture)?;
         // With --chunk-frames, the frames are counted first (decoding only) so that the
@@ -382,11 +386,19 @@ pub fn run_mode(
                 continue;
             }
             let config = s.base.cell_config(&s.varies, &cell)?;
-            // A sweep runs captures, decoded for the HDL-32E: per-laser options must fit
-            // its lasers (`occlusion` lasers = [40] would select nothing).
-            crate::noise::NoiseChain::new(&config)
-                .for_lasers(crate::sensor::HDL32E.lasers)
-                .map_err(|e| Error::Invalid(format!("{}: {e}", cell.file_name(&s.varies))))?;
+            // Per-laser options must fit the capture's sensor (`occlusion` lasers = [40]
+            // would select nothing on an HDL-32E).
+            let pipeline = Pipeline::new(&config)
+                .for_lasers(sensor.lasers)
+                .map_err(|e| {
+                    Error::Invalid(format!(
+                        "{}: {}: the {} ({} lasers): {e}",
+                        capture.path.display(),
+                        cell.file_name(&s.varies),
+                        sensor.name,
+                        sensor.lasers
+                    ))
+                })?;
             let mut baseline = config.clone();
             baseline.noise.clear();
             // Without noise stages only RANSAC ground draws random numbers: otherwise the
@@ -435,9 +447,10 @@ pub fn run_mode(
                 pending.entry(0).or_default().push(Pending {
                     path,
                     settings,
-                    pipeline: Pipeline::new(&config),
+                    pipeline,
                     baseline_key,
                     baseline,
+                    lasers: sensor.lasers,
                     min_points: config.cluster.min_points,
                 });
                 continue;
@@ -470,9 +483,10 @@ pub fn run_mode(
                     pending.entry(j).or_default().push(Pending {
                         path: part.clone(),
                         settings: want.1,
-                        pipeline: Pipeline::new(&config),
+                        pipeline: pipeline.clone(),
                         baseline_key: baseline_key.clone(),
                         baseline: baseline.clone(),
+                        lasers: sensor.lasers,
                         min_points: config.cluster.min_points,
                     });
                 }
@@ -647,6 +661,8 @@ struct Pending {
     settings: serde_json::Value,
     pipeline: Pipeline,
     baseline: Config,
+    /// The capture's sensor's lasers (the baseline's chain is built for them).
+    lasers: usize,
     baseline_key: String,
     min_points: usize,
 }
@@ -694,8 +710,63 @@ pub fn hash_file(path: &Path) -> Result<String> {
 /// Frames of the capture in the sweep's range: the number every cell file must hold
 /// (counted from the frame index, without decoding returns).
 fn count_frames(s: &SweepSettings, capture: &CaptureInput) -> Result<usize> {
-    let scan = crate::hdl32e::index::FrameScan::open(&capture.path, &s.decoder)?;
-    Ok(chunks::chunk_plan(scan, &s.frames, s.decoder.keep_partial, u32::MAX)?.2)
+    match crate::sensor::frames::open_capture(&capture.path, &s.decoder)? {
+        CaptureFrames::Hdl32e(_) => {
+            let scan = crate::hdl32e::index::FrameScan::open(&capture.path, &s.decoder)?;
+            Ok(chunks::chunk_plan(scan, &s.frames, s.decoder.keep_partial, u32::MAX)?.2)
+        }
+        // Another sensor's capture has no frame index: its frames are decoded and counted.
+        CaptureFrames::Model(mut r) => {
+            let mut n = 0;
+            loop {
+                let batch = r.next_batch(16, &s.frames)?;
+                if batch.is_empty() {
+                    return Ok(n);
+                }
+                n += batch.len();
+                batch.into_iter().for_each(|f| r.recycle(f));
+            }
+        }
+    }
+}
+
+/// The sensor of a sweep's capture: the HDL-32E, or another described sensor told by its
+/// packets' structure; an error for what a sweep of another sensor's capture cannot do
+/// yet (`--chunk-frames`, whose frame index is the HDL-32E's; `--calibration`, an
+/// HDL-32E file).
+fn capture_sensor(s: &SweepSettings, capture: &CaptureInput) -> Result<&'static SensorModel> {
+    let model = match crate::sensor::frames::open_capture(&capture.path, &s.decoder)? {
+        CaptureFrames::Hdl32e(_) => return Ok(&crate::sensor::HDL32E),
+        CaptureFrames::Model(r) => r.model(),
+    };
+    let refuse = |what: &str| {
+        Err(Error::Invalid(format!(
+            "{}: a {} capture: {what}; nothing was written",
+            capture.path.display(),
+            model.name
+        )))
+    };
+    if s.chunk_frames.is_some() {
+        return refuse(
+            "--chunk-frames cuts captures by the HDL-32E's frame index; leave it out (the \
+             capture is swept whole)",
+        );
+    }
+    if s.decoder.calibration != crate::calibration::Calibration::builtin() {
+        return refuse(
+            "--calibration reads an HDL-32E calibration, and the sensor's own table is \
+             built in; leave --calibration out",
+        );
+    }
+    Ok(model)
+}
+
+/// The frames of a capture from the start, with its sensor's reader.
+fn open_frames(path: &Path, decoder: &DecoderOptions) -> Result<Box<dyn FrameSource>> {
+    Ok(match crate::sensor::frames::open_capture(path, decoder)? {
+        CaptureFrames::Hdl32e(r) => r,
+        CaptureFrames::Model(r) => r,
+    })
 }
 
 fn cell_settings(
@@ -1053,7 +1124,9 @@ fn compute_chunk(
             Some(i) => i,
             None => {
                 keys.push(&c.baseline_key);
-                baselines.push(Pipeline::new(&c.baseline));
+                // A baseline has no noise stage: nothing in it can misfit the lasers.
+                let p = Pipeline::new(&c.baseline);
+                baselines.push(p.for_lasers(c.lasers).unwrap_or(p));
                 keys.len() - 1
             }
         };
@@ -1061,9 +1134,9 @@ fn compute_chunk(
     }
     let empty = BTreeMap::new();
     let classes = labels.map_or(&empty, |l| &l.classes);
-    let mut reader = match seek {
-        Some(at) => FrameReader::open_at(&capture.path, &s.decoder, at)?,
-        None => FrameReader::open(&capture.path, &s.decoder)?,
+    let mut reader: Box<dyn FrameSource> = match seek {
+        Some(at) => Box::new(FrameReader::open_at(&capture.path, &s.decoder, at)?),
+        None => open_frames(&capture.path, &s.decoder)?,
     };
     let batch_size = (2 * rayon::current_num_threads()).max(4);
     // Each cell's frames go to its file as their batch is done (kept until then only):
@@ -1159,7 +1232,12 @@ pub struct Panel {
 
 /// Runs one frame through the clean configuration, each stage type of the base alone, and
 /// all of them (the reference study's figure 3 for occlusion and rain).
-pub fn birdseye_panels(base: &BaseConfig, seed: u64, frame: &Frame) -> Result<Vec<Panel>> {
+pub fn birdseye_panels(
+    base: &BaseConfig,
+    seed: u64,
+    frame: &Frame,
+    lasers: usize,
+) -> Result<Vec<Panel>> {
     let mut types: Vec<&str> = Vec::new();
     for s in &base.config.noise {
         if !types.contains(&s.kind()) {
@@ -1177,7 +1255,10 @@ pub fn birdseye_panels(base: &BaseConfig, seed: u64, frame: &Frame) -> Result<Ve
         .par_iter()
         .map(|(title, kinds)| {
             let config = base.only_stages(kinds, seed)?;
-            let r = Pipeline::new(&config).process(frame.clone())?;
+            let pipeline = Pipeline::new(&config)
+                .for_lasers(lasers)
+                .map_err(Error::Invalid)?;
+            let r = pipeline.process(frame.clone())?;
             let points = r
                 .survivors
                 .iter()
@@ -1199,22 +1280,36 @@ pub fn birdseye_panels(base: &BaseConfig, seed: u64, frame: &Frame) -> Result<Ve
         .collect()
 }
 
-/// Decodes the frame with index `index` of a capture (the first in `frames` when `None`).
+/// Decodes the frame with index `index` of a capture (the first in `frames` when `None`),
+/// with its sensor's number of lasers.
 pub fn read_frame(
     path: &Path,
     decoder: &DecoderOptions,
     frames: &RangeInclusive<u32>,
     index: Option<u32>,
-) -> Result<Option<Frame>> {
-    for frame in FrameReader::open(path, decoder)? {
-        let frame = frame?;
-        let wanted = match index {
-            Some(i) => frame.index == i,
-            None => frames.contains(&frame.index),
+) -> Result<Option<(Frame, usize)>> {
+    let (mut reader, lasers): (Box<dyn FrameSource>, usize) =
+        match crate::sensor::frames::open_capture(path, decoder)? {
+            CaptureFrames::Hdl32e(r) => (r, crate::sensor::HDL32E.lasers),
+            CaptureFrames::Model(r) => {
+                let lasers = r.model().lasers;
+                (r, lasers)
+            }
         };
-        if wanted {
-            return Ok(Some(frame));
+    let everything = 0..=u32::MAX;
+    loop {
+        let batch = reader.next_batch(16, &everything)?;
+        if batch.is_empty() {
+            return Ok(None);
+        }
+        for frame in batch {
+            let wanted = match index {
+                Some(i) => frame.index == i,
+                None => frames.contains(&frame.index),
+            };
+            if wanted {
+                return Ok(Some((frame, lasers)));
+            }
         }
     }
-    Ok(None)
 }

@@ -4,7 +4,8 @@
 //! synthesized here (`synth --sensor`); the real VLP-16 capture of ../shared is used
 //! when present. What `run` counts is checked against the returns the library's packet
 //! decoder gives packet by packet, and `info` reports the same sensor and returns.
-//! `--pcap-out` writes each sensor's packets back: every kept return in its own slot.
+//! `--pcap-out` writes each sensor's packets back: every kept return in its own slot;
+//! `convert`, `sweep` and standard input take these captures too.
 
 mod common;
 
@@ -65,6 +66,16 @@ fn run_every_sweep(capture: &Path, config: &Path, out: &Path) {
         .success();
 }
 
+/// The vertex count a PLY file's header declares.
+fn ply_vertices(path: &Path) -> u64 {
+    let bytes = std::fs::read(path).unwrap();
+    let head = String::from_utf8_lossy(&bytes[..bytes.len().min(4096)]).into_owned();
+    head.lines()
+        .find_map(|l| l.strip_prefix("element vertex "))
+        .map(|n| n.trim().parse().unwrap())
+        .unwrap_or_else(|| panic!("{}: no vertex count", path.display()))
+}
+
 fn summary(dir: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap()
 }
@@ -119,6 +130,22 @@ fn captures_of_every_other_sensor_run_with_their_own_lasers() {
             .map(|v| v.as_u64().unwrap())
             .collect();
         assert_eq!(got, want, "{name}");
+        // `convert` writes every return into its sweep's PLY file.
+        let converted = tmp.path().join(format!("convert-{name}"));
+        bin2()
+            .args(["--quiet", "convert", "--keep-partial"])
+            .arg(&capture)
+            .arg("-o")
+            .arg(&converted)
+            .assert()
+            .success();
+        let vertices: u64 = std::fs::read_dir(&converted)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "ply"))
+            .map(|p| ply_vertices(&p))
+            .sum();
+        assert_eq!(vertices, total, "{name}: convert");
         // `info` tells the same sensor and counts the same returns.
         let info = bin2()
             .args(["info", "--json"])

@@ -1,9 +1,10 @@
 //! `lidar-noise convert`: one point cloud per frame, no noise.
 
 use crate::cli::Global;
-use crate::frame::Frame;
+use crate::frame::{Frame, FrameSource};
 use crate::hdl32e::frames::DecoderOptions;
 use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
+use crate::sensor::frames::CaptureFrames;
 use crate::writers::ply::PlyFrame;
 use crate::writers::staging::{self, OutputFolder, Staged};
 use crate::writers::{write_file, FrameOutput};
@@ -185,7 +186,11 @@ fn convert_one(
     range: &RangeInclusive<u32>,
     global: Global,
 ) -> Result<u32> {
-    let mut reader = super::open_capture(capture, options)?;
+    let mut frames = crate::engine::inputs::open_any_capture(capture, options)?;
+    let reader: &mut dyn FrameSource = match &mut frames {
+        CaptureFrames::Hdl32e(r) => &mut **r,
+        CaptureFrames::Model(r) => &mut **r,
+    };
     let source = super::capture_label(capture);
     let progress = super::frames_progress(global, capture, options, range);
     let mut written = 0u32;
@@ -201,25 +206,34 @@ fn convert_one(
     };
     // No heap warm-up: a frame's decoding and PLY need little heap, and warming 12 MB a
     // worker made `convert` of the shared capture slower (16.0 -> 17.9 ms).
-    crate::engine::stream_frames(&mut reader, range, 0, work, |frame, reader| {
+    crate::engine::stream_frames(reader, range, 0, work, |frame, reader| {
         written += 1;
         progress.inc(1);
         reader.recycle(frame);
         Ok(())
     })?;
     progress.finish_and_clear();
-    let summary = reader.summary();
     // Named as `run` names it: the path as given, `<stdin>` for `-`.
     let shown = super::capture_shown(capture);
-    super::warn_truncation(global, Path::new(&shown), &summary);
-    super::warn_capture(global, Path::new(&shown), &summary, false);
-    if written == 0 {
-        // Same message as `run`'s: the capture's full frames counted to its end.
-        return Err(crate::engine::reports::no_frame_error(
-            &shown,
-            range,
-            &mut reader,
-        ));
+    match &mut frames {
+        CaptureFrames::Hdl32e(reader) => {
+            let summary = reader.summary();
+            super::warn_truncation(global, Path::new(&shown), &summary);
+            super::warn_capture(global, Path::new(&shown), &summary, false);
+            if written == 0 {
+                // Same message as `run`'s: the capture's full frames counted to its end.
+                return Err(crate::engine::reports::no_frame_error(
+                    &shown, range, reader,
+                ));
+            }
+        }
+        CaptureFrames::Model(reader) => {
+            if written == 0 {
+                return Err(crate::engine::reports::no_model_frame_error(
+                    &shown, range, reader,
+                ));
+            }
+        }
     }
     Ok(written)
 }

@@ -557,14 +557,7 @@ fn run_source(
         }
         Source::Model(r) => {
             if spool.frames == 0 {
-                anyhow::bail!(
-                    "{shown}: no frame to process in {} of this {} capture ({} full and {} \
-                     partial sweeps; --keep-partial keeps the partial ones)",
-                    crate::options::frames_phrase(&plan.frames),
-                    r.model().name,
-                    r.summary().full_frames,
-                    r.summary().partial_frames
-                );
+                return Err(reports::no_model_frame_error(&shown, &plan.frames, r));
             }
             SourceSummary::Model(r.summary())
         }

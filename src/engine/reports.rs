@@ -215,6 +215,24 @@ pub fn report_line(source: &str, frames: usize, t: &Totals) -> String {
 
 /// The error for a `--frames` range with no frame to process, naming the capture's full
 /// frames (the reader stopped at the end of the range, so it reads on to count them).
+/// The error for a capture of another sensor that yielded no frame in `frames`, read to
+/// its end.
+pub fn no_model_frame_error(
+    source: &str,
+    frames: &RangeInclusive<u32>,
+    reader: &crate::sensor::frames::ModelFrameReader,
+) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{source}: no frame to process in {} of this {} capture ({} full and {} partial \
+         sweeps; --keep-partial keeps the partial ones)",
+        crate::options::frames_phrase(frames),
+        reader.model().name,
+        reader.summary().full_frames,
+        reader.summary().partial_frames
+    )
+}
+
+/// The error for an HDL-32E capture that yielded no frame in `frames`.
 pub fn no_frame_error(
     source: &str,
     frames: &RangeInclusive<u32>,

@@ -193,6 +193,21 @@ fn what_a_capture_of_another_sensor_cannot_do_is_refused_before_writing() {
     refused_scan(&capture, &["--chunk-frames", "1", "-c", cfg], "VLP-16");
     // The paper's occlusion names laser 30: the VLP-16 has 16.
     refused_scan(&capture, &[], "the VLP-16 (16 lasers)");
+    // A VLP-32C capture whose mode byte no firmware writes: the other sensors' reader
+    // says what it found, not that only the HDL-32E is decoded.
+    let vlp32c = synth(tmp.path(), "vlp32c", &["--preset", "crossroad"], 1);
+    let mut bytes = std::fs::read(&vlp32c).unwrap();
+    let mut at = 24;
+    while at + 16 <= bytes.len() {
+        let len = u32::from_le_bytes(bytes[at + 8..at + 12].try_into().unwrap()) as usize;
+        if len == 42 + 1206 {
+            bytes[at + 16 + 42 + 1204] = 0x55;
+        }
+        at += 16 + len;
+    }
+    let bad = tmp.path().join("bad-mode.pcap");
+    std::fs::write(&bad, bytes).unwrap();
+    refused_scan(&bad, &[], "unknown return mode byte 0x55");
 }
 
 #[test]

@@ -119,8 +119,7 @@ pub fn identify(sample: &Sample) -> Result<Identity, String> {
     }
     if product != packet::PRODUCT_HDL32E && product != 0 {
         return Err(format!(
-            "this is a {} capture (product id 0x{product:02x}), not an HDL-32E; \
-             lidar-noise decodes only the HDL-32E",
+            "this is a {} capture (product id 0x{product:02x}), not an HDL-32E",
             packet::product_name(product)
         ));
     }

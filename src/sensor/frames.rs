@@ -48,15 +48,26 @@ pub fn open_capture(
     if crate::capture::is_stream(path) {
         return Err(e);
     }
-    match ModelFrameReader::open(
-        path,
-        options.interpolate_azimuth,
-        options.dual,
-        options.cut_angle_deg,
-        options.keep_partial,
-    ) {
+    model_or(
+        e,
+        ModelFrameReader::open(
+            path,
+            options.interpolate_azimuth,
+            options.dual,
+            options.cut_angle_deg,
+            options.keep_partial,
+        ),
+    )
+}
+
+/// The other sensor's reader, or the error to show when neither reader takes the
+/// capture: where the HDL-32E reader saw another product's packets, the other readers'
+/// (it names what was measured and every sensor described); else the HDL-32E reader's.
+fn model_or(hdl32e: Error, model: Result<Option<ModelFrameReader>>) -> Result<CaptureFrames> {
+    match model {
         Ok(Some(r)) => Ok(CaptureFrames::Model(Box::new(r))),
-        _ => Err(e),
+        Err(m) if hdl32e.to_string().contains("not an HDL-32E") => Err(m),
+        _ => Err(hdl32e),
     }
 }
 
@@ -73,16 +84,16 @@ pub fn open_capture_bytes(
         Err(e) => e,
     };
     let open = || CaptureReader::from_reader(std::io::Cursor::new(ArcBytes(bytes.clone())), name);
-    match ModelFrameReader::open_with(
-        open,
-        options.interpolate_azimuth,
-        options.dual,
-        options.cut_angle_deg,
-        options.keep_partial,
-    ) {
-        Ok(Some(r)) => Ok(CaptureFrames::Model(Box::new(r))),
-        _ => Err(e),
-    }
+    model_or(
+        e,
+        ModelFrameReader::open_with(
+            open,
+            options.interpolate_azimuth,
+            options.dual,
+            options.cut_angle_deg,
+            options.keep_partial,
+        ),
+    )
 }
 
 /// Data packets searched for an HDL-64E's calibration in their status bytes: three

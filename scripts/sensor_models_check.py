@@ -98,6 +98,32 @@ cases = [
 ]
 
 HOUR0 = 7200  # host clock at a whole hour, small so float64 seconds keep nanoseconds
+
+
+def decode_and_write(name, model, cal, payloads, skip_first_columns):
+    """Decodes `payloads` with velodyne_decoder (`model`, calibration `cal`) and writes
+    NAME.bin (the payloads) and NAME.csv (its points) into `out`; leaves out the points
+    of columns below `skip_first_columns` (0: none). Returns the number of points."""
+    config = vd.Config(model=model, calibration=cal, min_range=0.0, max_range=1e4, timestamp_first_packet=True)
+    packets = [
+        vd.VelodynePacket(HOUR0 + int.from_bytes(p[1200:1204], "little") * 1e-6, np.frombuffer(p, dtype=np.uint8))
+        for p in payloads
+    ]
+    stamp, points = vd.ScanDecoder(config).decode(packets, as_pcl_structs=True)
+    base = stamp.device % 3600.0
+    if skip_first_columns:
+        points = points[points["column"] >= skip_first_columns]
+    (out / f"{name}.bin").write_bytes(b"".join(payloads))
+    with open(out / f"{name}.csv", "w") as f:
+        f.write("x,y,z,intensity,time,ring,return_type\n")
+        for q in points:
+            f.write(
+                "%.9g,%.9g,%.9g,%d,%.9f,%d,%d\n"
+                % (q["x"], q["y"], q["z"], q["intensity"], base + float(q["time"]), q["ring"], q["return_type"])
+            )
+    return len(points)
+
+
 rng = np.random.default_rng(31)
 manifest = []
 FLAGS = [0xEEFF, 0xDDFF, 0xCCFF, 0xBBFF]
@@ -150,30 +176,14 @@ for name, model_name, model, cal, firing_us, step, banks, dual in cases:
     if isinstance(cal, str):
         calib_file = str(calib_dir / cal)
         cal = vd.Calibration.read(calib_file)
-    config = vd.Config(model=model, calibration=cal, min_range=0.0, max_range=1e4, timestamp_first_packet=True)
-    packets = [
-        vd.VelodynePacket(HOUR0 + int.from_bytes(p[1200:1204], "little") * 1e-6, np.frombuffer(p, dtype=np.uint8))
-        for p in payloads
-    ]
-    stamp, points = vd.ScanDecoder(config).decode(packets, as_pcl_structs=True)
-    base = stamp.device % 3600.0
     skip_first = banks == 4
-    if skip_first:
-        # velodyne_decoder's VLS-128 path interpolates nothing in the first packet (its
-        # rotation rate comes from the packet before) and times it with the 2.89 us
-        # channel before it has measured the packet spacing: its points are left out
-        # here (columns 0-2 single, 0 dual) and the test leaves out packet 0's.
-        points = points[points["column"] >= (1 if dual else 3)]
-    (out / f"{name}.bin").write_bytes(b"".join(payloads))
-    with open(out / f"{name}.csv", "w") as f:
-        f.write("x,y,z,intensity,time,ring,return_type\n")
-        for q in points:
-            f.write(
-                "%.9g,%.9g,%.9g,%d,%.9f,%d,%d\n"
-                % (q["x"], q["y"], q["z"], q["intensity"], base + float(q["time"]), q["ring"], q["return_type"])
-            )
+    # velodyne_decoder's VLS-128 path interpolates nothing in the first packet (its
+    # rotation rate comes from the packet before) and times it with the 2.89 us channel
+    # before it has measured the packet spacing: its points are left out here (columns
+    # 0-2 single, 0 dual) and the test leaves out packet 0's.
+    n_points = decode_and_write(name, model, cal, payloads, (1 if dual else 3) if skip_first else 0)
     manifest.append(f"{name}\t{model_name}\t{calib_file}\t{'skip_first' if skip_first else ''}\n")
-    print(f"velodyne_decoder {vd.__version__}: {name}: {len(points)} points -> {out / name}.csv")
+    print(f"velodyne_decoder {vd.__version__}: {name}: {n_points} points -> {out / name}.csv")
 
 
 def pcap_payloads(path):
@@ -207,28 +217,12 @@ for path in sorted(captures.glob("*.pcap")) if captures else []:
         print(f"{path}: product byte 0x{product:02x}: not a VLP-32C or VLS-128, left out")
         continue
     name = f"real_{path.stem}"
-    config = vd.Config(model=model, calibration=cal, min_range=0.0, max_range=1e4, timestamp_first_packet=True)
-    packets = [
-        vd.VelodynePacket(HOUR0 + int.from_bytes(p[1200:1204], "little") * 1e-6, np.frombuffer(p, dtype=np.uint8))
-        for p in payloads
-    ]
-    stamp, points = vd.ScanDecoder(config).decode(packets, as_pcl_structs=True)
-    base = stamp.device % 3600.0
     skip_first = product == 0xA1
-    if skip_first:
-        points = points[points["column"] >= (1 if mode == 0x39 else 3)]
-    (out / f"{name}.bin").write_bytes(b"".join(payloads))
-    with open(out / f"{name}.csv", "w") as f:
-        f.write("x,y,z,intensity,time,ring,return_type\n")
-        for q in points:
-            f.write(
-                "%.9g,%.9g,%.9g,%d,%.9f,%d,%d\n"
-                % (q["x"], q["y"], q["z"], q["intensity"], base + float(q["time"]), q["ring"], q["return_type"])
-            )
+    n_points = decode_and_write(name, model, cal, payloads, (1 if mode == 0x39 else 3) if skip_first else 0)
     manifest.append(f"{name}\t{model_name}\t\t{'real skip_first' if skip_first else 'real'}\n")
     print(
         f"velodyne_decoder {vd.__version__}: {name} ({path.name}, {model_name}, mode 0x{mode:02x}, "
-        f"packets {spacing:.0f} us apart): {len(points)} points -> {out / name}.csv"
+        f"packets {spacing:.0f} us apart): {n_points} points -> {out / name}.csv"
     )
 (out / "manifest.txt").write_text("".join(manifest))
 

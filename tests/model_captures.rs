@@ -15,6 +15,32 @@ use lidar_noise::sensor::decode::{DualSelect, ModelDecoder};
 use lidar_noise::sensor::SensorModel;
 use std::path::{Path, PathBuf};
 
+const CROSSROAD: &[&str] = &["--preset", "crossroad"];
+/// The crossroad turns at 20 Hz, beyond the HDL-64E's 15 Hz: a random street for it.
+const STREET: &[&str] = &["--random", "3"];
+
+/// Every described sensor but the HDL-32E: its `synth` name, model, a scene it can turn
+/// at, and a laser to occlude (past 31 where it has more).
+const SENSORS: [(&str, &SensorModel, &[&str], u8); 7] = [
+    ("vlp16", &lidar_noise::sensor::VLP16, CROSSROAD, 9),
+    (
+        "puck-hi-res",
+        &lidar_noise::sensor::PUCK_HI_RES,
+        CROSSROAD,
+        2,
+    ),
+    ("vlp32c", &lidar_noise::sensor::VLP32C, CROSSROAD, 31),
+    ("hdl64e s2", &lidar_noise::sensor::HDL64E_S2, STREET, 40),
+    ("hdl64e s3", &lidar_noise::sensor::HDL64E_S3, STREET, 63),
+    ("vls128", &lidar_noise::sensor::VLS128, CROSSROAD, 100),
+    (
+        "vls128 fw5.1",
+        &lidar_noise::sensor::VLS128_FW51,
+        CROSSROAD,
+        127,
+    ),
+];
+
 /// Synthesizes `rotations` turns of `scene_args` for `sensor` into `dir`; the capture.
 fn synth(dir: &Path, sensor: &str, scene_args: &[&str], rotations: u32) -> PathBuf {
     let out = dir.join(sensor);
@@ -89,21 +115,7 @@ fn config(dir: &Path, text: &str) -> PathBuf {
 #[test]
 fn captures_of_every_other_sensor_run_with_their_own_lasers() {
     let tmp = tempfile::tempdir().unwrap();
-    let crossroad: &[&str] = &["--preset", "crossroad"];
-    // The crossroad turns at 20 Hz, beyond the HDL-64E's 15 Hz: a random street instead.
-    let street: &[&str] = &["--random", "3"];
-    for (name, model, scene, occluded) in [
-        ("vlp16", &lidar_noise::sensor::VLP16, crossroad, 9u8),
-        (
-            "puck-hi-res",
-            &lidar_noise::sensor::PUCK_HI_RES,
-            crossroad,
-            2,
-        ),
-        ("vlp32c", &lidar_noise::sensor::VLP32C, crossroad, 31),
-        ("hdl64e s2", &lidar_noise::sensor::HDL64E_S2, street, 40),
-        ("vls128", &lidar_noise::sensor::VLS128, crossroad, 100),
-    ] {
+    for (name, model, scene, occluded) in SENSORS {
         let capture = synth(tmp.path(), name, scene, 2);
         let cfg = config(
             tmp.path(),
@@ -259,27 +271,7 @@ fn slots(path: &Path, model: &SensorModel) -> Vec<(u32, u8, u8, u16, u8)> {
 #[test]
 fn pcap_out_writes_every_other_sensors_packets_back() {
     let tmp = tempfile::tempdir().unwrap();
-    let crossroad: &[&str] = &["--preset", "crossroad"];
-    let street: &[&str] = &["--random", "3"];
-    for (name, model, scene, occluded) in [
-        ("vlp16", &lidar_noise::sensor::VLP16, crossroad, 9u8),
-        (
-            "puck-hi-res",
-            &lidar_noise::sensor::PUCK_HI_RES,
-            crossroad,
-            2,
-        ),
-        ("vlp32c", &lidar_noise::sensor::VLP32C, crossroad, 31),
-        ("hdl64e s2", &lidar_noise::sensor::HDL64E_S2, street, 40),
-        ("hdl64e s3", &lidar_noise::sensor::HDL64E_S3, street, 63),
-        ("vls128", &lidar_noise::sensor::VLS128, crossroad, 100),
-        (
-            "vls128 fw5.1",
-            &lidar_noise::sensor::VLS128_FW51,
-            crossroad,
-            127,
-        ),
-    ] {
+    for (name, model, scene, occluded) in SENSORS {
         let capture = synth(tmp.path(), name, scene, 2);
         let input = slots(&capture, model);
         for (k, text) in [
@@ -395,15 +387,7 @@ fn a_capture_of_another_sensor_on_standard_input_runs_as_the_file_does() {
 #[test]
 fn sweeps_run_on_captures_of_other_sensors_with_their_labels() {
     let tmp = tempfile::tempdir().unwrap();
-    let crossroad: &[&str] = &["--preset", "crossroad"];
-    let street: &[&str] = &["--random", "3"];
-    for (name, scene) in [
-        ("vlp16", crossroad),
-        ("puck-hi-res", crossroad),
-        ("vlp32c", crossroad),
-        ("hdl64e s3", street),
-        ("vls128", crossroad),
-    ] {
+    for (name, _, scene, _) in SENSORS {
         let capture = synth(tmp.path(), name, scene, 3);
         let out = tmp.path().join(format!("sweep-{name}"));
         bin2()
@@ -430,7 +414,7 @@ fn sweeps_run_on_captures_of_other_sensors_with_their_labels() {
         }
     }
     // What does not fit the sensor is refused before anything is written.
-    let capture = synth(tmp.path(), "vlp16", crossroad, 1);
+    let capture = synth(tmp.path(), "vlp16", CROSSROAD, 1);
     let cfg = config(
         tmp.path(),
         "seed = 1\n[[noise]]\ntype = \"occlusion\"\nlasers = [20]\n",

@@ -100,13 +100,7 @@ fn write_model(
         "  packets       {} data, {} position, {} other UDP, {} bad data",
         s.data_packets, s.position_packets, s.other_udp, s.bad_data_packets
     )?;
-    if !dead.is_empty() {
-        writeln!(
-            out,
-            "  dead lasers   {} (no return over the capture)",
-            super::join_ids(&dead)
-        )?;
-    }
+    write_dead(out, &dead)?;
     writeln!(out, "  calibration   {}", s.calibration)?;
     writeln!(out, "  packet period {:.0} us", s.packet_period_us)?;
     writeln!(out, "  rotation      {:.2} Hz", s.rotation_hz)?;
@@ -116,6 +110,18 @@ fn write_model(
         s.full_frames, s.partial_frames
     )?;
     writeln!(out, "  returns       {} in all", s.returns)?;
+    Ok(())
+}
+
+/// The line naming the lasers without a return, where there are any.
+fn write_dead(out: &mut impl Write, dead: &[u8]) -> Result<()> {
+    if !dead.is_empty() {
+        writeln!(
+            out,
+            "  dead lasers   {} (no return over the capture)",
+            super::join_ids(dead)
+        )?;
+    }
     Ok(())
 }
 
@@ -147,14 +153,7 @@ fn write_text(out: &mut impl Write, path: &std::path::Path, s: &CaptureSummary) 
         s.capture.fragments, s.capture.not_udp, s.capture.not_ipv4, s.capture.malformed
     )?;
     writeln!(out, "  data ports    {}", ports.join(", "))?;
-    let dead = s.dead_lasers();
-    if !dead.is_empty() {
-        writeln!(
-            out,
-            "  dead lasers   {} (no return over the capture)",
-            super::join_ids(&dead)
-        )?;
-    }
+    write_dead(out, &s.dead_lasers())?;
     if let Some(p) = s.packet_period_us {
         writeln!(out, "  packet period {p:.0} us")?;
     }

@@ -3,7 +3,7 @@
 use crate::calibration::Calibration;
 use crate::error::{Error, Result};
 use crate::hdl32e::decode::DualSelect;
-use crate::hdl32e::frames::DecoderOptions;
+use crate::hdl32e::frames::{CalibrationFile, DecoderOptions};
 use crate::writers::ply::{PlyEncoding, PlyStyle};
 use crate::writers::{FrameFormat, FrameOutput};
 use std::ops::RangeInclusive;
@@ -12,7 +12,8 @@ use std::path::PathBuf;
 /// Decoder settings as given on the command line.
 #[derive(Clone, Debug, clap::Args)]
 pub struct DecoderArgs {
-    /// Per-laser calibration: ROS YAML or VeloView XML (default: the manual's table).
+    /// Per-laser calibration: ROS YAML or VeloView XML of the capture's sensor (default:
+    /// the manual's table; an HDL-64E's own from its status bytes).
     #[arg(long, value_name = "FILE")]
     pub calibration: Option<PathBuf>,
     /// Use the block azimuth for every laser instead of interpolating by firing time.
@@ -43,18 +44,45 @@ impl DecoderArgs {
                 self.cut_angle
             )));
         }
-        let calibration = match &self.calibration {
-            Some(path) => Calibration::from_file(path)?,
-            None => Calibration::builtin(),
+        let (calibration, calibration_file) = match &self.calibration {
+            Some(path) => match Calibration::from_file(path) {
+                Ok(c) => (
+                    c,
+                    Some(CalibrationFile {
+                        path: path.clone(),
+                        not_hdl32e: None,
+                    }),
+                ),
+                // Another described sensor's file (an HDL-64E's 64 lasers) is read for the
+                // captures of that sensor; a file no sensor reads is refused now.
+                Err(e) if other_sensor_reads(path) => (
+                    Calibration::builtin(),
+                    Some(CalibrationFile {
+                        path: path.clone(),
+                        not_hdl32e: Some(e.to_string()),
+                    }),
+                ),
+                Err(e) => return Err(e),
+            },
+            None => (Calibration::builtin(), None),
         };
         Ok(DecoderOptions {
             calibration,
+            calibration_file,
             interpolate_azimuth: !self.no_interpolate,
             dual: self.dual,
             cut_angle_deg: self.cut_angle,
             keep_partial: self.keep_partial,
         })
     }
+}
+
+/// Whether a described sensor other than the HDL-32E reads the calibration file `path`.
+fn other_sensor_reads(path: &std::path::Path) -> bool {
+    crate::sensor::MODELS
+        .iter()
+        .filter(|m| m.name != crate::sensor::HDL32E.name)
+        .any(|m| crate::sensor::calibration::ModelCalibration::from_file(path, m).is_ok())
 }
 
 /// Point-cloud output settings shared by `run` and `convert`.

@@ -1390,3 +1390,63 @@ fn an_hdl64e_capture_is_decoded_with_the_calibration_of_its_status_bytes() {
     let info: serde_json::Value = serde_json::from_slice(&info.get_output().stdout).unwrap();
     assert_eq!(info["calibration"], "the packets' status bytes");
 }
+
+#[test]
+fn calibration_files_of_other_sensors_decode_their_captures() {
+    let tmp = tempfile::tempdir().unwrap();
+    // An S2 capture whose status bytes carry no valid block, and a 64-laser YAML.
+    let capture = tmp.path().join("s2.pcap");
+    let broken: Vec<(u8, u8)> = s2_status_stream()
+        .iter()
+        .map(|&(k, v)| (k, v ^ 1))
+        .collect();
+    s2_capture(&capture, &broken);
+    let yaml = tmp.path().join("unit.yaml");
+    std::fs::write(&yaml, yaml64("")).unwrap();
+    let info = |args: &[&std::ffi::OsStr]| {
+        let out = common::bin2().arg("info").args(args).output().unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, stdout, stderr) = info(&[
+        "--json".as_ref(),
+        "--calibration".as_ref(),
+        yaml.as_os_str(),
+        capture.as_os_str(),
+    ]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(v["sensor"], "HDL-64E S2");
+    assert_eq!(v["calibration"], yaml.display().to_string());
+    // The file's angles decode the returns: laser 5 at -1.25 deg.
+    let options = lidar_noise::hdl32e::frames::DecoderOptions {
+        calibration_file: Some(lidar_noise::hdl32e::frames::CalibrationFile {
+            path: yaml.clone(),
+            not_hdl32e: Some("not an HDL-32E file".into()),
+        }),
+        ..Default::default()
+    };
+    let frames = match lidar_noise::sensor::frames::open_capture(&capture, &options).unwrap() {
+        lidar_noise::sensor::frames::CaptureFrames::Model(mut r) => {
+            r.next_batch(4, &(0..=u32::MAX)).unwrap()
+        }
+        _ => panic!("an HDL-64E capture"),
+    };
+    let l5 = frames[0].returns.iter().find(|r| r.laser == 5).unwrap();
+    assert!(
+        (f64::from(l5.elevation) + 1.25).abs() < 1e-4,
+        "{}",
+        l5.elevation
+    );
+    // An HDL-32E capture refuses it, saying why.
+    let (code, _, stderr) = info(&[
+        "--calibration".as_ref(),
+        yaml.as_os_str(),
+        "fixtures/crossroad.pcap".as_ref(),
+    ]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("this is an HDL-32E capture"), "{stderr}");
+}

@@ -381,15 +381,6 @@ fn open_capture_source(path: &Path, plan: &Plan) -> Result<(Source, Plan)> {
         CaptureFrames::Model(r) => r,
     };
     let model = reader.model();
-    if plan.decoder.calibration != crate::calibration::Calibration::builtin() {
-        anyhow::bail!(
-            "{}: a {} capture: --calibration reads an HDL-32E calibration, and the {}'s \
-             own table is built in; leave --calibration out",
-            path.display(),
-            model.name,
-            model.name
-        );
-    }
     let plan = plan.for_sensor(model).map_err(nothing)?;
     Ok((Source::Model(reader), plan))
 }

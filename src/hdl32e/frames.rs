@@ -35,6 +35,19 @@ pub struct DecoderOptions {
     pub cut_angle_deg: f64,
     /// Emit the partial first and last sweeps too.
     pub keep_partial: bool,
+    /// The `--calibration` file as given (None: built-in tables), for captures of the
+    /// other described sensors, which read it for their own model.
+    pub calibration_file: Option<CalibrationFile>,
+}
+
+/// A calibration file given for the captures to decode.
+#[derive(Clone, Debug)]
+pub struct CalibrationFile {
+    /// Its path.
+    pub path: std::path::PathBuf,
+    /// Why it is not an HDL-32E calibration, when it is another sensor's: an HDL-32E
+    /// capture is then refused with this.
+    pub not_hdl32e: Option<String>,
 }
 
 impl Default for DecoderOptions {
@@ -45,6 +58,24 @@ impl Default for DecoderOptions {
             dual: DualSelect::Both,
             cut_angle_deg: 0.0,
             keep_partial: false,
+            calibration_file: None,
+        }
+    }
+}
+
+impl DecoderOptions {
+    /// Refuses, for an HDL-32E capture, a calibration file of another sensor.
+    fn check_calibration(&self) -> Result<()> {
+        match self
+            .calibration_file
+            .as_ref()
+            .and_then(|f| f.not_hdl32e.as_ref())
+        {
+            Some(why) => Err(Error::Invalid(format!(
+                "{why} (this is an HDL-32E capture: give it an HDL-32E calibration, or \
+                 leave --calibration out)"
+            ))),
+            None => Ok(()),
         }
     }
 }
@@ -381,7 +412,9 @@ impl FrameReader {
         open: impl Fn() -> Result<CaptureReader>,
         options: &DecoderOptions,
     ) -> Result<Self> {
-        Ok(Self::from_parts(identify_in(open()?)?, open()?, options))
+        let identity = identify_in(open()?)?;
+        options.check_calibration()?;
+        Ok(Self::from_parts(identity, open()?, options))
     }
 
     /// A reader of `capture`, a capture identified as `identity`.
@@ -446,6 +479,7 @@ impl FrameReader {
     /// and container counters in it are the whole capture's).
     pub fn open_at(path: &Path, options: &DecoderOptions, at: &FrameSeek) -> Result<Self> {
         let identity = identify_in(CaptureReader::open(path)?)?;
+        options.check_calibration()?;
         let capture = CaptureReader::open_at(path, &at.capture)?;
         let mut reader = Self::from_parts(identity, capture, options);
         reader.resume(at);

@@ -50,6 +50,7 @@ pub fn open_capture(
     }
     model_or(
         e,
+        options,
         ModelFrameReader::open(
             path,
             options.interpolate_azimuth,
@@ -63,9 +64,18 @@ pub fn open_capture(
 /// The other sensor's reader, or the error to show when neither reader takes the
 /// capture: where the HDL-32E reader saw another product's packets, the other readers'
 /// (it names what was measured and every sensor described); else the HDL-32E reader's.
-fn model_or(hdl32e: Error, model: Result<Option<ModelFrameReader>>) -> Result<CaptureFrames> {
+fn model_or(
+    hdl32e: Error,
+    options: &crate::hdl32e::frames::DecoderOptions,
+    model: Result<Option<ModelFrameReader>>,
+) -> Result<CaptureFrames> {
     match model {
-        Ok(Some(r)) => Ok(CaptureFrames::Model(Box::new(r))),
+        Ok(Some(r)) => Ok(CaptureFrames::Model(Box::new(
+            match &options.calibration_file {
+                Some(file) => r.with_calibration_file(&file.path)?,
+                None => r,
+            },
+        ))),
         Err(m) if hdl32e.to_string().contains("not an HDL-32E") => Err(m),
         _ => Err(hdl32e),
     }
@@ -86,6 +96,7 @@ pub fn open_capture_bytes(
     let open = || CaptureReader::from_reader(std::io::Cursor::new(ArcBytes(bytes.clone())), name);
     model_or(
         e,
+        options,
         ModelFrameReader::open_with(
             open,
             options.interpolate_azimuth,
@@ -266,6 +277,22 @@ impl ModelFrameReader {
                 ..Default::default()
             },
         }))
+    }
+
+    /// The reader decoding with the calibration file `path` (a `db.xml` or ROS YAML of
+    /// the identified sensor: its unit's angles and corrections) instead of the built-in
+    /// table or the status bytes' calibration.
+    pub fn with_calibration_file(mut self, path: &Path) -> Result<Self> {
+        let cal = super::calibration::ModelCalibration::from_file(path, self.model)?;
+        self.summary.calibration = path.display().to_string();
+        self.decoder = self
+            .decoder
+            .with_calibration(cal)
+            .map_err(|message| Error::Config {
+                path: path.to_path_buf(),
+                message,
+            })?;
+        Ok(self)
     }
 
     /// [`ModelFrameReader::open_with`] of a capture file.

@@ -732,8 +732,7 @@ fn count_frames(s: &SweepSettings, capture: &CaptureInput) -> Result<usize> {
 
 /// The sensor of a sweep's capture: the HDL-32E, or another described sensor told by its
 /// packets' structure; an error for what a sweep of another sensor's capture cannot do
-/// yet (`--chunk-frames`, whose frame index is the HDL-32E's; `--calibration`, an
-/// HDL-32E file).
+/// yet (`--chunk-frames`, whose frame index is the HDL-32E's).
 fn capture_sensor(s: &SweepSettings, capture: &CaptureInput) -> Result<&'static SensorModel> {
     let model = match crate::sensor::frames::open_capture(&capture.path, &s.decoder)? {
         CaptureFrames::Hdl32e(_) => return Ok(&crate::sensor::HDL32E),
@@ -750,12 +749,6 @@ fn capture_sensor(s: &SweepSettings, capture: &CaptureInput) -> Result<&'static 
         return refuse(
             "--chunk-frames cuts captures by the HDL-32E's frame index; leave it out (the \
              capture is swept whole)",
-        );
-    }
-    if s.decoder.calibration != crate::calibration::Calibration::builtin() {
-        return refuse(
-            "--calibration reads an HDL-32E calibration, and the sensor's own table is \
-             built in; leave --calibration out",
         );
     }
     Ok(model)

@@ -61,20 +61,9 @@ fn synth(dir: &Path, sensor: &str, scene_args: &[&str], rotations: u32) -> PathB
 
 /// Returns per laser id of every data packet of the capture, decoded one by one.
 fn decoded_per_laser(path: &Path, model: &SensorModel) -> Vec<u64> {
-    let dec = ModelDecoder::new(model, true, DualSelect::Both);
-    let mut reader = CaptureReader::open(path).unwrap();
     let mut per_laser = vec![0u64; model.lasers];
-    let mut out = Vec::new();
-    while let Some(d) = reader.next_datagram().unwrap() {
-        if !model.layout.is_data_packet(d.payload) {
-            continue;
-        }
-        out.clear();
-        dec.decode_packet(d.payload, d.record, 0.0, &mut out)
-            .unwrap();
-        for r in &out {
-            per_laser[usize::from(r.laser)] += 1;
-        }
+    for (_, _, laser, _, _) in slots(path, model) {
+        per_laser[usize::from(laser)] += 1;
     }
     per_laser
 }

@@ -12,8 +12,8 @@ pub mod validate;
 // The helpers every command shares live with the engine that runs the inputs.
 pub use crate::engine::inputs::{
     capture_label, capture_shown, check_stdin_once, frames_progress, frames_total, is_stdin,
-    join_ids, open_capture, output_names, progress, raw_intensity_hint, warn_capture,
-    warn_truncation, STDIN, STDIN_NAME,
+    join_ids, output_names, progress, raw_intensity_hint, warn_capture, warn_truncation, STDIN,
+    STDIN_NAME,
 };
 
 /// Writes `text` to standard output, flushed; a failure (a full disk, a closed pipe) is an

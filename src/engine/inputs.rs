@@ -184,29 +184,10 @@ pub fn capture_label(path: &Path) -> String {
     )
 }
 
-/// Opens a capture file, or reads standard input to its end for `-` (the reader reads the
-/// capture twice, to identify the sensor and then to decode, so a pipe is buffered in
-/// memory); a stream that does not start with a capture's file header is refused at once.
-pub fn open_capture(
-    path: &Path,
-    options: &crate::hdl32e::frames::DecoderOptions,
-) -> anyhow::Result<crate::hdl32e::frames::FrameReader> {
-    if !is_stdin(path) {
-        return Ok(crate::hdl32e::frames::FrameReader::open(path, options)?);
-    }
-    let name = Path::new(STDIN_NAME);
-    let bytes = crate::capture::read_stream(std::io::stdin().lock(), name)?;
-    Ok(crate::hdl32e::frames::FrameReader::from_bytes(
-        std::sync::Arc::from(bytes),
-        name,
-        options,
-    )?)
-}
-
-/// The frame reader of a capture file or of standard input (`-`, held in memory as
-/// [`open_capture`] holds it): the HDL-32E's, or another described sensor's where that
-/// refuses the capture and the sensor's structure fits it (a FIFO is read once: only the
-/// HDL-32E's).
+/// The frame reader of a capture file or of standard input (`-`, read to its end and held
+/// in memory, as each reader reads a capture twice: to identify the sensor, then to
+/// decode): the HDL-32E's, or another described sensor's where that refuses the capture
+/// and the sensor's structure fits it (a FIFO is read once: only the HDL-32E's).
 pub fn open_any_capture(
     path: &Path,
     options: &crate::hdl32e::frames::DecoderOptions,

@@ -18,6 +18,7 @@
 //! allocated. Every error names the file and the place (byte offset, point index, line
 //! and column), and no input makes a reader panic (tests/fuzz.rs, targets `cloud-*`).
 
+pub(crate) mod atan;
 pub mod boxes;
 pub mod csv;
 pub mod frames;

@@ -173,6 +173,7 @@ impl BeamTable {
     /// ambiguous: the elevation lies more than a quarter of the spacing to the next beam
     /// on its side away from the nearest beam (the middle half between two beams), or
     /// beyond the outermost beams by more than half their spacing.
+    #[inline]
     pub fn nearest(&self, elevation_deg: f64) -> (u8, bool) {
         let i = self.first_at_or_above(elevation_deg);
         self.judged(i, elevation_deg, |k| self.elevation[k])
@@ -182,10 +183,13 @@ impl BeamTable {
     /// point): from the bin's start, a step or two up (bins are narrower than the beam
     /// spacing), and down where rounding put the bin's start above the elevation, so the
     /// index is the partition point's whatever the table.
+    #[inline]
     fn first_at_or_above(&self, elevation_deg: f64) -> usize {
         let last = self.first_bound.len() - 1;
-        let bin = ((elevation_deg + 90.0) * BINS_PER_DEG).floor();
-        // NaN (refused before) would give bin 0: still the partition point below.
+        // Truncation, not `floor` (a libm call on the x86-64 baseline): the same bin for
+        // every value at or above 0, and anything below (or a NaN, refused before)
+        // starts at bin 0, where the steps below find the partition point all the same.
+        let bin = (elevation_deg + 90.0) * BINS_PER_DEG;
         let bin = if bin >= 0.0 {
             (bin as usize).min(last)
         } else {
@@ -206,6 +210,7 @@ impl BeamTable {
     /// where the beams are lines from offset origins (KITTI's HDL-64E), where it is the
     /// beam whose line passes nearest in height at that distance, ambiguous by the same
     /// rule in height.
+    #[inline]
     pub fn nearest_at(&self, horizontal: f64, z: f64, elevation_deg: f64) -> (u8, bool) {
         if self.origin_m.is_empty() {
             return self.nearest(elevation_deg);
@@ -228,6 +233,7 @@ impl BeamTable {
 
     /// The laser of beam `i`, nearest to `value` (the point's elevation or height; `at`
     /// gives each beam's), and whether the choice is ambiguous.
+    #[inline]
     fn judged(&self, i: usize, value: f64, at: impl Fn(usize) -> f64) -> (u8, bool) {
         let e = at(i);
         let n = self.elevation.len();
@@ -247,6 +253,95 @@ impl BeamTable {
         let ambiguous = gap > 0.0 && (value - e).abs() > 0.25 * gap;
         (self.by_elevation[i], ambiguous)
     }
+}
+
+/// Points whose geometry is computed at a time: a vectorised pass over a chunk, then the
+/// sequential placing over the same chunk while its values are in the first-level cache.
+const CHUNK: usize = 256;
+
+/// Range, horizontal distance, azimuth and elevation of a chunk of points.
+struct Geometry {
+    range: [f64; CHUNK],
+    horizontal: [f64; CHUNK],
+    azimuth: [f64; CHUNK],
+    elevation: [f64; CHUNK],
+    /// Azimuth in firing steps from 0.
+    steps: [f64; CHUNK],
+}
+
+impl Default for Geometry {
+    fn default() -> Self {
+        Geometry {
+            range: [0.0; CHUNK],
+            horizontal: [0.0; CHUNK],
+            azimuth: [0.0; CHUNK],
+            elevation: [0.0; CHUNK],
+            steps: [0.0; CHUNK],
+        }
+    }
+}
+
+impl Geometry {
+    /// The geometry of `chunk` (at most [`CHUNK`] points, all finite) in its first rows.
+    fn of(&mut self, chunk: &[CloudPoint], steps_per_deg: f64) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the processor has AVX2 (checked on the line above).
+                unsafe { self.of_avx2(chunk, steps_per_deg) };
+                return;
+            }
+        }
+        self.of_any(chunk, steps_per_deg);
+    }
+
+    /// [`Geometry::of`] compiled for AVX2: four points a vector instead of SSE2's two
+    /// (the same bits: no fused multiply-adds either way). Its own function, because a
+    /// closure passed to `transmission::wide` was not inlined into it and ran as SSE2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn of_avx2(&mut self, chunk: &[CloudPoint], steps_per_deg: f64) {
+        self.of_any(chunk, steps_per_deg);
+    }
+
+    /// [`Geometry::of`]'s loop: branch-free arithmetic (`atan`'s selects, no libm call),
+    /// so that it vectorises.
+    #[inline(always)]
+    fn of_any(&mut self, chunk: &[CloudPoint], steps_per_deg: f64) {
+        let n = chunk.len();
+        let (range, horizontal) = (&mut self.range[..n], &mut self.horizontal[..n]);
+        let (azimuth, elevation) = (&mut self.azimuth[..n], &mut self.elevation[..n]);
+        let steps = &mut self.steps[..n];
+        for (k, p) in chunk.iter().enumerate() {
+            let (x, y, z) = (f64::from(p.x), f64::from(p.y), f64::from(p.z));
+            // sqrt of the sums, not hypot: libm's hypot (overflow-safe, not needed for
+            // coordinates in metres) was an eighth of the conversion's time.
+            let h2 = x * x + y * y;
+            horizontal[k] = h2.sqrt();
+            range[k] = (h2 + z * z).sqrt();
+            // atan2 gives [-180, 180] degrees: one add wraps it.
+            let a = crate::cloud::atan::atan2(-y, x).to_degrees();
+            azimuth[k] = if a < 0.0 { a + 360.0 } else { a };
+            steps[k] = azimuth[k] * steps_per_deg;
+            elevation[k] = crate::cloud::atan::atan2(z, horizontal[k]).to_degrees();
+        }
+    }
+}
+
+/// A point placed on the grid: every value its return takes (32 bytes, two thirds of a
+/// return: the rest follows from the firing and the laser).
+#[derive(Clone, Copy)]
+struct Placed {
+    x: f32,
+    y: f32,
+    z: f32,
+    range: f32,
+    azimuth: f32,
+    elevation: f32,
+    firing: u32,
+    raw_distance: u16,
+    intensity: u8,
+    laser: u8,
 }
 
 /// Turns `points` into returns of `model` (see the module's documentation). Errors name
@@ -284,125 +379,170 @@ pub fn to_returns(
     let per_packet = model.sequences_per_packet(ReturnMode::Strongest) as i64;
     let rings = model.rings();
     let beams = BeamTable::new(model);
-    // Per laser: its firing time in the sequence and its azimuth offset in microseconds
-    // of rotation, so a point's firing is one division.
+    // Per laser: its firing time in the sequence, and its lead (that time and its azimuth
+    // offset in rotation) in firing steps, so a point's firing is a subtraction from its
+    // azimuth in steps.
     let laser_us: Vec<f64> = (0..lasers).map(|l| model.laser_offset_us(l)).collect();
-    let lead_us: Vec<f64> = (0..lasers)
-        .map(|l| laser_us[l] + model.azimuth_offset_deg.get(l).copied().unwrap_or(0.0) * us_per_deg)
+    let lead_steps: Vec<f64> = (0..lasers)
+        .map(|l| {
+            let offset_deg = model.azimuth_offset_deg.get(l).copied().unwrap_or(0.0);
+            (laser_us[l] + offset_deg * us_per_deg) / sequence_us
+        })
         .collect();
     let scale = match options.intensity_scale {
         IntensityScale::Unit => 255.0,
         IntensityScale::Byte | IntensityScale::Unstated => 1.0,
     };
-    let mut taken = vec![false; n as usize * lasers];
-    let (mut moved, mut shared, mut from_elevation, mut ambiguous) = (0, 0, 0, 0);
-    // Per point: its slot (firing * lasers + laser) and its return, in input order.
-    let mut slot_of = Vec::with_capacity(points.len());
+    let slots = n as usize * lasers;
+    // The point in each slot (u32::MAX: none); a point that had to share a slot is listed
+    // in `sharing` instead, as (slot, point), in file order.
+    let mut point_at = vec![u32::MAX; slots];
+    let mut sharing: Vec<(u32, u32)> = Vec::new();
+    let (mut moved, mut from_elevation, mut ambiguous) = (0, 0, 0);
+    // Per point, in input order: what its return needs beyond the point itself.
     let mut placed = Vec::with_capacity(points.len());
-    for (i, p) in points.iter().enumerate() {
-        if let Some((field, v)) = p.non_finite() {
-            return Err(Error::Invalid(format!(
-                "{source}: point {i} (0-based): {field} is {v}, not a finite number"
-            )));
-        }
-        let (x, y, z) = (f64::from(p.x), f64::from(p.y), f64::from(p.z));
-        // sqrt of the sums, not hypot: libm's hypot (overflow-safe, not needed for
-        // coordinates in metres) was an eighth of the conversion's time.
-        let h2 = x * x + y * y;
-        let horizontal = h2.sqrt();
-        let range = (h2 + z * z).sqrt();
-        // atan2 gives [-180, 180] degrees: one add wraps it (wrap_360 is rem_euclid's value
-        // without its fmod call).
-        let azimuth = crate::noise::wrap_360((-y).atan2(x).to_degrees());
-        let elevation = z.atan2(horizontal).to_degrees();
-        let laser = match p.ring {
-            Some(ring) if usize::from(ring) < lasers => beams.by_elevation[usize::from(ring)],
-            Some(ring) => {
+    let mut geometry = Geometry::default();
+    let steps_per_deg = us_per_deg / sequence_us;
+    for (c, chunk) in points.chunks(CHUNK).enumerate() {
+        // A non-finite value flows through the chunk's arithmetic harmlessly and is
+        // reported when its point's turn comes (after any earlier point's error).
+        let bad = chunk.iter().position(|p| p.non_finite().is_some());
+        geometry.of(chunk, steps_per_deg);
+        for (j, p) in chunk.iter().enumerate() {
+            let i = c * CHUNK + j;
+            if bad == Some(j) {
+                let (field, v) = p.non_finite().unwrap_or(("x", p.x));
                 return Err(Error::Invalid(format!(
-                    "{source}: point {i} (0-based): ring {ring} is out of range for the {} \
-                     ({lasers} lasers, rings 0 to {})",
-                    model.name,
-                    lasers - 1
-                )))
+                    "{source}: point {i} (0-based): {field} is {v}, not a finite number"
+                )));
             }
-            None => {
-                let (laser, unsure) = beams.nearest_at(horizontal, z, elevation);
-                from_elevation += 1;
-                ambiguous += usize::from(unsure);
-                laser
+            let range = geometry.range[j];
+            let laser = match p.ring {
+                Some(ring) if usize::from(ring) < lasers => beams.by_elevation[usize::from(ring)],
+                Some(ring) => {
+                    return Err(Error::Invalid(format!(
+                        "{source}: point {i} (0-based): ring {ring} is out of range for the \
+                         {} ({lasers} lasers, rings 0 to {})",
+                        model.name,
+                        lasers - 1
+                    )))
+                }
+                None => {
+                    let (laser, unsure) = beams.nearest_at(
+                        geometry.horizontal[j],
+                        f64::from(p.z),
+                        geometry.elevation[j],
+                    );
+                    from_elevation += 1;
+                    ambiguous += usize::from(unsure);
+                    laser
+                }
+            };
+            let l = usize::from(laser);
+            // The firing on the circle. The turn is cut where a firing starts at azimuth 0,
+            // as a capture's sweeps are cut: a firing that started before 0 (a laser of
+            // the turn's last firing, interpolated or offset past the cut) is the turn's
+            // last, one that starts at or past 360 the next turn's first (a laser fired
+            // ahead of its firing's azimuth by an offset); within the turn, the grid
+            // firing whose step holds the firing's start (grid firing k covers [k, k + 1)
+            // steps, as the turn covers [0, 360): the firings of a capture's sweep, cut at
+            // 0, keep their order, one a step while the sensor turns no slower than the
+            // grid). Float noise at a step's start (a thousandth of a firing: float32
+            // coordinates give azimuths to about 3e-5 of one) counts as the start itself.
+            // Within one turn of the grid either way (azimuths and offsets under one
+            // turn), so one add or subtract wraps it (no float remainder).
+            const AT_CUT: f64 = 1e-3;
+            let turn = n as f64;
+            let mut t = geometry.steps[j] - lead_steps[l];
+            if t < -AT_CUT {
+                t += turn;
+            } else if t >= turn - AT_CUT {
+                t -= turn;
             }
-        };
-        let l = usize::from(laser);
-        // The firing on the circle. The turn is cut where a firing starts at azimuth 0,
-        // as a capture's sweeps are cut: a firing that started before 0 (a laser of the
-        // turn's last firing, interpolated or offset past the cut) is the turn's last,
-        // one that starts at or past 360 the next turn's first (a laser fired ahead of
-        // its firing's azimuth by an offset); within the turn, the grid firing whose step
-        // holds the firing's start (grid firing k covers [k, k + 1) steps, as the turn
-        // covers [0, 360): the firings of a capture's sweep, cut at 0, keep their order,
-        // one a step while the sensor turns no slower than the grid). Float noise at a
-        // step's start (a thousandth of a firing: float32 coordinates give azimuths to
-        // about 3e-5 of one) counts as the start itself. Within one turn of the grid
-        // either way (azimuths and offsets under one turn), so one add or subtract wraps
-        // it (no float remainder).
-        const AT_CUT: f64 = 1e-3;
-        let turn = n as f64;
-        let mut t = (azimuth * us_per_deg - lead_us[l]) / sequence_us;
-        if t < -AT_CUT {
-            t += turn;
-        } else if t >= turn - AT_CUT {
-            t -= turn;
+            // Truncation is the floor here: t + AT_CUT is at least 0 (or clamped to 0
+            // whichever way it rounds), and `floor` is a libm call on the x86-64
+            // baseline (no SSE4.1 round), a twentieth of the conversion.
+            let k = ((t + AT_CUT) as i64).clamp(0, n - 1);
+            let free =
+                |f: i64| (0..n).contains(&f) && point_at[f as usize * lasers + l] == u32::MAX;
+            let firing = if free(k) {
+                k
+            } else if let Some(f) = (1..=REACH).flat_map(|d| [k - d, k + d]).find(|&f| free(f)) {
+                moved += 1;
+                f
+            } else {
+                k
+            };
+            let slot = firing as usize * lasers + l;
+            if point_at[slot] == u32::MAX {
+                point_at[slot] = i as u32;
+            } else {
+                sharing.push((slot as u32, i as u32));
+            }
+            placed.push(Placed {
+                x: p.x,
+                y: p.y,
+                z: p.z,
+                range: range as f32,
+                azimuth: geometry.azimuth[j] as f32,
+                elevation: geometry.elevation[j] as f32,
+                firing: firing as u32,
+                raw_distance: crate::noise::round_clamped(
+                    range / model.distance_resolution_m,
+                    u16::MAX,
+                ),
+                intensity: crate::noise::round_clamped(f64::from(p.intensity) * scale, 255) as u8,
+                laser,
+            });
         }
-        let k = ((t + AT_CUT).floor() as i64).clamp(0, n - 1);
-        let free = |f: i64| (0..n).contains(&f) && !taken[f as usize * lasers + l];
-        let firing = if free(k) {
-            k
-        } else if let Some(f) = (1..=REACH).flat_map(|d| [k - d, k + d]).find(|&f| free(f)) {
-            moved += 1;
-            f
-        } else {
-            shared += 1;
-            k
-        };
-        taken[firing as usize * lasers + l] = true;
-        let time_us = firing as f64 * sequence_us + laser_us[l];
-        let byte = crate::noise::round_clamped(f64::from(p.intensity) * scale, 255) as u8;
-        slot_of.push(firing as u32 * lasers as u32 + u32::from(laser));
-        placed.push(Return {
-            x: p.x,
-            y: p.y,
-            z: p.z,
-            range: range as f32,
-            azimuth: azimuth as f32,
-            elevation: elevation as f32,
-            time: options.start_time + time_us * 1e-6,
-            packet: (firing / per_packet) as u32,
-            raw_distance: crate::noise::round_clamped(
-                range / model.distance_resolution_m,
-                u16::MAX,
-            ),
-            intensity: byte,
-            laser,
-            ring: rings[l],
-            block: (firing % per_packet) as u8,
-            kind: ReturnKind::Strongest,
-        });
     }
-    // Counting sort by slot: firing order, then laser, then file order (stable, so the
-    // same points always give the same returns).
-    let mut start = vec![0u32; taken.len() + 1];
-    for &s in &slot_of {
-        start[s as usize + 1] += 1;
+    let shared = sharing.len();
+    // Firing order, then laser, then file order (the same points always give the same
+    // returns): the slots walked in order, a slot's own point before those sharing it
+    // (pushed in file order, so a stable sort by slot keeps them so).
+    sharing.sort_by_key(|&(slot, _)| slot);
+    let mut order = Vec::with_capacity(points.len());
+    let mut rest = sharing.iter().peekable();
+    for (slot, &i) in point_at.iter().enumerate() {
+        if i != u32::MAX {
+            order.push(i);
+            while let Some(&&(s, j)) = rest.peek() {
+                if s as usize != slot {
+                    break;
+                }
+                order.push(j);
+                rest.next();
+            }
+        }
     }
-    for j in 1..start.len() {
-        start[j] += start[j - 1];
-    }
-    let mut order = vec![0u32; points.len()];
-    for (i, &s) in slot_of.iter().enumerate() {
-        order[start[s as usize] as usize] = i as u32;
-        start[s as usize] += 1;
-    }
-    let returns = order.iter().map(|&i| placed[i as usize]).collect();
+    // The returns built in firing order from the placings (a placing holds all its
+    // return needs, so one record is read a return; building returns in input order and
+    // then moving them was a fifth of the conversion, most of it the copy's pages).
+    let returns = order
+        .iter()
+        .map(|&i| {
+            let q = &placed[i as usize];
+            let l = usize::from(q.laser);
+            let firing = i64::from(q.firing);
+            let time_us = firing as f64 * sequence_us + laser_us[l];
+            Return {
+                x: q.x,
+                y: q.y,
+                z: q.z,
+                range: q.range,
+                azimuth: q.azimuth,
+                elevation: q.elevation,
+                time: options.start_time + time_us * 1e-6,
+                packet: (firing / per_packet) as u32,
+                raw_distance: q.raw_distance,
+                intensity: q.intensity,
+                laser: q.laser,
+                ring: rings[l],
+                block: (firing % per_packet) as u8,
+                kind: ReturnKind::Strongest,
+            }
+        })
+        .collect();
     Ok(CloudReturns {
         returns,
         order,

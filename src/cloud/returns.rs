@@ -267,6 +267,12 @@ struct Geometry {
     elevation: [f64; CHUNK],
     /// Azimuth in firing steps from 0.
     steps: [f64; CHUNK],
+    /// Range in the sensor's distance units, rounded and clamped (the raw distance).
+    raw: [u16; CHUNK],
+    /// Intensity byte.
+    intensity: [u8; CHUNK],
+    /// Whether x, y, z and intensity are all finite.
+    finite: [bool; CHUNK],
 }
 
 impl Default for Geometry {
@@ -277,22 +283,25 @@ impl Default for Geometry {
             azimuth: [0.0; CHUNK],
             elevation: [0.0; CHUNK],
             steps: [0.0; CHUNK],
+            raw: [0; CHUNK],
+            intensity: [0; CHUNK],
+            finite: [true; CHUNK],
         }
     }
 }
 
 impl Geometry {
     /// The geometry of `chunk` (at most [`CHUNK`] points, all finite) in its first rows.
-    fn of(&mut self, chunk: &[CloudPoint], steps_per_deg: f64) {
+    fn of(&mut self, chunk: &[CloudPoint], steps_per_deg: f64, unit_m: f64, scale: f64) {
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx2") {
                 // SAFETY: the processor has AVX2 (checked on the line above).
-                unsafe { self.of_avx2(chunk, steps_per_deg) };
+                unsafe { self.of_avx2(chunk, steps_per_deg, unit_m, scale) };
                 return;
             }
         }
-        self.of_any(chunk, steps_per_deg);
+        self.of_any(chunk, steps_per_deg, unit_m, scale);
     }
 
     /// [`Geometry::of`] compiled for AVX2: four points a vector instead of SSE2's two
@@ -300,18 +309,26 @@ impl Geometry {
     /// closure passed to `transmission::wide` was not inlined into it and ran as SSE2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn of_avx2(&mut self, chunk: &[CloudPoint], steps_per_deg: f64) {
-        self.of_any(chunk, steps_per_deg);
+    unsafe fn of_avx2(
+        &mut self,
+        chunk: &[CloudPoint],
+        steps_per_deg: f64,
+        unit_m: f64,
+        scale: f64,
+    ) {
+        self.of_any(chunk, steps_per_deg, unit_m, scale);
     }
 
     /// [`Geometry::of`]'s loop: branch-free arithmetic (`atan`'s selects, no libm call),
     /// so that it vectorises.
     #[inline(always)]
-    fn of_any(&mut self, chunk: &[CloudPoint], steps_per_deg: f64) {
+    fn of_any(&mut self, chunk: &[CloudPoint], steps_per_deg: f64, unit_m: f64, scale: f64) {
         let n = chunk.len();
         let (range, horizontal) = (&mut self.range[..n], &mut self.horizontal[..n]);
         let (azimuth, elevation) = (&mut self.azimuth[..n], &mut self.elevation[..n]);
         let steps = &mut self.steps[..n];
+        let (raw, finite) = (&mut self.raw[..n], &mut self.finite[..n]);
+        let bytes = &mut self.intensity[..n];
         for (k, p) in chunk.iter().enumerate() {
             let (x, y, z) = (f64::from(p.x), f64::from(p.y), f64::from(p.z));
             // sqrt of the sums, not hypot: libm's hypot (overflow-safe, not needed for
@@ -324,6 +341,11 @@ impl Geometry {
             azimuth[k] = if a < 0.0 { a + 360.0 } else { a };
             steps[k] = azimuth[k] * steps_per_deg;
             elevation[k] = crate::cloud::atan::atan2(z, horizontal[k]).to_degrees();
+            raw[k] = crate::noise::round_clamped(range[k] / unit_m, u16::MAX);
+            let i = f64::from(p.intensity);
+            bytes[k] = crate::noise::round_clamped(i * scale, 255) as u8;
+            // Zero times a value is 0 unless the value is infinite or NaN.
+            finite[k] = (x * 0.0 + y * 0.0) + (z * 0.0 + i * 0.0) == 0.0;
         }
     }
 }
@@ -406,8 +428,8 @@ pub fn to_returns(
     for (c, chunk) in points.chunks(CHUNK).enumerate() {
         // A non-finite value flows through the chunk's arithmetic harmlessly and is
         // reported when its point's turn comes (after any earlier point's error).
-        let bad = chunk.iter().position(|p| p.non_finite().is_some());
-        geometry.of(chunk, steps_per_deg);
+        geometry.of(chunk, steps_per_deg, model.distance_resolution_m, scale);
+        let bad = geometry.finite[..chunk.len()].iter().position(|&f| !f);
         for (j, p) in chunk.iter().enumerate() {
             let i = c * CHUNK + j;
             if bad == Some(j) {
@@ -487,11 +509,8 @@ pub fn to_returns(
                 azimuth: geometry.azimuth[j] as f32,
                 elevation: geometry.elevation[j] as f32,
                 firing: firing as u32,
-                raw_distance: crate::noise::round_clamped(
-                    range / model.distance_resolution_m,
-                    u16::MAX,
-                ),
-                intensity: crate::noise::round_clamped(f64::from(p.intensity) * scale, 255) as u8,
+                raw_distance: geometry.raw[j],
+                intensity: geometry.intensity[j],
                 laser,
             });
         }

@@ -74,6 +74,38 @@ pub trait FrameSource {
 
     /// Hands a finished frame's buffer back for reuse.
     fn recycle(&mut self, frame: Frame);
+
+    /// Every remaining frame whose index lies in `frames`, in order.
+    fn read_rest(
+        &mut self,
+        frames: &std::ops::RangeInclusive<u32>,
+    ) -> crate::error::Result<Vec<Frame>> {
+        let mut all = Vec::new();
+        loop {
+            let batch = self.next_batch(16, frames)?;
+            if batch.is_empty() {
+                return Ok(all);
+            }
+            all.extend(batch);
+        }
+    }
+
+    /// Reads the source to its end (or past `frames`), counting the frames in `frames`
+    /// and keeping none (their buffers recycled).
+    fn count_rest(
+        &mut self,
+        frames: &std::ops::RangeInclusive<u32>,
+    ) -> crate::error::Result<usize> {
+        let mut n = 0;
+        loop {
+            let batch = self.next_batch(16, frames)?;
+            if batch.is_empty() {
+                return Ok(n);
+            }
+            n += batch.len();
+            batch.into_iter().for_each(|f| self.recycle(f));
+        }
+    }
 }
 
 impl Frame {

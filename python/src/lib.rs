@@ -1019,16 +1019,6 @@ fn read_capture<'py>(
 ) -> PyResult<(&'static str, Vec<(u32, bool, Bound<'py, PyDict>)>)> {
     use lidar_noise::frame::FrameSource;
     use lidar_noise::sensor::frames::CaptureFrames;
-    fn drain(reader: &mut impl FrameSource) -> Result<Vec<Frame>, Error> {
-        let mut all = Vec::new();
-        loop {
-            let batch = reader.next_batch(16, &(0..=u32::MAX))?;
-            if batch.is_empty() {
-                return Ok(all);
-            }
-            all.extend(batch);
-        }
-    }
     let (sensor, frames) = py
         .detach(|| -> Result<(&'static str, Vec<Frame>), Error> {
             let options = lidar_noise::hdl32e::frames::DecoderOptions {
@@ -1038,10 +1028,10 @@ fn read_capture<'py>(
             // The reader `run` uses: the HDL-32E's, or another described sensor's.
             match lidar_noise::sensor::frames::open_capture(&path, &options)? {
                 CaptureFrames::Hdl32e(mut r) => {
-                    Ok((lidar_noise::sensor::HDL32E.name, drain(&mut *r)?))
+                    Ok((lidar_noise::sensor::HDL32E.name, r.read_rest(&(0..=u32::MAX))?))
                 }
                 CaptureFrames::Model(mut r) => {
-                    let frames = drain(&mut *r)?;
+                    let frames = r.read_rest(&(0..=u32::MAX))?;
                     Ok((r.model().name, frames))
                 }
             }

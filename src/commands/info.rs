@@ -2,6 +2,7 @@
 //! sensor, told by its packets' structure as `run` tells it).
 
 use crate::cli::Global;
+use crate::frame::FrameSource;
 use crate::hdl32e::frames::CaptureSummary;
 use crate::options::DecoderArgs;
 use crate::sensor::frames::{CaptureFrames, ModelCaptureSummary};
@@ -33,14 +34,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         let mut reader = match crate::engine::inputs::open_any_capture(path, &options)? {
             CaptureFrames::Hdl32e(r) => r,
             CaptureFrames::Model(mut r) => {
-                let everything = 0..=u32::MAX;
-                loop {
-                    let batch = r.next_batch(16, &everything)?;
-                    if batch.is_empty() {
-                        break;
-                    }
-                    batch.into_iter().for_each(|f| r.recycle(f));
-                }
+                r.count_rest(&(0..=u32::MAX))?;
                 write_model(&mut out, path, r.summary(), args.json)?;
                 continue;
             }
@@ -72,10 +66,7 @@ fn write_model(
     s: &ModelCaptureSummary,
     json: bool,
 ) -> Result<()> {
-    let dead: Vec<u8> = (0..s.returns_per_laser.len())
-        .filter(|&l| s.returns_per_laser[l] == 0)
-        .map(|l| l as u8)
-        .collect();
+    let dead = s.dead_lasers();
     if json {
         let mut value = serde_json::to_value(s)?;
         value["file"] = serde_json::Value::from(path.display().to_string());

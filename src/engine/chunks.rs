@@ -24,6 +24,7 @@
 
 use super::{Plan, RunRequest};
 use crate::cli::Global;
+use crate::frame::FrameSource;
 use crate::hdl32e::frames::FrameReader;
 use crate::hdl32e::index::{FrameScan, FrameSeek};
 use crate::noise::summary::{
@@ -614,7 +615,7 @@ fn join_capture(
     }
     // The capture summary covers every packet a run reads: decode without processing.
     let mut reader = job.open(plan, None)?;
-    while !reader.next_batch(64, &plan.frames)?.is_empty() {}
+    reader.count_rest(&plan.frames)?;
     let capture_summary = reader.summary();
     super::inputs::warn_truncation(global, Path::new(&job.shown()), &capture_summary);
     super::inputs::warn_capture(

@@ -716,17 +716,7 @@ fn count_frames(s: &SweepSettings, capture: &CaptureInput) -> Result<usize> {
             Ok(chunks::chunk_plan(scan, &s.frames, s.decoder.keep_partial, u32::MAX)?.2)
         }
         // Another sensor's capture has no frame index: its frames are decoded and counted.
-        CaptureFrames::Model(mut r) => {
-            let mut n = 0;
-            loop {
-                let batch = r.next_batch(16, &s.frames)?;
-                if batch.is_empty() {
-                    return Ok(n);
-                }
-                n += batch.len();
-                batch.into_iter().for_each(|f| r.recycle(f));
-            }
-        }
+        CaptureFrames::Model(mut r) => r.count_rest(&s.frames),
     }
 }
 

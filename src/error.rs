@@ -13,12 +13,20 @@ pub enum Error {
         /// The underlying error.
         source: std::io::Error,
     },
-    /// A capture file is malformed or not an HDL-32E capture.
+    /// A capture file is malformed or not the capture its reader decodes.
     #[error("{path}: {message}")]
     Capture {
         /// The capture file.
         path: PathBuf,
         /// What is wrong and where (packet number, byte offset).
+        message: String,
+    },
+    /// A capture of another sensor than the reader decodes (the message names it).
+    #[error("{path}: {message}")]
+    OtherSensor {
+        /// The capture file.
+        path: PathBuf,
+        /// What the capture is.
         message: String,
     },
     /// A configuration or calibration file is invalid.

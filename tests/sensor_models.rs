@@ -1325,7 +1325,14 @@ fn an_hdl64e_capture_is_decoded_with_the_calibration_of_its_status_bytes() {
     let path = tmp.path().join("s2.pcap");
     s2_capture(&path, &status);
     let open = |p: &Path| {
-        ModelFrameReader::open(p, true, DualSelect::Both, 0.0, true)
+        let options = lidar_noise::hdl32e::frames::DecoderOptions {
+            interpolate_azimuth: true,
+            dual: DualSelect::Both,
+            cut_angle_deg: 0.0,
+            keep_partial: true,
+            ..Default::default()
+        };
+        ModelFrameReader::open(p, &options)
             .unwrap()
             .expect("an HDL-64E capture")
     };

@@ -368,7 +368,14 @@ pub(super) fn identify_in(mut capture: CaptureReader) -> Result<Identity> {
             }
         }
     }
-    identify::identify(&sample).map_err(|message| {
+    identify::identify(&sample).map_err(|refusal| {
+        if refusal.other_sensor {
+            return Error::OtherSensor {
+                path: path.clone(),
+                message: refusal.message,
+            };
+        }
+        let message = refusal.message;
         let linktype = capture.linktype().unwrap_or(-1);
         let message = if sample.products.is_empty() && capture.linktype().is_none() {
             // pcapng packets refer to an interface description block for their link type.

@@ -92,14 +92,38 @@ fn packet_period_us(sample: &Sample) -> Option<f64> {
     }
 }
 
+/// Why sampled packets were not taken for an HDL-32E's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Refusal {
+    /// What the packets are, for the user.
+    pub message: String,
+    /// Whether their product byte names another sensor (whose own reader then explains).
+    pub other_sensor: bool,
+}
+
+impl From<String> for Refusal {
+    fn from(message: String) -> Self {
+        Refusal {
+            message,
+            other_sensor: false,
+        }
+    }
+}
+
+impl std::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
 /// Decides whether the sampled packets come from an HDL-32E; the error says what they are.
-pub fn identify(sample: &Sample) -> Result<Identity, String> {
+pub fn identify(sample: &Sample) -> Result<Identity, Refusal> {
     let Some(&product) = sample.products.first() else {
-        return Err(
+        return Err(String::from(
             "no HDL-32E data packets found (1206-byte UDP payloads with 0xFFEE block \
-                    flags): is this a Velodyne capture?"
-                .into(),
-        );
+                    flags): is this a Velodyne capture?",
+        )
+        .into());
     };
     if let Some(k) = sample.products.iter().position(|&p| p != product) {
         let other = sample.products[k];
@@ -107,7 +131,7 @@ pub fn identify(sample: &Sample) -> Result<Identity, String> {
             Some((record, offset)) => format!(" (record {record} at byte offset {offset})"),
             None => String::new(),
         };
-        return Err(format!(
+        return Err(Refusal::from(format!(
             "data packets disagree on the product id: data packet {k}{} has 0x{other:02x} ({}) \
              where data packet 0{} has 0x{product:02x} ({}): the capture mixes sensors; keep \
              one sensor's packets (e.g. filter by UDP port) and rerun",
@@ -115,17 +139,22 @@ pub fn identify(sample: &Sample) -> Result<Identity, String> {
             packet::product_name(other),
             place(0),
             packet::product_name(product)
-        ));
+        )));
     }
     if product != packet::PRODUCT_HDL32E && product != 0 {
-        return Err(format!(
-            "this is a {} capture (product id 0x{product:02x}), not an HDL-32E",
-            packet::product_name(product)
-        ));
+        return Err(Refusal {
+            message: format!(
+                "this is a {} capture (product id 0x{product:02x}), not an HDL-32E",
+                packet::product_name(product)
+            ),
+            other_sensor: true,
+        });
     }
     let mode_byte = sample.modes[0];
     let mode = ReturnMode::from_byte(mode_byte).ok_or_else(|| {
-        format!("unknown return mode byte 0x{mode_byte:02x} in the first data packet")
+        Refusal::from(format!(
+            "unknown return mode byte 0x{mode_byte:02x} in the first data packet"
+        ))
     })?;
     let period = packet_period_us(sample);
     if let Some(period) = period {
@@ -139,18 +168,18 @@ pub fn identify(sample: &Sample) -> Result<Identity, String> {
             } else {
                 "a packet timing no HDL-32E produces"
             };
-            return Err(format!(
+            return Err(Refusal::from(format!(
                 "the product byte says 0x{product:02x} but data packets are {period:.0} us apart, \
                  {what}; an HDL-32E sends one every {:.0} us",
                 firings * packet::FIRING_US
-            ));
+            )));
         }
     } else if product == 0 {
-        return Err(
+        return Err(String::from(
             "product id 0x00 (old firmware) and too few data packets to confirm the HDL-32E \
-             packet timing"
-                .into(),
-        );
+             packet timing",
+        )
+        .into());
     }
     Ok(Identity {
         product,
@@ -184,11 +213,13 @@ mod tests {
     #[test]
     fn vlp16_is_refused_by_product_or_by_timing() {
         let by_product = identify(&sample(0x22, 0x37, 1327)).unwrap_err();
-        assert!(by_product.contains("VLP-16"), "{by_product}");
+        assert!(by_product.message.contains("VLP-16"), "{by_product}");
+        assert!(by_product.other_sensor, "{by_product}");
         let by_timing = identify(&sample(0x21, 0x37, 1327)).unwrap_err();
-        assert!(by_timing.contains("VLP-16"), "{by_timing}");
+        assert!(by_timing.message.contains("VLP-16"), "{by_timing}");
+        assert!(!by_timing.other_sensor, "{by_timing}");
         let dual = identify(&sample(0x21, 0x39, 663)).unwrap_err();
-        assert!(dual.contains("VLP-16"), "{dual}");
+        assert!(dual.message.contains("VLP-16"), "{dual}");
     }
 
     #[test]
@@ -208,7 +239,7 @@ mod tests {
             payload[packet::DATA_PACKET_BYTES - 1] = if i == 6 { 0x22 } else { 0x21 };
             s.push(&payload, u64::from(i), i + 2, 24 + 1264 * u64::from(i + 2));
         }
-        let m = identify(&s).unwrap_err();
+        let m = identify(&s).unwrap_err().message;
         assert!(
             m.contains("data packet 6 (record 8 at byte offset 10136) has 0x22 (VLP-16)")
                 && m.contains("data packet 0 (record 2 at byte offset 2552) has 0x21"),

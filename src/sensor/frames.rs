@@ -14,7 +14,7 @@
 //! `run` refuses those options for other sensors, and a capture's returns are the same
 //! however it is read.
 
-use super::decode::{DualSelect, ModelDecoder};
+use super::decode::ModelDecoder;
 use super::identify::{identify, Identified};
 use super::{ReturnMode, SensorModel};
 use crate::capture::CaptureReader;
@@ -48,17 +48,7 @@ pub fn open_capture(
     if crate::capture::is_stream(path) {
         return Err(e);
     }
-    model_or(
-        e,
-        options,
-        ModelFrameReader::open(
-            path,
-            options.interpolate_azimuth,
-            options.dual,
-            options.cut_angle_deg,
-            options.keep_partial,
-        ),
-    )
+    model_or(e, options, ModelFrameReader::open(path, options))
 }
 
 /// The other sensor's reader, or the error to show when neither reader takes the
@@ -76,7 +66,7 @@ fn model_or(
                 None => r,
             },
         ))),
-        Err(m) if hdl32e.to_string().contains("not an HDL-32E") => Err(m),
+        Err(m) if matches!(hdl32e, Error::OtherSensor { .. }) => Err(m),
         _ => Err(hdl32e),
     }
 }
@@ -94,17 +84,7 @@ pub fn open_capture_bytes(
         Err(e) => e,
     };
     let open = || CaptureReader::from_reader(std::io::Cursor::new(ArcBytes(bytes.clone())), name);
-    model_or(
-        e,
-        options,
-        ModelFrameReader::open_with(
-            open,
-            options.interpolate_azimuth,
-            options.dual,
-            options.cut_angle_deg,
-            options.keep_partial,
-        ),
-    )
+    model_or(e, options, ModelFrameReader::open_with(open, options))
 }
 
 /// Data packets searched for an HDL-64E's calibration in their status bytes: three
@@ -180,6 +160,20 @@ pub struct ModelCaptureSummary {
     pub calibration: String,
 }
 
+impl ModelCaptureSummary {
+    /// Laser ids without a single return in a capture that has returns (empty when it has
+    /// none), as [`crate::hdl32e::frames::CaptureSummary::dead_lasers`] gives them.
+    pub fn dead_lasers(&self) -> Vec<u8> {
+        if self.returns == 0 {
+            return Vec::new();
+        }
+        (0..self.returns_per_laser.len())
+            .filter(|&l| self.returns_per_laser[l] == 0)
+            .map(|l| l as u8)
+            .collect()
+    }
+}
+
 /// Iterator over the frames of a capture of a described sensor other than the HDL-32E.
 pub struct ModelFrameReader {
     capture: CaptureReader,
@@ -205,14 +199,14 @@ pub struct ModelFrameReader {
 
 impl ModelFrameReader {
     /// Identifies the sensor of the capture `open` reads (twice: a first reader for the
-    /// sample, a second to decode); `None` when it is an HDL-32E (its own reader takes
-    /// it), an error when no described sensor fits.
+    /// sample, a second to decode; a third for an HDL-64E's status bytes, unless
+    /// `options` name a calibration file); `None` when it is an HDL-32E (its own reader
+    /// takes it), an error when no described sensor fits. Of `options`, the HDL-32E's
+    /// calibration is not used, nor the calibration file: the caller applies it
+    /// ([`ModelFrameReader::with_calibration_file`]), whose errors then are its own.
     pub fn open_with(
         open: impl Fn() -> Result<CaptureReader>,
-        interpolate: bool,
-        dual: DualSelect,
-        cut_angle_deg: f64,
-        keep_partial: bool,
+        options: &crate::hdl32e::frames::DecoderOptions,
     ) -> Result<Option<Self>> {
         let mut sample_reader = open()?;
         let path = sample_reader.path().to_path_buf();
@@ -234,10 +228,17 @@ impl ModelFrameReader {
             return Ok(None);
         }
         let model = found.model;
-        let cut = ((cut_angle_deg.rem_euclid(360.0) * 100.0).round() as u32) % 36000;
-        let mut decoder = ModelDecoder::new(model, interpolate, dual);
+        let cut = ((options.cut_angle_deg.rem_euclid(360.0) * 100.0).round() as u32) % 36000;
+        let mut decoder = ModelDecoder::new(model, options.interpolate_azimuth, options.dual);
         let mut calibration = "built-in".to_string();
-        if let Some(cal) = status_calibration(&open, model)? {
+        // A calibration file, applied once the sensor is known
+        // ([`ModelFrameReader::with_calibration_file`]), wins over the status bytes: they
+        // are not read then (a third pass over up to 12,480 data packets).
+        let status = match options.calibration_file {
+            Some(_) => None,
+            None => status_calibration(&open, model)?,
+        };
+        if let Some(cal) = status {
             calibration = cal.source.clone();
             decoder = decoder
                 .with_calibration(cal)
@@ -250,7 +251,7 @@ impl ModelFrameReader {
             capture: open()?,
             decoder,
             model,
-            keep_partial,
+            keep_partial: options.keep_partial,
             cut,
             building: None,
             ready: VecDeque::new(),
@@ -298,18 +299,9 @@ impl ModelFrameReader {
     /// [`ModelFrameReader::open_with`] of a capture file.
     pub fn open(
         path: &Path,
-        interpolate: bool,
-        dual: DualSelect,
-        cut_angle_deg: f64,
-        keep_partial: bool,
+        options: &crate::hdl32e::frames::DecoderOptions,
     ) -> Result<Option<Self>> {
-        Self::open_with(
-            || CaptureReader::open(path),
-            interpolate,
-            dual,
-            cut_angle_deg,
-            keep_partial,
-        )
+        Self::open_with(|| CaptureReader::open(path), options)
     }
 
     /// The sensor identified.
@@ -532,5 +524,23 @@ impl crate::frame::FrameSource for ModelFrameReader {
 
     fn recycle(&mut self, frame: Frame) {
         ModelFrameReader::recycle(self, frame)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dead_lasers_are_those_without_a_return_in_a_capture_with_returns() {
+        let mut s = ModelCaptureSummary {
+            returns: 5,
+            returns_per_laser: vec![3, 0, 2, 0],
+            ..Default::default()
+        };
+        assert_eq!(s.dead_lasers(), vec![1, 3]);
+        s.returns = 0;
+        s.returns_per_laser = vec![0; 4];
+        assert!(s.dead_lasers().is_empty());
     }
 }

@@ -64,20 +64,15 @@ impl Output for Scan<'_> {
 
     fn write_to(&self, out: &mut dyn Write) -> std::io::Result<()> {
         match self.format {
-            Format::Kitti => {
-                for p in self.points {
-                    for v in [p.x, p.y, p.z, f32::from(p.intensity) / 255.0] {
-                        out.write_all(&v.to_le_bytes())?;
-                    }
-                }
-            }
-            Format::NuScenes => {
-                for p in self.points {
-                    for v in [p.x, p.y, p.z, f32::from(p.intensity), f32::from(p.ring)] {
-                        out.write_all(&v.to_le_bytes())?;
-                    }
-                }
-            }
+            // Points gathered a chunk at a time into a buffer, one `write_all` a chunk: a
+            // call through `dyn Write` for every 4-byte value (a small `memcpy` each) was
+            // a twentieth of a dataset run.
+            Format::Kitti => write_records(out, self.points, |p| {
+                floats_le::<4, 16>([p.x, p.y, p.z, f32::from(p.intensity) / 255.0])
+            })?,
+            Format::NuScenes => write_records(out, self.points, |p| {
+                floats_le::<5, 20>([p.x, p.y, p.z, f32::from(p.intensity), f32::from(p.ring)])
+            })?,
             Format::Pcd => {
                 let n = self.points.len();
                 write!(
@@ -102,6 +97,34 @@ impl Output for Scan<'_> {
         }
         Ok(())
     }
+}
+
+/// The little-endian bytes of `N` floats, one after the other.
+fn floats_le<const N: usize, const B: usize>(values: [f32; N]) -> [u8; B] {
+    const { assert!(B == 4 * N, "B must be the bytes of N floats") };
+    let mut bytes = [0u8; B];
+    for (chunk, v) in bytes.chunks_exact_mut(4).zip(values) {
+        chunk.copy_from_slice(&v.to_le_bytes());
+    }
+    bytes
+}
+
+/// Writes `record(p)` for every point, 64 KB at a time.
+fn write_records<const B: usize>(
+    out: &mut dyn Write,
+    points: &[ScanPoint],
+    record: impl Fn(&ScanPoint) -> [u8; B],
+) -> std::io::Result<()> {
+    let per_chunk = (64 << 10) / B;
+    let mut buf = Vec::with_capacity(per_chunk * B);
+    for chunk in points.chunks(per_chunk) {
+        buf.clear();
+        for p in chunk {
+            buf.extend_from_slice(&record(p));
+        }
+        out.write_all(&buf)?;
+    }
+    Ok(())
 }
 
 /// The sidecar CSV: one row per point of the scan written, in the same order.

@@ -159,16 +159,22 @@ fn is_zero(n: &u64) -> bool {
 /// Returns below this count say too little about the intensity distribution.
 const MIN_RETURNS_FOR_INTENSITY_CHECK: u64 = 1000;
 
+/// Laser ids with no return among `per_laser` counts, when there are `returns` at all (a
+/// capture without any says nothing about its lasers).
+pub(crate) fn dead_lasers(returns: u64, per_laser: &[u64]) -> Vec<u8> {
+    if returns == 0 {
+        return Vec::new();
+    }
+    (0..per_laser.len())
+        .filter(|&l| per_laser[l] == 0)
+        .map(|l| l as u8)
+        .collect()
+}
+
 impl CaptureSummary {
     /// Lasers (by id) that returned nothing over the whole capture, when it has returns.
     pub fn dead_lasers(&self) -> Vec<u8> {
-        if self.returns == 0 {
-            return Vec::new();
-        }
-        (0..self.returns_per_laser.len())
-            .filter(|&l| self.returns_per_laser[l] == 0)
-            .map(|l| l as u8)
-            .collect()
+        dead_lasers(self.returns, &self.returns_per_laser)
     }
 
     /// Share of returns with an intensity above 100 and the median intensity, when the

@@ -164,13 +164,7 @@ impl ModelCaptureSummary {
     /// Laser ids without a single return in a capture that has returns (empty when it has
     /// none), as [`crate::hdl32e::frames::CaptureSummary::dead_lasers`] gives them.
     pub fn dead_lasers(&self) -> Vec<u8> {
-        if self.returns == 0 {
-            return Vec::new();
-        }
-        (0..self.returns_per_laser.len())
-            .filter(|&l| self.returns_per_laser[l] == 0)
-            .map(|l| l as u8)
-            .collect()
+        crate::hdl32e::frames::dead_lasers(self.returns, &self.returns_per_laser)
     }
 }
 

@@ -232,3 +232,38 @@ fn forks_on_a_pool_change_no_result() {
         }
     }
 }
+
+/// A dataset run's lean processing gives every value the scan files and the truth
+/// scores read exactly as the full processing does, and leaves out only the reports'.
+#[test]
+fn process_points_matches_process_but_for_the_reports() {
+    let fixtures = common::fixtures();
+    for name in ["paper", "adverse-weather"] {
+        let pipeline = Pipeline::new(&config(name));
+        let frames: Vec<_> =
+            FrameReader::open(&fixtures.join("crossroad.pcap"), &DecoderOptions::default())
+                .unwrap()
+                .take(3)
+                .map(|f| f.unwrap())
+                .collect();
+        for frame in frames {
+            let full = pipeline.process(frame.clone()).unwrap();
+            let lean = pipeline.process_points(frame).unwrap();
+            assert_eq!(lean.kept, full.kept, "{name}");
+            assert_eq!(lean.ground, full.ground, "{name}");
+            assert_eq!(lean.labels, full.labels, "{name}");
+            assert_eq!(lean.survivors.len(), full.survivors.len(), "{name}");
+            assert_eq!(lean.noisy.fate, full.noisy.fate, "{name}");
+            assert_eq!(lean.noisy.cause, full.noisy.cause, "{name}");
+            for (a, b) in lean.survivors.iter().zip(&full.survivors) {
+                assert_eq!((a.x, a.y, a.z, a.intensity), (b.x, b.y, b.z, b.intensity));
+            }
+            assert!(
+                !full.clusters.is_empty(),
+                "{name}: the fixture has clusters"
+            );
+            assert!(lean.clusters.is_empty(), "{name}");
+            assert_eq!(lean.counts.clusters, full.counts.clusters, "{name}");
+        }
+    }
+}

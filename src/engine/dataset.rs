@@ -376,7 +376,7 @@ fn run_file(
     let points = frame.returns.len();
     let result = plan
         .pipeline
-        .process(frame)
+        .process_points(frame)
         .map_err(|e| anyhow::anyhow!("{}: {e:#}", path.display()))?;
     let rows = super::frame_files::scan_points(&result);
     let kept = rows.len();

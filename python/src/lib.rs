@@ -1027,9 +1027,10 @@ fn read_capture<'py>(
             };
             // The reader `run` uses: the HDL-32E's, or another described sensor's.
             match lidar_noise::sensor::frames::open_capture(&path, &options)? {
-                CaptureFrames::Hdl32e(mut r) => {
-                    Ok((lidar_noise::sensor::HDL32E.name, r.read_rest(&(0..=u32::MAX))?))
-                }
+                CaptureFrames::Hdl32e(mut r) => Ok((
+                    lidar_noise::sensor::HDL32E.name,
+                    r.read_rest(&(0..=u32::MAX))?,
+                )),
                 CaptureFrames::Model(mut r) => {
                     let frames = r.read_rest(&(0..=u32::MAX))?;
                     Ok((r.model().name, frames))

@@ -259,7 +259,9 @@ impl BeamTable {
 /// sequential placing over the same chunk while its values are in the first-level cache.
 const CHUNK: usize = 256;
 
-/// Range, horizontal distance, azimuth and elevation of a chunk of points.
+/// What a chunk of points' returns take from their coordinates and intensity, computed
+/// in one vectorised pass: range, horizontal distance, azimuth, elevation, firing steps,
+/// raw distance, intensity byte, and whether the point's values are finite.
 struct Geometry {
     range: [f64; CHUNK],
     horizontal: [f64; CHUNK],
@@ -291,7 +293,8 @@ impl Default for Geometry {
 }
 
 impl Geometry {
-    /// The geometry of `chunk` (at most [`CHUNK`] points, all finite) in its first rows.
+    /// The geometry of `chunk` (at most [`CHUNK`] points) in its first rows; a point with
+    /// a non-finite value gets `finite` false (its other rows are meaningless).
     fn of(&mut self, chunk: &[CloudPoint], steps_per_deg: f64, unit_m: f64, scale: f64) {
         #[cfg(target_arch = "x86_64")]
         {

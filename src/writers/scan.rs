@@ -81,12 +81,17 @@ impl Output for Scan<'_> {
                      SIZE 4 4 4 4 2\nTYPE F F F F U\nCOUNT 1 1 1 1 1\nWIDTH {n}\nHEIGHT 1\n\
                      VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA binary\n"
                 )?;
-                for p in self.points {
-                    for v in [p.x, p.y, p.z, f32::from(p.intensity)] {
-                        out.write_all(&v.to_le_bytes())?;
-                    }
-                    out.write_all(&p.ring.to_le_bytes())?;
-                }
+                write_records(out, self.points, |p| {
+                    let mut record = [0u8; 18];
+                    record[..16].copy_from_slice(&floats_le::<4, 16>([
+                        p.x,
+                        p.y,
+                        p.z,
+                        f32::from(p.intensity),
+                    ]));
+                    record[16..].copy_from_slice(&p.ring.to_le_bytes());
+                    record
+                })?;
             }
             Format::Csv => {
                 writeln!(out, "x,y,z,intensity,ring")?;

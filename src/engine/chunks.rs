@@ -2,8 +2,10 @@
 //!
 //! The units are (capture, chunk j), chunk j being the capture's frames at positions
 //! [j*M, (j+1)*M) of those in `--frames`, numbered over the captures in the order given;
-//! `--shard K/N` takes the units `i` with `i % N == K`. A unit resumes the decoder where
-//! its chunk starts (see [`crate::hdl32e::index`]), writes its frames' own files (point
+//! `--shard K/N` takes the units `i` with `i % N == K`. Captures of any described sensor:
+//! a unit resumes the decoder where its chunk starts (the HDL-32E's from its frame index,
+//! [`crate::hdl32e::index`], which reads no returns; another sensor's from a scan of the
+//! capture, [`ModelFrameReader::scan`]), writes its frames' own files (point
 //! clouds, linkage) straight into the capture's folder `DIR/<name>/`, and last a part,
 //! `DIR/<name>/.run.chunk<M>-<j>.json`: the chunk's report pieces as the text one run
 //! writes them, its exact totals, the files it wrote and the run's settings, behind a
@@ -26,12 +28,13 @@ use super::{Plan, RunRequest};
 use crate::cli::Global;
 use crate::frame::FrameSource;
 use crate::hdl32e::frames::FrameReader;
-use crate::hdl32e::index::{FrameScan, FrameSeek};
+use crate::hdl32e::index::FrameScan;
 use crate::noise::summary::{
     DropCounts, DropsByLaser, NoiseSummary, RangeChange, RangeChangeState, SpuriousCounts,
 };
 use crate::pipeline::report::Totals;
 use crate::pipeline::StageCounts;
+use crate::sensor::frames::{CaptureFrames, CaptureSeek};
 use crate::writers::staging::{self, OutputFolder, Refused};
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
@@ -50,6 +53,8 @@ struct Job {
     name: String,
     /// The file (None: the built-in capture).
     path: Option<PathBuf>,
+    /// The plan for its sensor.
+    plan: Plan,
 }
 
 impl Job {
@@ -60,25 +65,65 @@ impl Job {
             .map_or_else(|| self.source.clone(), super::inputs::capture_shown)
     }
 
-    fn scan(&self, plan: &Plan) -> Result<FrameScan> {
-        Ok(match &self.path {
-            Some(p) => FrameScan::open(p, &plan.decoder)?,
-            None => FrameScan::from_bytes(
-                Arc::from(super::inputs::DEFAULT_CAPTURE),
-                Path::new(super::inputs::DEFAULT_CAPTURE_NAME),
-                &plan.decoder,
-            )?,
-        })
+    /// The job of the capture at `path` (None: the built-in one) and its chunks of `m`
+    /// frames, with the number of frames.
+    fn plan(
+        source: String,
+        name: String,
+        path: Option<PathBuf>,
+        plan: &Plan,
+        m: u32,
+    ) -> Result<(Job, Chunks, usize)> {
+        let decoder = &plan.decoder;
+        let (sensor, found) = match &path {
+            Some(p) => {
+                let sensor = match crate::sensor::frames::open_capture(p, decoder)? {
+                    CaptureFrames::Hdl32e(_) => &crate::sensor::HDL32E,
+                    CaptureFrames::Model(r) => r.model(),
+                };
+                (sensor, crate::sensor::frames::scan_capture(p, decoder)?)
+            }
+            None => {
+                let scan = FrameScan::from_bytes(
+                    Arc::from(super::inputs::DEFAULT_CAPTURE),
+                    Path::new(super::inputs::DEFAULT_CAPTURE_NAME),
+                    decoder,
+                )?;
+                let found: Box<dyn Iterator<Item = _>> = Box::new(
+                    scan.map(|f| f.map(|f| (f.index, f.partial, CaptureSeek::Hdl32e(f.seek)))),
+                );
+                (&crate::sensor::HDL32E, found)
+            }
+        };
+        let job_plan = plan.for_sensor(sensor).map_err(|e| match &path {
+            Some(p) => anyhow::anyhow!("{}: {e:#}; nothing was written", p.display()),
+            None => e,
+        })?;
+        let keep = decoder.keep_partial;
+        let (ranges, seeks, n) = crate::sweep::chunks::chunks_of(found, &plan.frames, keep, m)?;
+        let job = Job {
+            source,
+            name,
+            path,
+            plan: job_plan,
+        };
+        Ok((job, Chunks { ranges, seeks }, n))
     }
 
-    fn open(&self, plan: &Plan, at: Option<&FrameSeek>) -> Result<FrameReader> {
+    /// The capture's reader, from the start or from `at`.
+    fn open(&self, at: Option<&CaptureSeek>) -> Result<CaptureFrames> {
+        let decoder = &self.plan.decoder;
         let bytes = || Arc::from(super::inputs::DEFAULT_CAPTURE);
         let name = Path::new(super::inputs::DEFAULT_CAPTURE_NAME);
         Ok(match (&self.path, at) {
-            (Some(p), Some(at)) => FrameReader::open_at(p, &plan.decoder, at)?,
-            (Some(p), None) => FrameReader::open(p, &plan.decoder)?,
-            (None, Some(at)) => FrameReader::from_bytes_at(bytes(), name, &plan.decoder, at)?,
-            (None, None) => FrameReader::from_bytes(bytes(), name, &plan.decoder)?,
+            (Some(p), Some(at)) => crate::sensor::frames::open_capture_at(p, decoder, at)?,
+            (Some(p), None) => crate::sensor::frames::open_capture(p, decoder)?,
+            (None, Some(CaptureSeek::Hdl32e(at))) => CaptureFrames::Hdl32e(Box::new(
+                FrameReader::from_bytes_at(bytes(), name, decoder, at)?,
+            )),
+            (None, _) => {
+                CaptureFrames::Hdl32e(Box::new(FrameReader::from_bytes(bytes(), name, decoder)?))
+            }
         })
     }
 }
@@ -86,7 +131,7 @@ impl Job {
 /// A capture's chunks and where each starts.
 struct Chunks {
     ranges: Vec<RangeInclusive<u32>>,
-    seeks: Vec<FrameSeek>,
+    seeks: Vec<CaptureSeek>,
 }
 
 /// The exact totals of a part (see [`RangeChangeState`]).
@@ -274,35 +319,26 @@ pub(crate) fn run(
              folder to replace another run"
         );
     }
-    let mut jobs = Vec::new();
+    let mut named = Vec::new();
     if request.captures.is_empty() {
-        jobs.push(Job {
-            source: super::inputs::DEFAULT_CAPTURE_NAME.into(),
-            name: "crossroad".into(),
-            path: None,
-        });
+        named.push((
+            super::inputs::DEFAULT_CAPTURE_NAME.to_string(),
+            "crossroad".to_string(),
+            None,
+        ));
     }
     for (path, name) in request
         .captures
         .iter()
         .zip(super::inputs::output_names(&request.captures))
     {
-        jobs.push(Job {
-            source: super::inputs::capture_label(path),
-            name,
-            path: Some(path.clone()),
-        });
+        named.push((super::inputs::capture_label(path), name, Some(path.clone())));
     }
     // The units, and so the deal, are known before any work: each capture is scanned
-    // (frame starts only, no returns decoded).
-    let mut plans = Vec::new();
-    for job in &jobs {
-        let (ranges, seeks, n) = crate::sweep::chunks::chunk_plan(
-            job.scan(plan)?,
-            &plan.frames,
-            plan.decoder.keep_partial,
-            m,
-        )?;
+    // (an HDL-32E's frame starts only, no returns decoded).
+    let (mut jobs, mut plans) = (Vec::new(), Vec::new());
+    for (source, name, path) in named {
+        let (job, chunks, n) = Job::plan(source, name, path, plan, m)?;
         if n == 0 {
             bail!(
                 "{}: no frame to process in {}; pick others with --frames or add \
@@ -311,7 +347,8 @@ pub(crate) fn run(
                 crate::options::frames_phrase(&plan.frames)
             );
         }
-        plans.push(Chunks { ranges, seeks });
+        jobs.push(job);
+        plans.push(chunks);
     }
     let total: usize = plans.iter().map(|c| c.ranges.len()).sum();
     let folder = if request.shard.is_some() {
@@ -374,15 +411,8 @@ fn units(
                         continue;
                     }
                 }
-                let part = compute_unit(
-                    plan,
-                    job,
-                    &chunks.ranges[j],
-                    &chunks.seeks[j],
-                    &dir,
-                    inputs,
-                    want,
-                )?;
+                let part =
+                    compute_unit(job, &chunks.ranges[j], &chunks.seeks[j], &dir, inputs, want)?;
                 write_part(&path, &part, inputs)?;
                 computed += 1;
             }
@@ -400,20 +430,20 @@ fn units(
             return Ok(());
         }
     }
-    merge(request, plan, m, jobs, plans, &settings, inputs, global)
+    merge(request, m, jobs, plans, &settings, inputs, global)
 }
 
 /// Processes one chunk: its frames' files into `dir`, its report pieces into the part.
 fn compute_unit(
-    plan: &Plan,
     job: &Job,
     range: &RangeInclusive<u32>,
-    seek: &FrameSeek,
+    seek: &CaptureSeek,
     dir: &Path,
     inputs: &[&Path],
     settings: serde_json::Value,
 ) -> Result<Part> {
-    let mut reader = job.open(plan, Some(seek))?;
+    let plan = &job.plan;
+    let mut reader = job.open(Some(seek))?.into_source();
     let mut part = Part {
         settings,
         frames: 0,
@@ -431,7 +461,7 @@ fn compute_unit(
     };
     let warmup = crate::memory::worker_warmup_bytes();
     super::stream::stream_frames(
-        &mut reader,
+        &mut *reader,
         range,
         warmup,
         work,
@@ -480,7 +510,6 @@ fn compute_unit(
 #[allow(clippy::too_many_arguments)]
 fn merge(
     request: &RunRequest,
-    plan: &Plan,
     m: u32,
     jobs: &[Job],
     plans: &[Chunks],
@@ -538,7 +567,7 @@ fn merge(
             continue;
         }
         lines.push(join_capture(
-            request, plan, job, &dir, &names, settings, inputs, global,
+            request, job, &dir, &names, settings, inputs, global,
         )?);
     }
     if !global.quiet {
@@ -556,7 +585,6 @@ fn merge(
 #[allow(clippy::too_many_arguments)]
 fn join_capture(
     request: &RunRequest,
-    plan: &Plan,
     job: &Job,
     dir: &Path,
     names: &[String],
@@ -614,27 +642,33 @@ fn join_capture(
         staging::remove_results(dir, &stale, &|_| false);
     }
     // The capture summary covers every packet a run reads: decode without processing.
-    let mut reader = job.open(plan, None)?;
-    reader.count_rest(&plan.frames)?;
-    let capture_summary = reader.summary();
-    super::inputs::warn_truncation(global, Path::new(&job.shown()), &capture_summary);
-    super::inputs::warn_capture(
-        global,
-        Path::new(&job.shown()),
-        &capture_summary,
-        plan.config.sensor.intensity == crate::config::IntensityMode::Reflectivity,
-    );
+    let plan = &job.plan;
+    let mut reader = job.open(None)?;
+    match &mut reader {
+        CaptureFrames::Hdl32e(r) => r.count_rest(&plan.frames)?,
+        CaptureFrames::Model(r) => r.count_rest(&plan.frames)?,
+    };
+    let capture_summary;
+    let source_summary = match &reader {
+        CaptureFrames::Hdl32e(r) => {
+            capture_summary = r.summary();
+            super::inputs::warn_truncation(global, Path::new(&job.shown()), &capture_summary);
+            super::inputs::warn_capture(
+                global,
+                Path::new(&job.shown()),
+                &capture_summary,
+                plan.config.sensor.intensity == crate::config::IntensityMode::Reflectivity,
+            );
+            super::reports::SourceSummary::Capture(&capture_summary)
+        }
+        CaptureFrames::Model(r) => super::reports::SourceSummary::Model(r.summary()),
+    };
     let totals = Totals {
         ground_fraction: stages.ground_fraction(),
         noise,
         stages,
     };
-    let (summary, clusters) = super::reports::documents(
-        plan,
-        &job.source,
-        super::reports::SourceSummary::Capture(&capture_summary),
-        totals,
-    );
+    let (summary, clusters) = super::reports::documents(plan, &job.source, source_summary, totals);
     let pieces = |field: fn(&Part) -> &str, out: &mut dyn std::io::Write| -> std::io::Result<()> {
         for (j, name) in names.iter().enumerate() {
             let p = read(name).map_err(std::io::Error::other)?;

@@ -184,9 +184,8 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
         }
     }
     if let Some(m) = request.chunk_frames {
-        // Chunked runs take captures, decoded for the HDL-32E.
-        let plan = plan.for_sensor(&crate::sensor::HDL32E)?;
-        return chunks::run(request, &plan, m, &inputs, global);
+        // Chunked runs take captures of any described sensor, each with its plan.
+        return chunks::run(request, plan, m, &inputs, global);
     }
     // Every input and target is checked before anything is written.
     // Each job with the plan for its sensor (the noise chain's firing slots hold its

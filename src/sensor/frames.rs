@@ -9,10 +9,16 @@
 //! HDL-32E reader cuts (`src/hdl32e/frames.rs`, whose sweep and partial-frame rules this
 //! follows). The first and last sweeps are partial unless they start and end at the cut.
 //!
-//! Why a reader of its own beside the HDL-32E's: that one's packet index (seeking for
-//! `--chunk-frames`), duplicate window and `--pcap-out` re-encoding are the HDL-32E's;
-//! `run` refuses those options for other sensors, and a capture's returns are the same
-//! however it is read.
+//! Why a reader of its own beside the HDL-32E's: that one's packet index, duplicate
+//! window and `--pcap-out` re-encoding are the HDL-32E's, and a capture's returns are the
+//! same however it is read.
+//!
+//! `run --chunk-frames` starts a chunk mid-capture: [`ModelFrameReader::scan`] reads the
+//! capture once and gives each frame a [`ModelSeek`] (the packet its first firing is in
+//! and the reader's state just before that packet), and
+//! [`ModelFrameReader::resume_at`] goes on from there, yielding the same frames as a
+//! reader from the start (`tests/model_chunks.rs`). Unlike the HDL-32E's index, the scan
+//! decodes the returns (once, for the plan; each chunk then reads only its own packets).
 
 use super::decode::ModelDecoder;
 use super::identify::{identify, Identified};
@@ -49,6 +55,80 @@ pub fn open_capture(
         return Err(e);
     }
     model_or(e, options, ModelFrameReader::open(path, options))
+}
+
+/// Where a frame of a capture of any described sensor starts (see [`scan_capture`]).
+#[derive(Clone, Debug)]
+pub enum CaptureSeek {
+    /// In an HDL-32E capture, from its frame index.
+    Hdl32e(crate::hdl32e::index::FrameSeek),
+    /// In a capture of another sensor, from [`ModelFrameReader::scan`].
+    Model(ModelSeek),
+}
+
+/// A frame found by [`scan_capture`]: its index, whether it is a partial sweep, and where
+/// it starts.
+pub type ScannedFrame = (u32, bool, CaptureSeek);
+
+/// Every frame of the capture file at `path` (partial ones too, flagged) with where it
+/// starts, in order: an HDL-32E capture's from its frame index (streamed, no returns
+/// decoded), another sensor's from a scan that decodes it once; the capture reader's
+/// error when no described sensor fits.
+pub fn scan_capture(
+    path: &Path,
+    options: &crate::hdl32e::frames::DecoderOptions,
+) -> Result<Box<dyn Iterator<Item = Result<ScannedFrame>>>> {
+    let e = match crate::hdl32e::index::FrameScan::open(path, options) {
+        Ok(scan) => {
+            return Ok(Box::new(scan.map(|f| {
+                f.map(|f| (f.index, f.partial, CaptureSeek::Hdl32e(f.seek)))
+            })))
+        }
+        Err(e) => e,
+    };
+    let reader = match open_capture(path, options) {
+        Ok(CaptureFrames::Model(r)) => r,
+        Ok(CaptureFrames::Hdl32e(_)) => return Err(e),
+        Err(e) => return Err(e),
+    };
+    Ok(Box::new(reader.scan().map(|f| {
+        f.map(|f| (f.index, f.partial, CaptureSeek::Model(f.seek)))
+    })))
+}
+
+/// The frame reader of the capture file at `path` going on from `at` (found by
+/// [`scan_capture`] on the same file): the frames from `at`'s on are those a reader from
+/// the start yields.
+pub fn open_capture_at(
+    path: &Path,
+    options: &crate::hdl32e::frames::DecoderOptions,
+    at: &CaptureSeek,
+) -> Result<CaptureFrames> {
+    match at {
+        CaptureSeek::Hdl32e(at) => Ok(CaptureFrames::Hdl32e(Box::new(
+            crate::hdl32e::frames::FrameReader::open_at(path, options, at)?,
+        ))),
+        CaptureSeek::Model(at) => match open_capture(path, options)? {
+            CaptureFrames::Model(mut r) => {
+                r.resume_at(path, at)?;
+                Ok(CaptureFrames::Model(r))
+            }
+            CaptureFrames::Hdl32e(_) => Err(Error::Invalid(format!(
+                "{}: now an HDL-32E capture, not the one scanned: was it replaced during                  the run?",
+                path.display()
+            ))),
+        },
+    }
+}
+
+impl CaptureFrames {
+    /// The reader as a frame source.
+    pub fn into_source(self) -> Box<dyn crate::frame::FrameSource> {
+        match self {
+            CaptureFrames::Hdl32e(r) => r,
+            CaptureFrames::Model(r) => r,
+        }
+    }
 }
 
 /// The other sensor's reader, or the error to show when neither reader takes the
@@ -168,6 +248,78 @@ impl ModelCaptureSummary {
     }
 }
 
+/// Where a frame of a capture of another sensor starts: the packet to resume at and the
+/// reader's state just before it.
+#[derive(Clone, Debug)]
+pub struct ModelSeek {
+    /// The frame resumed at.
+    pub frame: u32,
+    capture: crate::capture::CapturePoint,
+    next_index: u32,
+    open: bool,
+    prev_ts: Option<u32>,
+    hour_offset_us: f64,
+    prev_rel: Option<u32>,
+    previous: Vec<u8>,
+}
+
+/// One frame found by [`ModelFrameReader::scan`].
+#[derive(Clone, Debug)]
+pub struct ScannedModelFrame {
+    /// Sweep index, as the reader numbers it.
+    pub index: u32,
+    /// Partial first or last sweep.
+    pub partial: bool,
+    /// Where to resume to read this frame first.
+    pub seek: ModelSeek,
+}
+
+/// The frames of a capture with where each starts ([`ModelFrameReader::scan`]).
+pub struct ModelScan {
+    reader: ModelFrameReader,
+}
+
+impl Iterator for ModelScan {
+    type Item = Result<ScannedModelFrame>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let r = &mut self.reader;
+        let frame = match r.next_frame() {
+            Ok(Some(f)) => f,
+            Ok(None) => return None,
+            Err(e) => {
+                // No frame after an error.
+                r.done = true;
+                r.ready.clear();
+                return Some(Err(e));
+            }
+        };
+        let seek = r
+            .seeks
+            .as_mut()
+            .and_then(VecDeque::pop_front)
+            .filter(|s| s.frame == frame.index);
+        let index = frame.index;
+        let partial = frame.partial;
+        r.recycle(frame);
+        Some(seek.map_or_else(
+            || {
+                Err(Error::Invalid(format!(
+                    "{}: internal: frame {index} has no start recorded",
+                    r.capture.path().display()
+                )))
+            },
+            |seek| {
+                Ok(ScannedModelFrame {
+                    index,
+                    partial,
+                    seek,
+                })
+            },
+        ))
+    }
+}
+
 /// Iterator over the frames of a capture of a described sensor other than the HDL-32E.
 pub struct ModelFrameReader {
     capture: CaptureReader,
@@ -189,6 +341,8 @@ pub struct ModelFrameReader {
     done: bool,
     past_range: bool,
     summary: ModelCaptureSummary,
+    /// While scanning: the seek of each frame started and not yet finished, in order.
+    seeks: Option<VecDeque<ModelSeek>>,
 }
 
 impl ModelFrameReader {
@@ -271,7 +425,44 @@ impl ModelFrameReader {
                 calibration,
                 ..Default::default()
             },
+            seeks: None,
         }))
+    }
+
+    /// Every frame of the capture (partial ones too, flagged) with where it starts, in
+    /// order, read to the capture's end; the frames' returns are decoded and dropped, and
+    /// a frame's start is held only until the frame ends (memory does not grow with the
+    /// capture).
+    pub fn scan(mut self) -> ModelScan {
+        self.keep_partial = true;
+        self.seeks = Some(VecDeque::new());
+        ModelScan { reader: self }
+    }
+
+    /// Goes on from `at` (of a scan of the same capture, read again from `path`): the
+    /// frames from `at.frame` on are those a reader from the start yields; the tail of
+    /// the frame before is dropped. The summary then covers only what is read from here.
+    pub fn resume_at(&mut self, path: &Path, at: &ModelSeek) -> Result<()> {
+        self.capture = CaptureReader::open_at(path, &at.capture)?;
+        self.next_index = at.next_index;
+        self.prev_ts = at.prev_ts;
+        self.hour_offset_us = at.hour_offset_us;
+        self.prev_rel = at.prev_rel;
+        self.previous.clone_from(&at.previous);
+        self.ready.clear();
+        self.done = false;
+        self.past_range = false;
+        // The frame open before the resume packet: only its tail is seen, and it is
+        // dropped (its index is below `at.frame`, the first a chunk asks for).
+        self.building = at.open.then(|| {
+            let frame = Frame {
+                index: at.next_index.wrapping_sub(1),
+                partial: false,
+                returns: Vec::new(),
+            };
+            Building::new(frame, 0, 0)
+        });
+        Ok(())
     }
 
     /// The reader decoding with the calibration file `path` (a `db.xml` or ROS YAML of
@@ -359,11 +550,33 @@ impl ModelFrameReader {
             self.summary.other_udp += 1;
             return Ok(());
         }
-        let record = d.record;
+        let (record, offset) = (d.record, d.offset);
         let mut payload = std::mem::take(&mut self.packet);
         payload.clear();
         payload.extend_from_slice(d.payload);
+        // While scanning, the state a frame starting in this packet resumes from.
+        let before = (
+            self.next_index,
+            self.building.is_some(),
+            self.prev_ts,
+            self.hour_offset_us,
+            self.prev_rel,
+        );
         self.decode_packet(&payload, record);
+        if let Some(seeks) = &mut self.seeks {
+            for frame in before.0..self.next_index {
+                seeks.push_back(ModelSeek {
+                    frame,
+                    capture: self.capture.point_before_last(offset),
+                    next_index: before.0,
+                    open: before.1,
+                    prev_ts: before.2,
+                    hour_offset_us: before.3,
+                    prev_rel: before.4,
+                    previous: self.previous.clone(),
+                });
+            }
+        }
         self.previous.clear();
         self.previous.extend_from_slice(&payload);
         self.packet = payload;

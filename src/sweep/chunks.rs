@@ -12,20 +12,22 @@
 use super::run::SweepSettings;
 use crate::error::{Error, Result};
 use crate::hdl32e::index::{FrameScan, FrameSeek};
+use crate::sensor::frames::CaptureSeek;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
 /// Frame-index ranges of the chunks of `M` frames of a capture within `s.frames`, where
 /// each chunk's first frame starts (to resume a reader there, see
-/// [`crate::hdl32e::index`]), and the number of frames; errors when the capture has no
-/// frame in range. Scans the capture without decoding returns, in bounded memory.
+/// [`crate::sensor::frames::scan_capture`]), and the number of frames; errors when the
+/// capture has no frame in range. An HDL-32E capture is scanned without decoding
+/// returns, in bounded memory; another sensor's is decoded once.
 pub fn chunk_ranges(
     s: &SweepSettings,
     path: &Path,
     frames_per_chunk: u32,
-) -> Result<(Vec<RangeInclusive<u32>>, Vec<FrameSeek>, usize)> {
-    let (ranges, seeks, n) = chunk_plan(
-        FrameScan::open(path, &s.decoder)?,
+) -> Result<(Vec<RangeInclusive<u32>>, Vec<CaptureSeek>, usize)> {
+    let (ranges, seeks, n) = chunks_of(
+        crate::sensor::frames::scan_capture(path, &s.decoder)?,
         &s.frames,
         s.decoder.keep_partial,
         frames_per_chunk,
@@ -48,21 +50,33 @@ pub fn chunk_plan(
     keep_partial: bool,
     m: u32,
 ) -> Result<(Vec<RangeInclusive<u32>>, Vec<FrameSeek>, usize)> {
+    let found = scan.map(|f| f.map(|f| (f.index, f.partial, f.seek)));
+    chunks_of(found, frames, keep_partial, m)
+}
+
+/// [`chunk_plan`] of any scan: `found` gives each frame's (index, partial, seek) in
+/// frame order.
+pub fn chunks_of<S>(
+    found: impl IntoIterator<Item = Result<(u32, bool, S)>>,
+    frames: &RangeInclusive<u32>,
+    keep_partial: bool,
+    m: u32,
+) -> Result<(Vec<RangeInclusive<u32>>, Vec<S>, usize)> {
     let m = m.max(1) as usize;
     let (mut ranges, mut seeks, mut n) = (Vec::new(), Vec::new(), 0usize);
-    for found in scan {
-        let found = found?;
-        if found.index > *frames.end() {
+    for found in found {
+        let (index, partial, seek) = found?;
+        if index > *frames.end() {
             break;
         }
-        if !frames.contains(&found.index) || (found.partial && !keep_partial) {
+        if !frames.contains(&index) || (partial && !keep_partial) {
             continue;
         }
         if n % m == 0 {
-            ranges.push(found.index..=found.index);
-            seeks.push(found.seek);
+            ranges.push(index..=index);
+            seeks.push(seek);
         } else if let Some(last) = ranges.last_mut() {
-            *last = *last.start()..=found.index;
+            *last = *last.start()..=index;
         }
         n += 1;
     }

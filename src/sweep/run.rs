@@ -15,10 +15,10 @@ use crate::config::Config;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::frame::FrameSource;
-use crate::hdl32e::frames::{DecoderOptions, FrameReader};
-use crate::hdl32e::index::FrameSeek;
+use crate::hdl32e::frames::DecoderOptions;
 use crate::pipeline::{FrameResult, Pipeline};
 use crate::sensor::frames::CaptureFrames;
+use crate::sensor::frames::CaptureSeek;
 use crate::sensor::SensorModel;
 use crate::synth::labels::{check_frame, read_labels_file, LabelRow, LabelRows};
 use rayon::prelude::*;
@@ -721,35 +721,19 @@ fn count_frames(s: &SweepSettings, capture: &CaptureInput) -> Result<usize> {
 }
 
 /// The sensor of a sweep's capture: the HDL-32E, or another described sensor told by its
-/// packets' structure; an error for what a sweep of another sensor's capture cannot do
-/// yet (`--chunk-frames`, whose frame index is the HDL-32E's).
+/// packets' structure.
 fn capture_sensor(s: &SweepSettings, capture: &CaptureInput) -> Result<&'static SensorModel> {
-    let model = match crate::sensor::frames::open_capture(&capture.path, &s.decoder)? {
-        CaptureFrames::Hdl32e(_) => return Ok(&crate::sensor::HDL32E),
-        CaptureFrames::Model(r) => r.model(),
-    };
-    let refuse = |what: &str| {
-        Err(Error::Invalid(format!(
-            "{}: a {} capture: {what}; nothing was written",
-            capture.path.display(),
-            model.name
-        )))
-    };
-    if s.chunk_frames.is_some() {
-        return refuse(
-            "--chunk-frames cuts captures by the HDL-32E's frame index; leave it out (the \
-             capture is swept whole)",
-        );
-    }
-    Ok(model)
+    Ok(
+        match crate::sensor::frames::open_capture(&capture.path, &s.decoder)? {
+            CaptureFrames::Hdl32e(_) => &crate::sensor::HDL32E,
+            CaptureFrames::Model(r) => r.model(),
+        },
+    )
 }
 
 /// The frames of a capture from the start, with its sensor's reader.
 fn open_frames(path: &Path, decoder: &DecoderOptions) -> Result<Box<dyn FrameSource>> {
-    Ok(match crate::sensor::frames::open_capture(path, decoder)? {
-        CaptureFrames::Hdl32e(r) => r,
-        CaptureFrames::Model(r) => r,
-    })
+    Ok(crate::sensor::frames::open_capture(path, decoder)?.into_source())
 }
 
 fn cell_settings(
@@ -1092,7 +1076,7 @@ fn frame_metrics(
 fn compute_chunk(
     s: &SweepSettings,
     capture: &CaptureInput,
-    seek: Option<&FrameSeek>,
+    seek: Option<&CaptureSeek>,
     cells: &[Pending],
     labels: Option<&Labels>,
     protected: &[&Path],
@@ -1118,7 +1102,9 @@ fn compute_chunk(
     let empty = BTreeMap::new();
     let classes = labels.map_or(&empty, |l| &l.classes);
     let mut reader: Box<dyn FrameSource> = match seek {
-        Some(at) => Box::new(FrameReader::open_at(&capture.path, &s.decoder, at)?),
+        Some(at) => {
+            crate::sensor::frames::open_capture_at(&capture.path, &s.decoder, at)?.into_source()
+        }
         None => open_frames(&capture.path, &s.decoder)?,
     };
     let batch_size = (2 * rayon::current_num_threads()).max(4);

@@ -1,0 +1,158 @@
+//! `run --chunk-frames` on captures of the sensors beside the HDL-32E (issue 31): a scan
+//! gives each frame where it starts, a reader resumed there yields the frames a reader
+//! from the start yields, and a chunked or sharded run writes the very bytes of one
+//! plain run, and a chunked or sharded sweep those of one plain sweep. Captures
+//! synthesized here (`synth`'s library), one per packet family.
+
+mod common;
+
+use assert_cmd::Command;
+use lidar_noise::frame::FrameSource;
+use lidar_noise::hdl32e::frames::DecoderOptions;
+use lidar_noise::sensor::frames::ModelFrameReader;
+use lidar_noise::synth::{write_capture, Scene, SynthOptions};
+use std::path::{Path, PathBuf};
+
+/// A capture of `sensor` (a name `synth --sensor` takes) of `rotations` turns of the
+/// parking scene at 10 Hz, written into `dir`.
+fn capture(dir: &Path, sensor: &str, rotations: u32) -> PathBuf {
+    let mut scene = Scene::preset("parking").unwrap();
+    scene.frames = rotations;
+    scene.sensor.rotation_hz = 10.0;
+    let options = SynthOptions {
+        sensor: lidar_noise::cloud::guess::sensor_by_name(sensor).unwrap(),
+        ..SynthOptions::default()
+    };
+    let (_, pcap, _) = write_capture(&scene, &options, Vec::new(), Vec::new()).unwrap();
+    let path = dir.join(format!("{sensor}.pcap"));
+    std::fs::write(&path, pcap).unwrap();
+    path
+}
+
+/// The frames (index, partial, returns) of `reader` in `frames`.
+fn frames_of(
+    reader: &mut ModelFrameReader,
+    frames: std::ops::RangeInclusive<u32>,
+) -> Vec<(u32, bool, Vec<lidar_noise::frame::Return>)> {
+    reader
+        .read_rest(&frames)
+        .unwrap()
+        .into_iter()
+        .map(|f| (f.index, f.partial, f.returns))
+        .collect()
+}
+
+#[test]
+fn a_reader_resumed_at_a_scanned_frame_yields_the_frames_from_the_start() {
+    let dir = tempfile::tempdir().unwrap();
+    for sensor in ["vlp16", "vlp32c", "hdl64e", "vls128"] {
+        let path = capture(dir.path(), sensor, 4);
+        let options = DecoderOptions {
+            keep_partial: true,
+            ..DecoderOptions::default()
+        };
+        let open = || ModelFrameReader::open(&path, &options).unwrap().unwrap();
+        let all = frames_of(&mut open(), 0..=u32::MAX);
+        let scanned: Vec<_> = open().scan().map(Result::unwrap).collect();
+        let found: Vec<(u32, bool)> = scanned.iter().map(|f| (f.index, f.partial)).collect();
+        let want: Vec<(u32, bool)> = all.iter().map(|f| (f.0, f.1)).collect();
+        assert_eq!(found, want, "{sensor}: the scan's frames");
+        assert!(all.len() >= 4, "{sensor}: {} frames", all.len());
+        for s in &scanned {
+            assert_eq!(s.seek.frame, s.index);
+            let mut resumed = open();
+            resumed.resume_at(&path, &s.seek).unwrap();
+            let got = frames_of(&mut resumed, s.index..=u32::MAX);
+            let tail = &all[all.iter().position(|f| f.0 == s.index).unwrap()..];
+            assert_eq!(got.len(), tail.len(), "{sensor}: from frame {}", s.index);
+            for (g, w) in got.iter().zip(tail) {
+                assert_eq!((g.0, g.1), (w.0, w.1), "{sensor}: from frame {}", s.index);
+                assert!(
+                    common::same_returns(&g.2, &w.2),
+                    "{sensor}: frame {} resumed at {}",
+                    g.0,
+                    s.index
+                );
+            }
+        }
+    }
+}
+
+fn bin() -> Command {
+    let mut c = Command::cargo_bin("lidar-noise").unwrap();
+    c.env("RAYON_NUM_THREADS", "2");
+    c
+}
+
+fn run(capture: &Path, out: &Path, extra: &[&str]) {
+    let o = bin()
+        .arg("run")
+        .arg(capture)
+        .args([
+            "-c",
+            "configs/adverse-weather.toml",
+            "--keep-partial",
+            "--quiet",
+        ])
+        .arg("-o")
+        .arg(out)
+        .args(extra)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn chunked_and_sharded_runs_of_other_sensors_equal_the_plain_run() {
+    let dir = tempfile::tempdir().unwrap();
+    for sensor in ["vlp16", "hdl64e"] {
+        let path = capture(dir.path(), sensor, 3);
+        let plain = dir.path().join(format!("{sensor}-plain"));
+        run(&path, &plain, &[]);
+        let expected = common::files(&plain);
+        assert!(expected.len() >= 6, "{sensor}: {} files", expected.len());
+        let chunked = dir.path().join(format!("{sensor}-chunked"));
+        run(&path, &chunked, &["--chunk-frames", "2"]);
+        assert!(common::files(&chunked) == expected, "{sensor}: chunked");
+        // Shards in reverse order, then the merge.
+        let sharded = dir.path().join(format!("{sensor}-sharded"));
+        for k in ["2/3", "1/3", "0/3"] {
+            run(&path, &sharded, &["--chunk-frames", "1", "--shard", k]);
+        }
+        run(&path, &sharded, &["--chunk-frames", "1", "--merge"]);
+        assert!(common::files(&sharded) == expected, "{sensor}: sharded");
+    }
+}
+
+#[test]
+fn chunked_sweeps_of_other_sensors_equal_the_plain_sweep() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = capture(dir.path(), "vlp16", 3);
+    let sweep = |out: &Path, extra: &[&str]| {
+        let o = bin()
+            .arg("sweep")
+            .arg(&path)
+            .args(["-c", "configs/adverse-weather.toml"])
+            .args(["--vary", "rain.rate_mm_h=0,3", "--seeds", "1..2"])
+            .args(["--keep-partial", "--quiet", "-o"])
+            .arg(out)
+            .args(extra)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    let plain = dir.path().join("plain");
+    sweep(&plain, &[]);
+    let expected = common::files(&plain);
+    let chunked = dir.path().join("chunked");
+    sweep(&chunked, &["--chunk-frames", "2"]);
+    assert!(common::files(&chunked) == expected, "chunked");
+    let sharded = dir.path().join("sharded");
+    for k in ["1/2", "0/2"] {
+        sweep(&sharded, &["--chunk-frames", "1", "--shard", k]);
+    }
+    sweep(&sharded, &["--chunk-frames", "1", "--merge"]);
+    assert!(common::files(&sharded) == expected, "sharded");
+}

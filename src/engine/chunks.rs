@@ -77,11 +77,13 @@ impl Job {
         let decoder = &plan.decoder;
         let (sensor, found) = match &path {
             Some(p) => {
+                // The scan first: it refuses a FIFO before opening it.
+                let found = crate::sensor::frames::scan_capture(p, decoder)?;
                 let sensor = match crate::sensor::frames::open_capture(p, decoder)? {
                     CaptureFrames::Hdl32e(_) => &crate::sensor::HDL32E,
                     CaptureFrames::Model(r) => r.model(),
                 };
-                (sensor, crate::sensor::frames::scan_capture(p, decoder)?)
+                (sensor, found)
             }
             None => {
                 let scan = FrameScan::from_bytes(

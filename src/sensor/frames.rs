@@ -86,6 +86,10 @@ pub fn scan_capture(
         }
         Err(e) => e,
     };
+    // A FIFO is refused by the scan before it is opened (an open waits for a writer).
+    if crate::capture::is_stream(path) {
+        return Err(e);
+    }
     let reader = match open_capture(path, options) {
         Ok(CaptureFrames::Model(r)) => r,
         Ok(CaptureFrames::Hdl32e(_)) => return Err(e),

@@ -84,9 +84,11 @@ fn bin() -> Command {
     c
 }
 
-fn run(capture: &Path, out: &Path, extra: &[&str]) {
+/// `lidar-noise COMMAND capture -c configs/adverse-weather.toml --keep-partial --quiet
+/// -o out EXTRA...`, which must succeed.
+fn lidar_noise(command: &str, capture: &Path, out: &Path, extra: &[&str]) {
     let o = bin()
-        .arg("run")
+        .arg(command)
         .arg(capture)
         .args([
             "-c",
@@ -101,6 +103,10 @@ fn run(capture: &Path, out: &Path, extra: &[&str]) {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+fn run(capture: &Path, out: &Path, extra: &[&str]) {
+    lidar_noise("run", capture, out, extra);
 }
 
 #[test]
@@ -130,18 +136,8 @@ fn chunked_sweeps_of_other_sensors_equal_the_plain_sweep() {
     let dir = tempfile::tempdir().unwrap();
     let path = capture(dir.path(), "vlp16", 3);
     let sweep = |out: &Path, extra: &[&str]| {
-        let o = bin()
-            .arg("sweep")
-            .arg(&path)
-            .args(["-c", "configs/adverse-weather.toml"])
-            .args(["--vary", "rain.rate_mm_h=0,3", "--seeds", "1..2"])
-            .args(["--keep-partial", "--quiet", "-o"])
-            .arg(out)
-            .args(extra)
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let vary = ["--vary", "rain.rate_mm_h=0,3", "--seeds", "1..2"];
+        lidar_noise("sweep", &path, out, &[&vary[..], extra].concat());
     };
     let plain = dir.path().join("plain");
     sweep(&plain, &[]);

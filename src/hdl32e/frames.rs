@@ -213,6 +213,20 @@ pub(crate) struct Building {
 }
 
 impl Building {
+    /// The frame a resumed reader finds open before its first packet (frame
+    /// `next_index - 1`, when `open`): only its tail is seen, and it is dropped (its index
+    /// is below the frame resumed at).
+    pub(crate) fn tail_before(open: bool, next_index: u32) -> Option<Self> {
+        open.then(|| {
+            let frame = Frame {
+                index: next_index.wrapping_sub(1),
+                partial: false,
+                returns: Vec::new(),
+            };
+            Building::new(frame, 0, 0)
+        })
+    }
+
     /// A frame whose first firing is at `rel` with azimuth step `step`.
     pub(crate) fn new(frame: Frame, rel: u32, step: u32) -> Self {
         Building {
@@ -521,16 +535,7 @@ impl FrameReader {
         self.next_index = at.next_index;
         self.sweep = at.sweep;
         self.skip_before = at.frame;
-        // The frame open before the resume packet: only its tail is seen, and it is
-        // dropped (its index is below `skip_before`).
-        self.building = at.open.then(|| {
-            let frame = Frame {
-                index: at.next_index.wrapping_sub(1),
-                partial: false,
-                returns: Vec::new(),
-            };
-            Building::new(frame, 0, 0)
-        });
+        self.building = Building::tail_before(at.open, at.next_index);
     }
 
     /// Up to `max` next frames whose index lies in `frames`; empty once the capture (or

@@ -456,16 +456,7 @@ impl ModelFrameReader {
         self.ready.clear();
         self.done = false;
         self.past_range = false;
-        // The frame open before the resume packet: only its tail is seen, and it is
-        // dropped (its index is below `at.frame`, the first a chunk asks for).
-        self.building = at.open.then(|| {
-            let frame = Frame {
-                index: at.next_index.wrapping_sub(1),
-                partial: false,
-                returns: Vec::new(),
-            };
-            Building::new(frame, 0, 0)
-        });
+        self.building = Building::tail_before(at.open, at.next_index);
         Ok(())
     }
 

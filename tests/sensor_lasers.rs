@@ -13,7 +13,8 @@ use lidar_noise::frame::Frame;
 use lidar_noise::noise::{Fate, NoiseChain, Slots};
 use lidar_noise::sensor::{SensorModel, HDL32E, HDL64E_S2, VLP16};
 
-/// A turn of `model` at 10 Hz with every laser returning in firings `0..firings`, laser
+/// A turn of `model` at 10 Hz with every laser returning in firings `0..firings` (each
+/// point in the middle of its laser's step), laser
 /// l at range 10 + l / 8 m (so lasers l and l + 32 differ), intensity 60.
 fn frame_of(model: &SensorModel, firings: u32) -> Frame {
     let n = (1.0 / (10.0 * model.sequence_us * 1e-6)).round();
@@ -21,8 +22,12 @@ fn frame_of(model: &SensorModel, firings: u32) -> Frame {
     let mut points = Vec::new();
     for k in 0..firings {
         for (l, &ring) in rings.iter().enumerate() {
-            let az =
-                f64::from(k) * 360.0 / n + model.azimuth_offset_deg.get(l).copied().unwrap_or(0.0);
+            // Mid-firing, laser l's own firing time and azimuth offset added: a point on
+            // the block azimuth (a laser's lead cut off) would sit on a firing's edge,
+            // where float noise decides which of two firings it is in.
+            let az = (f64::from(k) + 0.5) * 360.0 / n
+                + model.laser_offset_us(l) * 360.0 * 10.0 * 1e-6
+                + model.azimuth_offset_deg.get(l).copied().unwrap_or(0.0);
             let el = model.elevation_deg[l];
             let r = 10.0 + l as f64 / 8.0;
             let (sa, ca) = az.to_radians().sin_cos();

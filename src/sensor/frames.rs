@@ -118,7 +118,8 @@ pub fn open_capture_at(
                 Ok(CaptureFrames::Model(r))
             }
             CaptureFrames::Hdl32e(_) => Err(Error::Invalid(format!(
-                "{}: now an HDL-32E capture, not the one scanned: was it replaced during                  the run?",
+                "{}: now an HDL-32E capture, not the one scanned: was it replaced during \
+                 the run?",
                 path.display()
             ))),
         },

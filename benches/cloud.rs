@@ -2,7 +2,8 @@
 //! `.bin` (the HDL-64E's 64 beams of the built-in table, 1875 points a beam around the
 //! turn, ranges 4 to 60 m) read from memory and from a file in the page cache (target:
 //! at least 1 GB/s), and its points turned into HDL-64E S2 returns (the firing grid, the
-//! laser from the elevation).
+//! laser from the elevation); and its way out: the per-point `fate.csv` sidecar a dataset
+//! run writes beside each scan.
 //!
 //! `cargo bench --bench cloud` (one core: `taskset -c 0 cargo bench --bench cloud`).
 
@@ -10,6 +11,8 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use lidar_noise::cloud::returns::{to_returns, ReturnsOptions};
 use lidar_noise::cloud::{read_bytes, read_file, Format, IntensityScale, ReadOptions};
 use lidar_noise::sensor::HDL64E_S2;
+use lidar_noise::writers::scan::{Fates, ScanPoint};
+use lidar_noise::writers::Output;
 use std::path::Path;
 
 /// The scan's bytes: float32 x y z reflectance a point, beam by beam as KITTI stores it.
@@ -57,6 +60,38 @@ fn bench_cloud(c: &mut Criterion) {
     group.throughput(Throughput::Elements(cloud.points.len() as u64));
     group.bench_function("kitti_120k_to_hdl64e_returns", |b| {
         b.iter(|| to_returns(&cloud.points, &HDL64E_S2, &returns, "000000.bin").unwrap())
+    });
+    // The scan's points as a dataset run writes them back: each its clean range (the
+    // float text is most of the cost), a few removed by a stage, the low beams ground,
+    // the others in clusters of a few hundred points.
+    let scan: Vec<ScanPoint> = cloud
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let removed = i % 13 == 0;
+            ScanPoint {
+                x: p.x,
+                y: p.y,
+                z: p.z,
+                intensity: 77,
+                ring: (i / 1875) as u16,
+                point: Some(i as u32),
+                fate: if removed { 2 } else { 0 },
+                cause: if removed { 3 } else { 255 },
+                range_clean: (p.x * p.x + p.y * p.y + p.z * p.z).sqrt(),
+                ground: u8::from(i < 20 * 1875),
+                cluster: if i < 20 * 1875 { -1 } else { (i / 300) as i32 },
+            }
+        })
+        .collect();
+    let mut out = Vec::with_capacity(8 << 20);
+    group.bench_function("kitti_120k_fate_csv", |b| {
+        b.iter(|| {
+            out.clear();
+            Fates { points: &scan }.write_to(&mut out).unwrap();
+            out.len()
+        })
     });
     group.finish();
 }

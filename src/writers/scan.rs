@@ -10,6 +10,7 @@
 
 use super::Output;
 use crate::cloud::Format;
+use std::fmt::Write as _;
 use std::io::Write;
 
 /// One point of a noisy scan and what became of it.
@@ -147,80 +148,147 @@ impl Output for Fates<'_> {
     }
 
     fn write_to(&self, out: &mut dyn Write) -> std::io::Result<()> {
-        // Rows are built in a buffer with `itoa` for the integers (the formatting machinery
-        // through a `dyn Write` was a fifth of a dataset run) and `ryu` for the range
-        // (`Display`'s float formatting was then a sixth): the bytes are those `writeln!`
-        // wrote.
-        let mut buf: Vec<u8> = Vec::with_capacity(64 * 1024);
-        buf.extend_from_slice(FATES_HEADER.as_bytes());
-        buf.push(b'\n');
-        let mut ints = itoa::Buffer::new();
+        // Each row is written in place into a buffer of fixed length, each field without
+        // a growth check or a `memcpy` call: the formatting machinery through a `dyn
+        // Write` was a fifth of a dataset run, and then a copy and a growth check a field
+        // (`push` and `extend_from_slice` on a `Vec`) most of what was left. The bytes
+        // are those `writeln!` wrote.
+        let mut buf = vec![0u8; CHUNK + ROW_MAX];
+        let header = FATES_HEADER.len();
+        buf[..header].copy_from_slice(FATES_HEADER.as_bytes());
+        buf[header] = b'\n';
+        let mut at = header + 1;
         let mut floats = ryu::Buffer::new();
         for p in self.points {
+            let space: &mut [u8; ROW_MAX] = (&mut buf[at..at + ROW_MAX])
+                .try_into()
+                .expect("a chunk has room for a row");
+            let mut row = Row {
+                bytes: space,
+                len: 0,
+            };
             match p.point {
-                Some(point) => push_uint(&mut buf, point),
-                None => buf.extend_from_slice(b"-1"),
+                Some(point) => row.uint(point),
+                None => row.text(b"-1"),
             }
-            buf.push(b',');
-            push_uint(&mut buf, u32::from(p.fate));
-            buf.push(b',');
-            push_uint(&mut buf, u32::from(p.cause));
-            buf.push(b',');
-            push_display_f32(&mut buf, &mut floats, p.range_clean);
-            buf.push(b',');
-            push_uint(&mut buf, u32::from(p.ground));
-            buf.push(b',');
+            row.byte(b',');
+            row.uint(u32::from(p.fate));
+            row.byte(b',');
+            row.uint(u32::from(p.cause));
+            row.byte(b',');
+            row.float(&mut floats, p.range_clean);
+            row.byte(b',');
+            row.uint(u32::from(p.ground));
+            row.byte(b',');
             if p.cluster < 0 {
-                buf.extend_from_slice(ints.format(p.cluster).as_bytes());
-            } else {
-                push_uint(&mut buf, p.cluster.unsigned_abs());
+                row.byte(b'-');
             }
-            buf.push(b'\n');
-            if buf.len() >= 60 * 1024 {
-                out.write_all(&buf)?;
-                buf.clear();
+            row.uint(p.cluster.unsigned_abs());
+            row.byte(b'\n');
+            at += row.len;
+            if at >= CHUNK {
+                out.write_all(&buf[..at])?;
+                at = 0;
             }
         }
-        out.write_all(&buf)
+        out.write_all(&buf[..at])
     }
 }
 
-/// Appends `v` in decimal. Digit by digit, not through `itoa`: copying itoa's text into
-/// the row is a `memcpy` call of a length unknown at compile time for a value of one to
-/// six digits, and those calls were about a twelfth of a dataset run (perf).
-#[inline]
-fn push_uint(buf: &mut Vec<u8>, v: u32) {
-    let mut digits = [0u8; 10];
-    let mut at = digits.len();
-    let mut rest = v;
-    loop {
-        at -= 1;
-        digits[at] = b'0' + (rest % 10) as u8;
-        rest /= 10;
-        if rest == 0 {
-            break;
-        }
-    }
-    for &d in &digits[at..] {
-        buf.push(d);
-    }
+/// Longest row of the fate CSV: a point index and a cluster id of 10 digits and a sign,
+/// three bytes, five commas and a newline (37), and the longest text `Display` gives an
+/// f32 (48, 1e-45 written out).
+const ROW_MAX: usize = 96;
+
+/// Bytes of rows written at a time.
+const CHUNK: usize = 64 * 1024;
+
+/// One row of the fate CSV as it is built, in the room left in the buffer.
+struct Row<'a> {
+    bytes: &'a mut [u8; ROW_MAX],
+    len: usize,
 }
 
-/// Appends `v` as `Display` writes it. ryu gives the same shortest round-trip digits,
-/// but for the ".0" it adds to whole numbers, the exponent it uses for very small and
-/// large ones, and the way it breaks an exact tie between two shortest texts (to even,
-/// where `Display` rounds up: 1.00390625 is "1.0039063", ryu's "1.0039062"). Whole
-/// numbers and floats that can tie go to `Display`.
-fn push_display_f32(buf: &mut Vec<u8>, floats: &mut ryu::Buffer, v: f32) {
-    if v.abs() < 1e6 && !may_tie(v) {
-        let s = floats.format_finite(v);
-        if !s.contains('e') {
-            buf.extend_from_slice(s.as_bytes());
+/// "00", "01", ... "99": two digits a step.
+const DIGIT_PAIRS: &[u8; 200] = b"\
+0001020304050607080910111213141516171819\
+2021222324252627282930313233343536373839\
+4041424344454647484950515253545556575859\
+6061626364656667686970717273747576777879\
+8081828384858687888990919293949596979899";
+
+impl Row<'_> {
+    #[inline]
+    fn byte(&mut self, b: u8) {
+        self.bytes[self.len] = b;
+        self.len += 1;
+    }
+
+    #[inline]
+    fn text(&mut self, s: &[u8]) {
+        let (n, to) = (s.len(), &mut self.bytes[self.len..]);
+        // Two overlapping copies of a fixed length (a load and a store each) rather than
+        // a `memcpy` call for a text of a few bytes.
+        if (8..=16).contains(&n) && to.len() >= 16 {
+            to[..8].copy_from_slice(&s[..8]);
+            to[n - 8..n].copy_from_slice(&s[n - 8..]);
+        } else if (4..8).contains(&n) && to.len() >= 8 {
+            to[..4].copy_from_slice(&s[..4]);
+            to[n - 4..n].copy_from_slice(&s[n - 4..]);
+        } else {
+            to[..n].copy_from_slice(s);
+        }
+        self.len += n;
+    }
+
+    /// Appends `v` in decimal, two digits a step from the last.
+    #[inline(always)]
+    fn uint(&mut self, v: u32) {
+        let digits = (v | 1).ilog10() as usize + 1;
+        let mut at = self.len + digits;
+        let mut rest = v;
+        while rest >= 100 {
+            let pair = (rest % 100) as usize * 2;
+            rest /= 100;
+            at -= 2;
+            self.bytes[at..at + 2].copy_from_slice(&DIGIT_PAIRS[pair..pair + 2]);
+        }
+        if rest >= 10 {
+            let pair = rest as usize * 2;
+            self.bytes[at - 2..at].copy_from_slice(&DIGIT_PAIRS[pair..pair + 2]);
+        } else {
+            self.bytes[at - 1] = b'0' + rest as u8;
+        }
+        self.len += digits;
+    }
+
+    /// Appends `v` as `Display` writes it. ryu gives the same shortest round-trip
+    /// digits, but for the ".0" it adds to whole numbers (written here as integers, as
+    /// `Display` writes them), the exponent it uses below 1e-5 and from 1e16, and the
+    /// way it breaks an exact tie between two shortest texts (to even, where `Display`
+    /// rounds up: 1.00390625 is "1.0039063", ryu's "1.0039062"). Floats that can tie
+    /// and those outside [1e-4, 1e6) go to `Display`.
+    #[inline]
+    fn float(&mut self, floats: &mut ryu::Buffer, v: f32) {
+        // Whole: `as` truncates (one instruction; `fract` is a libm call on x86-64).
+        if (v as i32) as f32 == v && v.abs() < 16_777_216.0 {
+            // Every whole f32 below 2^24 is its own shortest text: no other integer of
+            // fewer digits rounds to it.
+            if v.is_sign_negative() {
+                self.byte(b'-');
+            }
+            self.uint(v.abs() as u32);
             return;
         }
+        if (1e-4..1e6).contains(&v.abs()) && !may_tie(v) {
+            self.text(floats.format_finite(v).as_bytes());
+            return;
+        }
+        let mut s = String::new();
+        // Writing to a String cannot fail.
+        let _ = write!(s, "{v}");
+        self.text(s.as_bytes());
     }
-    // Writing to a Vec cannot fail.
-    let _ = write!(buf, "{v}");
 }
 
 /// Whether `v` is whole (or zero, or not finite), or its exact decimal value has 10
@@ -254,9 +322,14 @@ mod tests {
         values.extend((0..32).map(|k| 1u32 << k));
         values.extend((1..10).map(|k| 10u32.pow(k) - 1));
         for v in values {
-            let mut buf = b"x".to_vec();
-            push_uint(&mut buf, v);
-            assert_eq!(String::from_utf8(buf).unwrap(), format!("x{v}"));
+            let mut space = [0; ROW_MAX];
+            let mut row = Row {
+                bytes: &mut space,
+                len: 0,
+            };
+            row.byte(b'x');
+            row.uint(v);
+            assert_eq!(&row.bytes[..row.len], format!("x{v}").as_bytes());
         }
     }
 
@@ -266,9 +339,13 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         let mut floats = ryu::Buffer::new();
         let mut check = |v: f32| {
-            let mut buf = Vec::new();
-            push_display_f32(&mut buf, &mut floats, v);
-            assert_eq!(String::from_utf8(buf).unwrap(), v.to_string(), "{v:e}");
+            let mut space = [0; ROW_MAX];
+            let mut row = Row {
+                bytes: &mut space,
+                len: 0,
+            };
+            row.float(&mut floats, v);
+            assert_eq!(&row.bytes[..row.len], v.to_string().as_bytes(), "{v:e}");
         };
         for v in [
             0.0f32,
@@ -284,6 +361,10 @@ mod tests {
             -342_417.62,
             1.003_906_2,
             999_999.94,
+            -25.0,
+            16_777_215.0,
+            16_777_216.0,
+            -16_777_218.0,
             f32::MIN_POSITIVE,
             1e-45,
             f32::NAN,
@@ -301,6 +382,8 @@ mod tests {
             let bits = rng.random_range(1..=24);
             let m = rng.random_range(0..1u32 << bits) as f32;
             check(m / (1u64 << rng.random_range(0..40)) as f32);
+            // Whole numbers, which are written as integers.
+            check(rng.random_range(-20_000_000i32..20_000_000) as f32);
         }
     }
 

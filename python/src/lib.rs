@@ -428,19 +428,18 @@ impl RecordLayout {
     /// The records of `rows` (indices into the noisy frame), written straight into the
     /// bytes numpy will view as the structured array (no column copies).
     fn records(&self, noisy: &NoisyFrame, rows: &[u32]) -> Vec<u8> {
+        let mut buf = vec![0u8; rows.len() * self.itemsize];
         if self.itemsize == ALIGNED_ITEMSIZE && self.at == ALIGNED_AT {
             // numpy's aligned layout of APPLIED_DTYPE (what the package passes): offsets
-            // known at compile time, each record built on the stack and appended, where
-            // the general path zeroes the whole buffer first and computes every offset.
-            let mut buf = Vec::with_capacity(rows.len() * ALIGNED_ITEMSIZE);
-            for &i in rows {
-                let mut rec = [0u8; ALIGNED_ITEMSIZE];
-                fill_record(&mut rec, &ALIGNED_AT, noisy, i as usize);
-                buf.extend_from_slice(&rec);
+            // known at compile time. Written in place: a record built on the stack and
+            // then appended was read back in wide loads right after its narrow stores,
+            // which stalled on every record (store forwarding).
+            for (rec, &i) in buf.chunks_exact_mut(ALIGNED_ITEMSIZE).zip(rows) {
+                let rec: &mut [u8; ALIGNED_ITEMSIZE] = rec.try_into().expect("chunks are exact");
+                fill_record(rec, &ALIGNED_AT, noisy, i as usize);
             }
             return buf;
         }
-        let mut buf = vec![0u8; rows.len() * self.itemsize];
         for (rec, &i) in buf.chunks_exact_mut(self.itemsize).zip(rows) {
             fill_record(rec, &self.at, noisy, i as usize);
         }

@@ -35,8 +35,9 @@
 //!   nearest firing within two on either side that no point claims, and shares the slot
 //!   only when those are all claimed (counted in [`CloudReturns::moved`] and
 //!   [`CloudReturns::shared`]); a point is never pushed out of its own firing, so a
-//!   collision moves one point, not the rest of its line. Slots no point claims are the sensor's empty slots (sky,
-//!   no echo), which the spurious-return rules of `noise::spurious` need.
+//!   collision moves one point, not the rest of its line. Slots no point claims are the
+//!   sensor's empty slots (sky, no echo), which the spurious-return rules of
+//!   `noise::spurious` need.
 //! - packet and block from the firing (firings numbered from 0 at the turn's start,
 //!   `sequences_per_packet` firings a packet in single return mode: 12 on the HDL-32E and
 //!   VLP-32C, 24 on the VLP-16, 6 on the HDL-64E), time = `start_time` + the firing's and

@@ -26,7 +26,6 @@
 
 use super::{Plan, RunRequest};
 use crate::cli::Global;
-use crate::frame::FrameSource;
 use crate::hdl32e::frames::FrameReader;
 use crate::hdl32e::index::FrameScan;
 use crate::noise::summary::{
@@ -646,10 +645,7 @@ fn join_capture(
     // The capture summary covers every packet a run reads: decode without processing.
     let plan = &job.plan;
     let mut reader = job.open(None)?;
-    match &mut reader {
-        CaptureFrames::Hdl32e(r) => r.count_rest(&plan.frames)?,
-        CaptureFrames::Model(r) => r.count_rest(&plan.frames)?,
-    };
+    reader.source_mut().count_rest(&plan.frames)?;
     let capture_summary;
     let source_summary = match &reader {
         CaptureFrames::Hdl32e(r) => {

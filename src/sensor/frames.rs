@@ -134,6 +134,14 @@ impl CaptureFrames {
             CaptureFrames::Model(r) => r,
         }
     }
+
+    /// The reader as a frame source, kept for its summary afterwards.
+    pub fn source_mut(&mut self) -> &mut dyn crate::frame::FrameSource {
+        match self {
+            CaptureFrames::Hdl32e(r) => r.as_mut(),
+            CaptureFrames::Model(r) => r.as_mut(),
+        }
+    }
 }
 
 /// The other sensor's reader, or the error to show when neither reader takes the

@@ -75,15 +75,8 @@ impl Job {
     ) -> Result<(Job, Chunks, usize)> {
         let decoder = &plan.decoder;
         let (sensor, found) = match &path {
-            Some(p) => {
-                // The scan first: it refuses a FIFO before opening it.
-                let found = crate::sensor::frames::scan_capture(p, decoder)?;
-                let sensor = match crate::sensor::frames::open_capture(p, decoder)? {
-                    CaptureFrames::Hdl32e(_) => &crate::sensor::HDL32E,
-                    CaptureFrames::Model(r) => r.model(),
-                };
-                (sensor, found)
-            }
+            // The scan also tells the sensor (and refuses a FIFO before opening it).
+            Some(p) => crate::sensor::frames::scan_capture(p, decoder)?,
             None => {
                 let scan = FrameScan::from_bytes(
                     Arc::from(super::inputs::DEFAULT_CAPTURE),

@@ -70,19 +70,21 @@ pub enum CaptureSeek {
 /// it starts.
 pub type ScannedFrame = (u32, bool, CaptureSeek);
 
-/// Every frame of the capture file at `path` (partial ones too, flagged) with where it
-/// starts, in order: an HDL-32E capture's from its frame index (streamed, no returns
-/// decoded), another sensor's from a scan that decodes it once; the capture reader's
-/// error when no described sensor fits.
+/// The frames [`scan_capture`] finds, in order.
+pub type ScannedFrames = Box<dyn Iterator<Item = Result<ScannedFrame>>>;
+
+/// The sensor of the capture file at `path` and every frame of it (partial ones too,
+/// flagged) with where it starts, in order: an HDL-32E capture's from its frame index
+/// (streamed, no returns decoded), another sensor's from a scan that decodes it once; the
+/// capture reader's error when no described sensor fits.
 pub fn scan_capture(
     path: &Path,
     options: &crate::hdl32e::frames::DecoderOptions,
-) -> Result<Box<dyn Iterator<Item = Result<ScannedFrame>>>> {
+) -> Result<(&'static SensorModel, ScannedFrames)> {
     let e = match crate::hdl32e::index::FrameScan::open(path, options) {
         Ok(scan) => {
-            return Ok(Box::new(scan.map(|f| {
-                f.map(|f| (f.index, f.partial, CaptureSeek::Hdl32e(f.seek)))
-            })))
+            let frames = scan.map(|f| f.map(|f| (f.index, f.partial, CaptureSeek::Hdl32e(f.seek))));
+            return Ok((&super::HDL32E, Box::new(frames)));
         }
         Err(e) => e,
     };
@@ -95,9 +97,11 @@ pub fn scan_capture(
         Ok(CaptureFrames::Hdl32e(_)) => return Err(e),
         Err(e) => return Err(e),
     };
-    Ok(Box::new(reader.scan().map(|f| {
-        f.map(|f| (f.index, f.partial, CaptureSeek::Model(f.seek)))
-    })))
+    let sensor = reader.model();
+    let frames = reader
+        .scan()
+        .map(|f| f.map(|f| (f.index, f.partial, CaptureSeek::Model(f.seek))));
+    Ok((sensor, Box::new(frames)))
 }
 
 /// The frame reader of the capture file at `path` going on from `at` (found by

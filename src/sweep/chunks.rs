@@ -13,11 +13,12 @@ use super::run::SweepSettings;
 use crate::error::{Error, Result};
 use crate::hdl32e::index::{FrameScan, FrameSeek};
 use crate::sensor::frames::CaptureSeek;
+use crate::sensor::SensorModel;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
-/// Frame-index ranges of the chunks of `M` frames of a capture within `s.frames`, where
-/// each chunk's first frame starts (to resume a reader there, see
+/// The capture's sensor, the frame-index ranges of the chunks of `M` frames of it within
+/// `s.frames`, where each chunk's first frame starts (to resume a reader there, see
 /// [`crate::sensor::frames::scan_capture`]), and the number of frames; errors when the
 /// capture has no frame in range. An HDL-32E capture is scanned without decoding
 /// returns, in bounded memory; another sensor's is decoded once.
@@ -25,13 +26,9 @@ pub fn chunk_ranges(
     s: &SweepSettings,
     path: &Path,
     frames_per_chunk: u32,
-) -> Result<(Vec<RangeInclusive<u32>>, Vec<CaptureSeek>, usize)> {
-    let (ranges, seeks, n) = chunks_of(
-        crate::sensor::frames::scan_capture(path, &s.decoder)?,
-        &s.frames,
-        s.decoder.keep_partial,
-        frames_per_chunk,
-    )?;
+) -> Result<(&'static SensorModel, ChunkRanges)> {
+    let (sensor, found) = crate::sensor::frames::scan_capture(path, &s.decoder)?;
+    let (ranges, seeks, n) = chunks_of(found, &s.frames, s.decoder.keep_partial, frames_per_chunk)?;
     if n == 0 {
         return Err(Error::Invalid(format!(
             "{}: no frame to process in {} (partial sweeps need --keep-partial)",
@@ -39,8 +36,11 @@ pub fn chunk_ranges(
             crate::options::frames_phrase(&s.frames)
         )));
     }
-    Ok((ranges, seeks, n))
+    Ok((sensor, (ranges, seeks, n)))
 }
+
+/// Chunks' frame ranges, where each starts, and the number of frames.
+pub type ChunkRanges = (Vec<RangeInclusive<u32>>, Vec<CaptureSeek>, usize);
 
 /// Chunks of `m` frames among the frames a reader yields in `frames` (partial sweeps only
 /// with `keep_partial`), from a scan: ranges, each chunk's seek point, frame count.

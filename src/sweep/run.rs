@@ -344,22 +344,22 @@ pub fn run_mode(
         chunks::check_parts(&dir, s.chunk_frames)?;
         let protected = protected_paths(capture);
         let protected: Vec<&Path> = protected.iter().map(PathBuf::as_path).collect();
-        let sensor = capture_sensor(s, capture)?;
-        // Cells are keyed on the content of every input, not on names and sizes.
-        let content = content_key(s, capture)?;
         // With --chunk-frames, the frames are counted first (decoding only) so that the
-        // list of units, and so the deal of the shards, is known before any work.
+        // list of units, and so the deal of the shards, is known before any work; the
+        // scan tells the sensor too.
         let mut expected_frames = None;
         let mut seeks = Vec::new();
-        let ranges = match s.chunk_frames {
+        let (sensor, ranges) = match s.chunk_frames {
             Some(m) => {
-                let (ranges, at, n) = chunks::chunk_ranges(s, &capture.path, m)?;
+                let (sensor, (ranges, at, n)) = chunks::chunk_ranges(s, &capture.path, m)?;
                 expected_frames = Some(n);
                 seeks = at;
-                Some(ranges)
+                (sensor, Some(ranges))
             }
-            None => None,
+            None => (capture_sensor(s, capture)?, None),
         };
+        // Cells are keyed on the content of every input, not on names and sizes.
+        let content = content_key(s, capture)?;
         let n_chunks = ranges.as_ref().map_or(1, Vec::len);
         // Execution order: seeds outermost so cells sharing a baseline run together.
         // Pending units by chunk (one group without chunks), each group sharing decoding.

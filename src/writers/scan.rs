@@ -226,19 +226,8 @@ impl Row<'_> {
 
     #[inline]
     fn text(&mut self, s: &[u8]) {
-        let (n, to) = (s.len(), &mut self.bytes[self.len..]);
-        // Two overlapping copies of a fixed length (a load and a store each) rather than
-        // a `memcpy` call for a text of a few bytes.
-        if (8..=16).contains(&n) && to.len() >= 16 {
-            to[..8].copy_from_slice(&s[..8]);
-            to[n - 8..n].copy_from_slice(&s[n - 8..]);
-        } else if (4..8).contains(&n) && to.len() >= 8 {
-            to[..4].copy_from_slice(&s[..4]);
-            to[n - 4..n].copy_from_slice(&s[n - 4..]);
-        } else {
-            to[..n].copy_from_slice(s);
-        }
-        self.len += n;
+        self.bytes[self.len..self.len + s.len()].copy_from_slice(s);
+        self.len += s.len();
     }
 
     /// Appends `v` in decimal, two digits a step from the last.

@@ -83,9 +83,7 @@ impl Job {
                     Path::new(super::inputs::DEFAULT_CAPTURE_NAME),
                     decoder,
                 )?;
-                let found: Box<dyn Iterator<Item = _>> = Box::new(
-                    scan.map(|f| f.map(|f| (f.index, f.partial, CaptureSeek::Hdl32e(f.seek)))),
-                );
+                let found = crate::sensor::frames::hdl32e_scanned(scan);
                 (&crate::sensor::HDL32E, found)
             }
         };

@@ -82,10 +82,7 @@ pub fn scan_capture(
     options: &crate::hdl32e::frames::DecoderOptions,
 ) -> Result<(&'static SensorModel, ScannedFrames)> {
     let e = match crate::hdl32e::index::FrameScan::open(path, options) {
-        Ok(scan) => {
-            let frames = scan.map(|f| f.map(|f| (f.index, f.partial, CaptureSeek::Hdl32e(f.seek))));
-            return Ok((&super::HDL32E, Box::new(frames)));
-        }
+        Ok(scan) => return Ok((&super::HDL32E, hdl32e_scanned(scan))),
         Err(e) => e,
     };
     // A FIFO is refused by the scan before it is opened (an open waits for a writer).
@@ -102,6 +99,11 @@ pub fn scan_capture(
         .scan()
         .map(|f| f.map(|f| (f.index, f.partial, CaptureSeek::Model(f.seek))));
     Ok((sensor, Box::new(frames)))
+}
+
+/// The frames of an HDL-32E capture's frame index, as [`scan_capture`] gives them.
+pub fn hdl32e_scanned(scan: crate::hdl32e::index::FrameScan) -> ScannedFrames {
+    Box::new(scan.map(|f| f.map(|f| (f.index, f.partial, CaptureSeek::Hdl32e(f.seek)))))
 }
 
 /// The frame reader of the capture file at `path` going on from `at` (found by

@@ -554,32 +554,31 @@ pub fn to_returns(
     }
     // The returns built in firing order from the placings (a placing holds all its
     // return needs, so one record is read a return; building returns in input order and
-    // then moving them was a fifth of the conversion, most of it the copy's pages).
-    let returns = order
-        .iter()
-        .map(|&i| {
-            let q = &placed[i as usize];
-            let l = usize::from(q.laser);
-            let firing = i64::from(q.firing);
-            let time_us = firing as f64 * sequence_us + laser_us[l];
-            Return {
-                x: q.x,
-                y: q.y,
-                z: q.z,
-                range: q.range,
-                azimuth: q.azimuth,
-                elevation: q.elevation,
-                time: options.start_time + time_us * 1e-6,
-                packet: (firing / per_packet) as u32,
-                raw_distance: q.raw_distance,
-                intensity: q.intensity,
-                laser: q.laser,
-                ring: rings[l],
-                block: (firing % per_packet) as u8,
-                kind: ReturnKind::Strongest,
-            }
-        })
-        .collect();
+    // then moving them was a fifth of the conversion, most of it the copy's pages),
+    // with the room the noise chain keeps for added echoes (it would move them otherwise).
+    let mut returns = Vec::with_capacity(order.len() + crate::noise::room_for_added(order.len()));
+    returns.extend(order.iter().map(|&i| {
+        let q = &placed[i as usize];
+        let l = usize::from(q.laser);
+        let firing = i64::from(q.firing);
+        let time_us = firing as f64 * sequence_us + laser_us[l];
+        Return {
+            x: q.x,
+            y: q.y,
+            z: q.z,
+            range: q.range,
+            azimuth: q.azimuth,
+            elevation: q.elevation,
+            time: options.start_time + time_us * 1e-6,
+            packet: (firing / per_packet) as u32,
+            raw_distance: q.raw_distance,
+            intensity: q.intensity,
+            laser: q.laser,
+            ring: rings[l],
+            block: (firing % per_packet) as u8,
+            kind: ReturnKind::Strongest,
+        }
+    }));
     Ok(CloudReturns {
         returns,
         order,

@@ -452,7 +452,7 @@ impl Moved {
 /// Room kept in a frame's columns for the returns the chain may add in empty firing
 /// slots (a real HDL-32E frame has about 15 % of its slots empty), so that adding them
 /// does not move every column of a 50k-return frame (a tenth of a fog stage's time).
-fn room_for_added(n: usize) -> usize {
+pub(crate) fn room_for_added(n: usize) -> usize {
     n / 4 + 64
 }
 

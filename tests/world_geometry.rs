@@ -160,6 +160,34 @@ fn mixed_pixels_lie_between_the_surfaces_with_the_power_weighted_range() {
 }
 
 #[test]
+fn a_jump_of_exactly_edge_m_is_no_edge_however_the_ranges_round() {
+    // A capture's ranges are whole 2 mm units: 6,007 and 6,157 units are 0.300 m apart,
+    // 0.29999924 m between the two f32 ranges; the same points' ranges recomputed from
+    // x y z (a dataset's copy of the capture) may lie a unit in the last place either
+    // side, 0.3000002 m apart. None is more than edge_m = 0.3 m.
+    let cases = [
+        (6007.0f32 * 0.002, 6157.0f32 * 0.002),
+        (12.014_001, 12.313_999),
+        (12.013_999, 12.314_001),
+        (2.0, 2.3),
+    ];
+    for (near, far) in cases {
+        let out = run(
+            &stage("multipath", "probability = 1"),
+            &bands(near, far, false),
+        );
+        assert!(out.fate.iter().all(|&x| x == Fate::Kept), "{near} {far}");
+    }
+    // One unit more is an edge: every edge return mixed.
+    let out = run(
+        &stage("multipath", "probability = 1"),
+        &bands(12.014, 12.316, false),
+    );
+    let mixed = out.fate.iter().filter(|&&x| x != Fate::Kept).count();
+    assert_eq!(mixed, 32 * 118);
+}
+
+#[test]
 fn separate_echoes_follow_the_strongest_rule() {
     // 5 m and 8 m: 3 m apart, two echoes. The neighbour's echo g P_other beats the own
     // echo (1 - g) P_own when g > P_own / (P_own + P_other): with g uniform that happens

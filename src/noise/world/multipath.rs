@@ -7,7 +7,9 @@
 //!
 //! Model (pdiagram-models.md, 07, after Hebert and Krotkov 1992 and Tuley et al. 2005):
 //! a depth edge is a range jump of more than `edge_m` between the returns of one laser
-//! in consecutive firings (azimuth neighbours at most 1 degree apart). A return next to
+//! in consecutive firings (azimuth neighbours at most 1 degree apart; jumps compared to
+//! a tenth of a millimetre, so that a capture's jump of exactly `edge_m` is no edge
+//! however its ranges round in `f32`). A return next to
 //! an edge (the neighbour across the larger jump, if it has two) is an edge return; a
 //! fraction `probability` (p_mix) of them is mixed. With g the fraction of its footprint
 //! on the neighbour's surface, its own echo has power P1 = (1 - g) P_own and the
@@ -145,6 +147,20 @@ pub fn mix(r_own: f32, p_own: f64, r_other: f32, p_other: f64, g: f64, merge_m: 
     }
 }
 
+/// Step (metres) to which range jumps are rounded before they are compared with `edge_m`
+/// and with each other. A capture's ranges are whole multiples of its unit (2 mm on the
+/// HDL-32E), so a jump of exactly `edge_m` is common; in `f32` it came out a hair above
+/// or below by how each range happened to round, and the same scene read from a capture
+/// and from the points it was converted to decided such an edge either way. A tenth of a
+/// millimetre is finer than any sensor's unit and far coarser than the rounding.
+const JUMP_STEP_M: f64 = 1e-4;
+
+/// `jump_m` in steps of [`JUMP_STEP_M`], rounded to the nearest.
+#[inline]
+fn jump_steps(jump_m: f64) -> i64 {
+    (jump_m / JUMP_STEP_M).round() as i64
+}
+
 /// Signed azimuth difference b - a in degrees, wrapped to (-180, 180].
 #[inline]
 pub(crate) fn az_diff(a: f32, b: f32) -> f64 {
@@ -206,6 +222,7 @@ impl NoiseStage for Multipath {
             }
         }
         let merge_m = merge_distance_m(self.pulse_ns);
+        let edge = jump_steps(self.edge_m);
         let half_theta = self.divergence_mrad * 1e-3 / 2.0;
         // Decide every change from the state before this stage, then apply.
         let mut actions: Vec<(u32, usize, Mix)> = Vec::new();
@@ -224,7 +241,7 @@ impl NoiseStage for Multipath {
                     continue;
                 }
                 let (ri, ai) = (frame.range[i], frame.clean[i].azimuth);
-                let mut best: Option<(usize, f32, f64)> = None;
+                let mut best: Option<(usize, i64, f64)> = None;
                 for nf in [f.wrapping_sub(1), f + 1] {
                     if nf >= n_fir {
                         continue;
@@ -235,11 +252,8 @@ impl NoiseStage for Multipath {
                     }
                     let j = j as usize;
                     let step = az_diff(ai, frame.clean[j].azimuth).abs();
-                    let jump = (frame.range[j] - ri).abs();
-                    if step > MAX_STEP_DEG
-                        || f64::from(jump) <= self.edge_m
-                        || best.is_some_and(|b| b.1 >= jump)
-                    {
+                    let jump = jump_steps((f64::from(frame.range[j]) - f64::from(ri)).abs());
+                    if step > MAX_STEP_DEG || jump <= edge || best.is_some_and(|b| b.1 >= jump) {
                         continue;
                     }
                     best = Some((j, jump, step));

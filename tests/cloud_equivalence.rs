@@ -61,24 +61,46 @@ fn points(f: &Frame) -> Vec<ScanPoint> {
         .collect()
 }
 
-/// `configs` with the position tolerance of each (metres).
-fn check(capture: &Path, index: u32, configs: &[(String, f32)]) {
+/// The frame's returns as a CSV with a time column (seconds, as a tool that keeps each
+/// point's time writes it): the scan is then placed by time, not by azimuth.
+fn csv_with_time(f: &Frame) -> Vec<u8> {
+    let mut text = String::from("x,y,z,intensity,ring,time\n");
+    for r in &f.returns {
+        text.push_str(&format!(
+            "{},{},{},{},{},{}\n",
+            r.x, r.y, r.z, r.intensity, r.ring, r.time
+        ));
+    }
+    text.into_bytes()
+}
+
+/// The files a frame is written as: each format `run` writes back, and a CSV with the
+/// points' times.
+const ALL: [&str; 5] = ["s.pcd.bin", "000001.bin", "s.pcd", "s.csv", "timed.csv"];
+
+/// `configs` with the position tolerance of each (metres), on the frame written as each
+/// of `files` (names from [`ALL`]).
+fn check(capture: &Path, index: u32, configs: &[(String, f32)], files: &[&str]) {
     let (f, rotation_hz) = frame(capture, index);
     let pts = points(&f);
-    for format in [Format::NuScenes, Format::Kitti, Format::Pcd, Format::Csv] {
-        let name = match format {
-            Format::NuScenes => "s.pcd.bin",
-            Format::Kitti => "000001.bin",
-            Format::Pcd => "s.pcd",
-            _ => "s.csv",
-        };
+    for &name in files {
         let mut bytes = Vec::new();
-        Scan {
-            format,
-            points: &pts,
+        let format = match name {
+            "s.pcd.bin" => Some(Format::NuScenes),
+            "000001.bin" => Some(Format::Kitti),
+            "s.pcd" => Some(Format::Pcd),
+            "s.csv" => Some(Format::Csv),
+            _ => None,
+        };
+        match format {
+            Some(format) => Scan {
+                format,
+                points: &pts,
+            }
+            .write_to(&mut bytes)
+            .unwrap(),
+            None => bytes = csv_with_time(&f),
         }
-        .write_to(&mut bytes)
-        .unwrap();
         let cloud = read_bytes(&bytes, Path::new(name), &ReadOptions::default()).unwrap();
         let placed = to_returns(
             &cloud.points,
@@ -91,6 +113,8 @@ fn check(capture: &Path, index: u32, configs: &[(String, f32)]) {
             name,
         )
         .unwrap();
+        let timed = name == "timed.csv";
+        assert_eq!(placed.time_unit, timed.then_some("s"), "{name}");
         for (config, tolerance) in configs {
             let tolerance = *tolerance;
             let text = std::fs::read_to_string(
@@ -174,14 +198,15 @@ fn configs() -> Vec<(String, f32)> {
 
 #[test]
 fn every_format_gives_the_capture_frames_fates_causes_and_positions() {
-    check(&common::crossroad(), 1, &configs());
+    check(&common::crossroad(), 1, &configs(), &ALL);
 }
 
 /// A real capture: the sensor's rate varies within a turn, so on a uniform grid some
 /// points move to a neighbouring firing (1,698 of monterey's frame 3's 49,543, and 211
-/// share a slot), which reorders the per-return draws of stochastic stages: their fates
-/// agree in distribution, not return by return (a scan's formats hold no firing time to
-/// place them by). The configurations without random draws agree return by return.
+/// share a slot), which reorders the per-return draws of stochastic stages: placed by
+/// azimuth (the formats without a time field), their fates agree in distribution, not
+/// return by return, and the configurations without random draws agree return by return.
+/// Placed by the points' times, every configuration agrees return by return.
 #[test]
 fn on_the_shared_capture_too() {
     let Some(path) = common::shared("hdl32e/monterey.pcap") else {
@@ -192,5 +217,6 @@ fn on_the_shared_capture_too() {
         .filter(|(n, _)| n == "clear" || n == "occlusion")
         .collect();
     assert_eq!(deterministic.len(), 2);
-    check(&path, 3, &deterministic);
+    check(&path, 3, &deterministic, &ALL[..4]);
+    check(&path, 3, &configs(), &["timed.csv"]);
 }

@@ -163,6 +163,10 @@ def _columns(points: Any) -> "tuple[str, Dict[str, np.ndarray]]":
             elif not (ring < 0).all():
                 i = int(np.flatnonzero(ring < 0)[0])
                 raise ValueError(f"points: point {i} (0-based): ring {ring[i]} is negative")
+        if "time" in names:
+            # Places the points by time, as `run` places a file's (see the guide's
+            # "Other sensors").
+            cols["time"] = _field(points, "time", np.float64)
         return "points", cols
     if points.ndim != 2 or points.shape[1] not in (4, 5):
         raise ValueError(
@@ -330,7 +334,8 @@ def points_to_returns(
     """Plain points (x y z intensity [ring]) as returns of ``sensor`` (default the
     HDL-32E; any name ``Chain.from_toml`` takes), in firing order, and the input index of
     each (see the library's ``cloud::returns``). A ring, where given, is 0 (lowest beam)
-    to the sensor's lasers - 1."""
+    to the sensor's lasers - 1; a ``time`` field, where given, places the points on
+    their firings by time rather than by azimuth."""
     _sensor_model(sensor)
     kind, cols = _columns(points)
     if kind == "returns":
@@ -435,8 +440,9 @@ class Chain:
         below the sensor's lasers), or plain points, an (N, 4)/(N, 5) float array x y z
         intensity [ring] or a structured array with those names, each made a return of
         the chain's sensor (``points_to_returns``; a ring, where given, 0 to ``lasers -
-        1``; ``rotation_hz`` places them on the firing grid, ``intensity_scale`` "byte"
-        for 0-255 or "unit" for 0-1).
+        1``; ``rotation_hz`` places them on the firing grid, or a ``time`` field, where
+        given, on their firings by time; ``intensity_scale`` "byte" for 0-255 or "unit"
+        for 0-1).
 
         Returns an ``APPLIED_DTYPE`` array: row i is input point i (reported returns at
         their noisy position, dropped ones where they were), then the returns stages

@@ -74,7 +74,8 @@ class Chain:
     ) -> npt.NDArray[Any]:
         """Noise and detection filters on one frame: RETURN_DTYPE arrays (as `read`
         gives, exact to the CLI) or plain (N, 4)/(N, 5) float / structured x y z
-        intensity [ring] points, placed on the chain's sensor's firings. Returns
+        intensity [ring] [time] points, placed on the chain's sensor's firings (by
+        time where a time field is given). Returns
         APPLIED_DTYPE rows: input rows in order, then added returns. GIL released; the
         same bytes for any `threads`."""
     def detect(

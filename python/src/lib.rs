@@ -213,7 +213,7 @@ fn ring_of(i: usize, v: f32) -> PyResult<u16> {
     u16::try_from(k).map_err(|_| out_of_range())
 }
 
-/// Plain points (x y z intensity, optional ring) of a column dictionary.
+/// Plain points (x y z intensity, optional ring and time) of a column dictionary.
 fn cloud_points_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<CloudPoint>> {
     let x = column::<f32>(cols, "x", None)?;
     let n = x.as_array().len();
@@ -270,6 +270,18 @@ fn cloud_points_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<CloudPoint>> {
             }
             xyzi.and(&r)
                 .for_each(|&x, &y, &z, &i, &r| out.push(point(x, y, z, i, Some(r as u16))));
+        }
+    }
+    // A time field places the points by time, as `run` places a file's.
+    if cols.get_item("time")?.is_some() {
+        let time = column::<f64>(cols, "time", Some(n))?;
+        for (i, (p, &t)) in out.iter_mut().zip(time.as_array()).enumerate() {
+            if !t.is_finite() {
+                return Err(PyValueError::new_err(format!(
+                    "points: point {i} (0-based): time is {t}, not a finite number"
+                )));
+            }
+            p.time = Some(t);
         }
     }
     Ok(out)

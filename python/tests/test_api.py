@@ -262,6 +262,27 @@ def test_points_to_returns_puts_points_on_the_firing_grid():
     assert half["intensity"][0] == 128
 
 
+def test_points_with_a_time_field_are_placed_by_time():
+    # Point 1's azimuth says firing 100, its time (seconds after point 0's, which fired
+    # first) firing 300: a time field places points by time, as `run` places a file's.
+    def at(k, laser, r=20.0):
+        az = np.radians(k * 360.0 / 2170 + laser * 1.152 * 3.6e-3)
+        el = np.radians(ln_elevations()[laser])
+        return (r * np.cos(el) * np.cos(az), -r * np.cos(el) * np.sin(az), r * np.sin(el))
+    dtype = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4"), ("time", "<f8")]
+    p = np.array([(*at(0, 0), 50.0, 0.0), (*at(100, 5), 50.0, (300 * 46.08 + 5 * 1.152) * 1e-6)], dtype)
+    ret, order = ln.points_to_returns(p)
+    assert list(order) == [0, 1]
+    assert (ret["packet"][1], ret["block"][1]) == (300 // 12, 300 % 12)
+    assert abs(ret["time"][1] - (300 * 46.08 + 5 * 1.152) * 1e-6) < 1e-9
+    untimed = p[["x", "y", "z", "intensity"]]
+    ret, _ = ln.points_to_returns(untimed)
+    assert (ret["packet"][1], ret["block"][1]) == (100 // 12, 100 % 12)
+    p["time"][1] = np.nan
+    with pytest.raises(ValueError, match="point 1 .*time is NaN"):
+        ln.points_to_returns(p)
+
+
 # --- reading and writing --------------------------------------------------------------
 
 

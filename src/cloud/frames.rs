@@ -57,6 +57,9 @@ pub struct CloudSummary {
     pub laser_from_elevation: usize,
     /// Of those, points between two beams of the table, whose laser is a guess.
     pub laser_ambiguous: usize,
+    /// The unit of the time field that placed the points on their firings ("s", "ms",
+    /// "us", "ns"); null when they were placed by azimuth.
+    pub placed_by_time: Option<&'static str>,
 }
 
 /// One point-cloud file as a frame source.
@@ -190,6 +193,7 @@ fn load(path: &Path, options: &CloudOptions) -> Result<Loaded> {
         sharing_a_slot: placed.shared,
         laser_from_elevation: placed.from_elevation,
         laser_ambiguous: placed.ambiguous,
+        placed_by_time: placed.time_unit,
     };
     if placed.returns.is_empty() {
         return Err(Error::Invalid(format!("{shown}: the file holds no point")));

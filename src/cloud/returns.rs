@@ -38,6 +38,15 @@
 //!   collision moves one point, not the rest of its line. Slots no point claims are the
 //!   sensor's empty slots (sky, no echo), which the spurious-return rules of
 //!   `noise::spurious` need.
+//! - by time instead, where every point has a time whose span fits one turn at the
+//!   sensor's slowest rate in seconds, milliseconds, microseconds or nanoseconds (the
+//!   first that fits is the unit): the sensor fires at a fixed rate whatever its motor's
+//!   speed, so a point's firing is its time since the earliest point's, less its laser's
+//!   offset, in firing periods (rounded), counted from the earliest firing; its return's
+//!   time is its own; two points of one slot share it (a dual return, a merged sweep),
+//!   none moves. A real capture's frame written with its times keeps every firing
+//!   (`tests/cloud_equivalence.rs`), where on the azimuth grid a turn whose speed varies
+//!   moves some points. [`CloudReturns::time_unit`] says which placed them.
 //! - packet and block from the firing (firings numbered from 0 at the turn's start,
 //!   `sequences_per_packet` firings a packet in single return mode: 12 on the HDL-32E and
 //!   VLP-32C, 24 on the VLP-16, 6 on the HDL-64E), time = `start_time` + the firing's and
@@ -93,6 +102,47 @@ pub struct CloudReturns {
     /// Of those, points in the middle half between two neighbouring beams of the table
     /// (or more than half a spacing beyond the outermost): their laser is a guess.
     pub ambiguous: usize,
+    /// The unit the points' time field was read in when it placed them ("s", "ms", "us"
+    /// or "ns"); `None` when they were placed by azimuth (no time field, or one whose
+    /// span fits one turn in no unit).
+    pub time_unit: Option<&'static str>,
+}
+
+/// Units a time field is tried in, with their length in seconds: the first in which the
+/// field's span fits one turn at the sensor's slowest rate is taken (tools store it in
+/// seconds, as ROS's velodyne driver, or in nanoseconds, as Ouster's `t`).
+const TIME_UNITS: [(&str, f64); 4] = [("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9)];
+
+/// What places points by time: the time field's unit, its length in seconds, and the
+/// earliest time.
+type TimeBase = (&'static str, f64, f64);
+
+/// The unit of the points' time field when it can place them: every point has a time,
+/// they are not all equal, and their span fits one turn (at the sensor's slowest rate)
+/// in that unit. A time that is not a finite number is an error naming its point.
+fn time_unit(points: &[CloudPoint], slowest_hz: f64, source: &str) -> Result<Option<TimeBase>> {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (i, p) in points.iter().enumerate() {
+        let Some(t) = p.time else {
+            return Ok(None);
+        };
+        if !t.is_finite() {
+            return Err(Error::Invalid(format!(
+                "{source}: point {i} (0-based): time is {t}, not a finite number"
+            )));
+        }
+        lo = lo.min(t);
+        hi = hi.max(t);
+    }
+    let span = hi - lo;
+    if span.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return Ok(None);
+    }
+    let turn_s = 1.0 / slowest_hz;
+    Ok(TIME_UNITS
+        .iter()
+        .find(|&&(_, s)| span * s <= turn_s)
+        .map(|&(u, s)| (u, s, lo)))
 }
 
 /// Firings on either side searched for a free slot when a point's own is taken.
@@ -421,7 +471,16 @@ pub fn to_returns(
         IntensityScale::Unit => 255.0,
         IntensityScale::Byte | IntensityScale::Unstated => 1.0,
     };
-    let slots = n as usize * lasers;
+    // Placed by time where the points carry it in a unit that fits one turn: a firing
+    // then is the sensor's own (it fires at a fixed rate whatever its motor's speed), so
+    // a real capture's frame keeps every firing, where the azimuth grid moves some points
+    // of a turn whose speed varies.
+    let by_time = time_unit(points, lo, source)?;
+    let slots = if by_time.is_some() {
+        0
+    } else {
+        n as usize * lasers
+    };
     // The point in each slot (u32::MAX: none); a point that had to share a slot is listed
     // in `sharing` instead, as (slot, point), in file order.
     let mut point_at = vec![u32::MAX; slots];
@@ -433,6 +492,9 @@ pub fn to_returns(
     let mut placed = Vec::with_capacity(points.len());
     let mut geometry = Geometry::default();
     let steps_per_deg = us_per_deg / sequence_us;
+    // By time: each point's firing counted from the earliest time, less the laser's
+    // offset in its firing; the slots are taken after the loop.
+    let mut time_firings: Vec<i64> = Vec::new();
     for (c, chunk) in points.chunks(CHUNK).enumerate() {
         // A non-finite value flows through the chunk's arithmetic harmlessly and is
         // reported when its point's turn comes (after any earlier point's error).
@@ -481,6 +543,26 @@ pub fn to_returns(
             // coordinates give azimuths to about 3e-5 of one) counts as the start itself.
             // Within one turn of the grid either way (azimuths and offsets under one
             // turn), so one add or subtract wraps it (no float remainder).
+            if let Some((_, unit_s, t0)) = by_time {
+                // Checked finite with the point's other values (`check_points`).
+                let t = p.time.unwrap_or(t0);
+                let since_us = (t - t0) * unit_s * 1e6 - laser_us[l];
+                time_firings.push((since_us / sequence_us).round() as i64);
+                placed.push(Placed {
+                    x: p.x,
+                    y: p.y,
+                    z: p.z,
+                    range: range as f32,
+                    azimuth: geometry.azimuth[j] as f32,
+                    elevation: geometry.elevation[j] as f32,
+                    // Set below, once the earliest firing is known.
+                    firing: 0,
+                    raw_distance: geometry.raw[j],
+                    intensity: geometry.intensity[j],
+                    laser,
+                });
+                continue;
+            }
             const AT_CUT: f64 = 1e-3;
             let turn = n as f64;
             let mut t = geometry.steps[j] - lead_steps[l];
@@ -511,6 +593,27 @@ pub fn to_returns(
                 intensity: geometry.intensity[j],
                 laser,
             });
+        }
+    }
+    // By time: the firings counted from the earliest, and the slots taken in file order.
+    // A point whose slot an earlier point took shares it (its time says it is that
+    // firing's: a dual return, or a merged sweep), rather than moving.
+    let mut n = n;
+    let mut lowest = 0;
+    if by_time.is_some() && !placed.is_empty() {
+        lowest = time_firings.iter().copied().min().unwrap_or(0);
+        let last = time_firings.iter().copied().max().unwrap_or(0);
+        // Within one turn of the slowest rate (`time_unit`): a few thousand firings.
+        n = last - lowest + 1;
+        point_at = vec![u32::MAX; n as usize * lasers];
+        for (i, (q, &k)) in placed.iter_mut().zip(&time_firings).enumerate() {
+            q.firing = (k - lowest) as u32;
+            let slot = q.firing as usize * lasers + usize::from(q.laser);
+            if point_at[slot] == u32::MAX {
+                point_at[slot] = i as u32;
+            } else {
+                sharing.push((slot as u32, i as u32));
+            }
         }
     }
     // The points whose own slot an earlier point took, in file order: each moves to the
@@ -561,7 +664,14 @@ pub fn to_returns(
         let q = &placed[i as usize];
         let l = usize::from(q.laser);
         let firing = i64::from(q.firing);
-        let time_us = firing as f64 * sequence_us + laser_us[l];
+        // By time, the point's own, from the start of the earliest firing.
+        let time_us = match by_time {
+            Some((_, unit_s, t0)) => {
+                let t = points[i as usize].time.unwrap_or(t0);
+                (t - t0) * unit_s * 1e6 - lowest as f64 * sequence_us
+            }
+            None => firing as f64 * sequence_us + laser_us[l],
+        };
         Return {
             x: q.x,
             y: q.y,
@@ -587,6 +697,7 @@ pub fn to_returns(
         shared,
         from_elevation,
         ambiguous,
+        time_unit: by_time.map(|(u, _, _)| u),
     })
 }
 
@@ -965,5 +1076,101 @@ mod tests {
         .unwrap();
         let r = out.returns[0];
         assert_eq!((r.range, r.azimuth, r.elevation), (0.0, 0.0, 0.0));
+    }
+
+    /// A turn whose motor speeds up and slows down (the azimuth step of a firing from
+    /// 0.13 to 0.23 degree, a real sensor's rate varies less), every laser of every
+    /// firing, each point with its time in `unit_s` (the firing's start from `t0` plus
+    /// the laser's offset).
+    fn uneven_turn(firings: u32, unit_s: f64, t0: f64) -> Vec<CloudPoint> {
+        let mut pts = Vec::new();
+        let mut az = 0.0f64;
+        for k in 0..firings {
+            for laser in 0..32 {
+                let el = crate::calibration::BUILTIN_ELEVATION_DEG[laser];
+                let (sa, ca) = az.to_radians().sin_cos();
+                let (se, ce) = el.to_radians().sin_cos();
+                let t_us = f64::from(k) * 46.08 + HDL32E.laser_offset_us(laser);
+                let mut p = point(
+                    (10.0 * ce * ca) as f32,
+                    (-10.0 * ce * sa) as f32,
+                    (10.0 * se) as f32,
+                    50.0,
+                    Some(u16::from(HDL32E.rings()[laser])),
+                );
+                p.time = Some(t0 + t_us * 1e-6 / unit_s);
+                pts.push(p);
+            }
+            az += 0.18 + 0.05 * (f64::from(k) * 0.01).sin();
+        }
+        pts
+    }
+
+    #[test]
+    fn points_with_times_keep_their_own_firings() {
+        let options = ReturnsOptions::default();
+        for (unit, unit_s, t0) in [
+            ("s", 1.0, 1.5e9),
+            ("ms", 1e-3, 0.0),
+            ("us", 1e-6, 7.0),
+            ("ns", 1e-9, 0.0),
+        ] {
+            let pts = uneven_turn(1500, unit_s, t0);
+            let out = to_returns(&pts, &HDL32E, &options, "t").unwrap();
+            assert_eq!(out.time_unit, Some(unit));
+            assert_eq!((out.firings, out.moved, out.shared), (1500, 0, 0), "{unit}");
+            for (j, r) in out.returns.iter().enumerate() {
+                let i = out.order[j] as usize;
+                assert_eq!(i, j, "{unit}: file order is firing order");
+                let k = (i / 32) as u32;
+                assert_eq!(r.packet * 12 + u32::from(r.block), k, "{unit}: point {i}");
+                let want = pts[i].time.unwrap() - pts[0].time.unwrap();
+                assert!((r.time - want * unit_s).abs() < 1e-6, "{unit}: point {i}");
+            }
+            // The same points by azimuth: the speeding turn puts some on other firings.
+            let untimed: Vec<CloudPoint> = pts
+                .iter()
+                .map(|p| CloudPoint { time: None, ..*p })
+                .collect();
+            let out = to_returns(&untimed, &HDL32E, &options, "t").unwrap();
+            assert_eq!(out.time_unit, None);
+            let off = out
+                .returns
+                .iter()
+                .zip(&out.order)
+                .filter(|(r, &i)| r.packet * 12 + u32::from(r.block) != i / 32)
+                .count();
+            assert!(off > 1000, "{unit}: {off}");
+        }
+    }
+
+    #[test]
+    fn times_that_cannot_place_points_leave_them_to_the_azimuth() {
+        let options = ReturnsOptions::default();
+        // All equal (a scan's one stamp on every point), and several turns in seconds.
+        let mut same = uneven_turn(100, 1.0, 0.0);
+        same.iter_mut().for_each(|p| p.time = Some(3.0));
+        let mut long = uneven_turn(100, 1.0, 0.0);
+        long.last_mut().unwrap().time = Some(1e12);
+        for pts in [same, long] {
+            let out = to_returns(&pts, &HDL32E, &options, "t").unwrap();
+            assert_eq!(out.time_unit, None);
+            assert_eq!(out.firings, 2170);
+        }
+        // Two points of one firing and laser (a dual return) share its slot.
+        let mut pts = uneven_turn(10, 1.0, 0.0);
+        let twin = pts[33];
+        pts.push(twin);
+        let out = to_returns(&pts, &HDL32E, &options, "t").unwrap();
+        assert_eq!((out.moved, out.shared), (0, 1));
+        assert_eq!(out.order[34], 320);
+        // A time that is not a number is refused with its point.
+        let mut pts = uneven_turn(10, 1.0, 0.0);
+        pts[7].time = Some(f64::NAN);
+        let e = to_returns(&pts, &HDL32E, &options, "t").unwrap_err();
+        assert!(
+            e.to_string().contains("point 7 (0-based): time is NaN"),
+            "{e}"
+        );
     }
 }

@@ -531,56 +531,47 @@ pub fn to_returns(
                 }
             };
             let l = usize::from(laser);
-            // The firing on the circle. The turn is cut where a firing starts at azimuth 0,
-            // as a capture's sweeps are cut: a firing that started before 0 (a laser of
-            // the turn's last firing, interpolated or offset past the cut) is the turn's
-            // last, one that starts at or past 360 the next turn's first (a laser fired
-            // ahead of its firing's azimuth by an offset); within the turn, the grid
-            // firing whose step holds the firing's start (grid firing k covers [k, k + 1)
-            // steps, as the turn covers [0, 360): the firings of a capture's sweep, cut at
-            // 0, keep their order, one a step while the sensor turns no slower than the
-            // grid). Float noise at a step's start (a thousandth of a firing: float32
-            // coordinates give azimuths to about 3e-5 of one) counts as the start itself.
-            // Within one turn of the grid either way (azimuths and offsets under one
-            // turn), so one add or subtract wraps it (no float remainder).
-            if let Some((_, unit_s, t0)) = by_time {
-                // Checked finite with the point's other values (`check_points`).
+            let firing = if let Some((_, unit_s, t0)) = by_time {
+                // Every point has a finite time (`time_unit`). The firing is set below,
+                // once the earliest is known.
                 let t = p.time.unwrap_or(t0);
                 let since_us = (t - t0) * unit_s * 1e6 - laser_us[l];
                 time_firings.push((since_us / sequence_us).round() as i64);
-                placed.push(Placed {
-                    x: p.x,
-                    y: p.y,
-                    z: p.z,
-                    range: range as f32,
-                    azimuth: geometry.azimuth[j] as f32,
-                    elevation: geometry.elevation[j] as f32,
-                    // Set below, once the earliest firing is known.
-                    firing: 0,
-                    raw_distance: geometry.raw[j],
-                    intensity: geometry.intensity[j],
-                    laser,
-                });
-                continue;
-            }
-            const AT_CUT: f64 = 1e-3;
-            let turn = n as f64;
-            let mut t = geometry.steps[j] - lead_steps[l];
-            if t < -AT_CUT {
-                t += turn;
-            } else if t >= turn - AT_CUT {
-                t -= turn;
-            }
-            // Truncation is the floor here: t + AT_CUT is at least 0 (or clamped to 0
-            // whichever way it rounds), and `floor` is a libm call on the x86-64
-            // baseline (no SSE4.1 round), a twentieth of the conversion.
-            let firing = ((t + AT_CUT) as i64).clamp(0, n - 1);
-            let slot = firing as usize * lasers + l;
-            if point_at[slot] == u32::MAX {
-                point_at[slot] = i as u32;
+                0
             } else {
-                lost.push(i as u32);
-            }
+                // The firing on the circle. The turn is cut where a firing starts at
+                // azimuth 0, as a capture's sweeps are cut: a firing that started before
+                // 0 (a laser of the turn's last firing, interpolated or offset past the
+                // cut) is the turn's last, one that starts at or past 360 the next turn's
+                // first (a laser fired ahead of its firing's azimuth by an offset); within
+                // the turn, the grid firing whose step holds the firing's start (grid
+                // firing k covers [k, k + 1) steps, as the turn covers [0, 360): the
+                // firings of a capture's sweep, cut at 0, keep their order, one a step
+                // while the sensor turns no slower than the grid). Float noise at a
+                // step's start (a thousandth of a firing: float32 coordinates give
+                // azimuths to about 3e-5 of one) counts as the start itself. Within one
+                // turn of the grid either way (azimuths and offsets under one turn), so
+                // one add or subtract wraps it (no float remainder).
+                const AT_CUT: f64 = 1e-3;
+                let turn = n as f64;
+                let mut t = geometry.steps[j] - lead_steps[l];
+                if t < -AT_CUT {
+                    t += turn;
+                } else if t >= turn - AT_CUT {
+                    t -= turn;
+                }
+                // Truncation is the floor here: t + AT_CUT is at least 0 (or clamped to
+                // 0 whichever way it rounds), and `floor` is a libm call on the x86-64
+                // baseline (no SSE4.1 round), a twentieth of the conversion.
+                let firing = ((t + AT_CUT) as i64).clamp(0, n - 1);
+                let slot = firing as usize * lasers + l;
+                if point_at[slot] == u32::MAX {
+                    point_at[slot] = i as u32;
+                } else {
+                    lost.push(i as u32);
+                }
+                firing
+            };
             placed.push(Placed {
                 x: p.x,
                 y: p.y,

@@ -44,13 +44,26 @@ fn totals(summary: &Path) -> serde_json::Value {
     v["totals"]["noise"].clone()
 }
 
+/// The frame as a CSV with each point's time (seconds), which places it by time.
+fn write_timed_csv(frame: &Frame, path: &Path) {
+    let mut text = String::from("x,y,z,intensity,ring,time\n");
+    for r in &frame.returns {
+        text.push_str(&format!(
+            "{},{},{},{},{},{}\n",
+            r.x, r.y, r.z, r.intensity, r.ring, r.time
+        ));
+    }
+    std::fs::write(path, text).unwrap();
+}
+
 #[test]
 fn a_scan_gives_the_same_fates_as_the_capture_frame_it_came_from() {
     let dir = tempfile::tempdir().unwrap();
     let scan = dir.path().join("scan.pcd.bin");
     write_pcd_bin(&fixture_frame(1), &scan);
-    // Every config whose stages act on recorded returns only (the ones that also fill empty
-    // firing slots see the scan's firing grid, not the capture's packets: see the manual).
+    // The configs whose stages act on recorded returns only: those that also fill empty
+    // firing slots need the scan on a grid of the capture's own rate (tested in
+    // `tests/cloud_equivalence.rs`, and by time in `a_scan_with_times_is_placed_by_them`).
     for config in ["clear", "occlusion", "paper", "rain", "pdiagram-sensor"] {
         let c = format!("configs/{config}.toml");
         let out = dir.path().join(format!("cloud-{config}"));
@@ -84,6 +97,65 @@ fn a_scan_gives_the_same_fates_as_the_capture_frame_it_came_from() {
     }
 }
 
+/// Fog at 300 m without range noise: every empty firing slot gets a fog echo and no draw
+/// decides anything, so its counts follow from where the points were placed alone (a
+/// scan runs as frame 0, the capture's frame is frame 1: their random streams differ).
+const FOG: &str = "seed = 42\n[[noise]]\ntype = \"fog\"\nvisibility_m = 300.0\n";
+
+#[test]
+fn a_scan_with_times_is_placed_by_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("fog.toml");
+    std::fs::write(&config, FOG).unwrap();
+    let run = |input: &Path, extra: &[&str], out: &Path| {
+        bin2()
+            .args(["--quiet", "run"])
+            .arg(input)
+            .args(extra)
+            .arg("-c")
+            .arg(&config)
+            .args(["--no-ply", "-o"])
+            .arg(out)
+            .assert()
+            .success();
+    };
+    let summary = |path: &Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+    };
+    let scan = dir.path().join("timed.csv");
+    write_timed_csv(&fixture_frame(1), &scan);
+    let (out, cap) = (dir.path().join("cloud"), dir.path().join("cap"));
+    run(&scan, &[], &out);
+    run(&crossroad(), &["--frames", "1"], &cap);
+    let v = summary(&out.join("timed").join("summary.json"));
+    assert_eq!(v["capture_summary"]["placed_by_time"], "s");
+    assert_eq!(v["capture_summary"]["firings"], 1085);
+    let a = &v["totals"]["noise"];
+    let b = totals(&cap.join("crossroad").join("summary.json"));
+    for key in ["returns_in", "returns_out", "dropped", "spurious"] {
+        assert_eq!(a[key], b[key], "{key}");
+    }
+    // Without the time column the same points are placed by azimuth, on the default
+    // 10 Hz grid: twice the capture's firings, so other empty slots and other echoes.
+    let text = std::fs::read_to_string(&scan).unwrap();
+    let untimed: String = text
+        .lines()
+        .map(|l| l.rsplit_once(',').unwrap().0.to_string() + "\n")
+        .collect();
+    let scan2 = dir.path().join("untimed.csv");
+    std::fs::write(&scan2, untimed).unwrap();
+    let out2 = dir.path().join("cloud2");
+    run(&scan2, &[], &out2);
+    let v = summary(&out2.join("untimed").join("summary.json"));
+    assert_eq!(
+        v["capture_summary"]["placed_by_time"],
+        serde_json::Value::Null
+    );
+    assert_eq!(v["capture_summary"]["firings"], 2170);
+    let added = &v["totals"]["noise"]["spurious"]["added"];
+    assert_ne!(added, &b["spurious"]["added"]);
+}
+
 #[test]
 fn the_summary_says_how_the_scan_was_placed_on_the_sensor() {
     let dir = tempfile::tempdir().unwrap();
@@ -108,6 +180,7 @@ fn the_summary_says_how_the_scan_was_placed_on_the_sensor() {
     // nuScenes spins at 20 Hz: half the HDL-32E's 2,170 firings a turn at 10 Hz.
     assert_eq!(s["rotation_hz"], 20.0);
     assert_eq!(s["firings"], 1085);
+    assert_eq!(s["placed_by_time"], serde_json::Value::Null);
     // Written back in its own format by default.
     assert!(out.join("t/frame_00000.pcd.bin").exists());
 }

@@ -61,22 +61,16 @@ fn points(f: &Frame) -> Vec<ScanPoint> {
         .collect()
 }
 
-/// The frame's returns as a CSV with a time column (seconds, as a tool that keeps each
-/// point's time writes it): the scan is then placed by time, not by azimuth.
-fn csv_with_time(f: &Frame) -> Vec<u8> {
-    let mut text = String::from("x,y,z,intensity,ring,time\n");
-    for r in &f.returns {
-        text.push_str(&format!(
-            "{},{},{},{},{},{}\n",
-            r.x, r.y, r.z, r.intensity, r.ring, r.time
-        ));
-    }
-    text.into_bytes()
-}
-
-/// The files a frame is written as: each format `run` writes back, and a CSV with the
-/// points' times.
-const ALL: [&str; 5] = ["s.pcd.bin", "000001.bin", "s.pcd", "s.csv", "timed.csv"];
+/// The files a frame is written as: each format `run` writes back, and a PCD and a CSV
+/// with the points' times (as `run` writes them back when the input had them).
+const ALL: [&str; 6] = [
+    "s.pcd.bin",
+    "000001.bin",
+    "s.pcd",
+    "s.csv",
+    "timed.pcd",
+    "timed.csv",
+];
 
 /// `configs` with the position tolerance of each (metres), on the frame written as each
 /// of `files` (names from [`ALL`]).
@@ -86,21 +80,20 @@ fn check(capture: &Path, index: u32, configs: &[(String, f32)], files: &[&str]) 
     for &name in files {
         let mut bytes = Vec::new();
         let format = match name {
-            "s.pcd.bin" => Some(Format::NuScenes),
-            "000001.bin" => Some(Format::Kitti),
-            "s.pcd" => Some(Format::Pcd),
-            "s.csv" => Some(Format::Csv),
-            _ => None,
+            "s.pcd.bin" => Format::NuScenes,
+            "000001.bin" => Format::Kitti,
+            "s.pcd" | "timed.pcd" => Format::Pcd,
+            _ => Format::Csv,
         };
-        match format {
-            Some(format) => Scan {
-                format,
-                points: &pts,
-            }
-            .write_to(&mut bytes)
-            .unwrap(),
-            None => bytes = csv_with_time(&f),
+        let timed = name.starts_with("timed");
+        let times: Vec<f64> = f.returns.iter().map(|r| r.time).collect();
+        Scan {
+            format,
+            points: &pts,
+            times: timed.then_some(&times[..]),
         }
+        .write_to(&mut bytes)
+        .unwrap();
         let cloud = read_bytes(&bytes, Path::new(name), &ReadOptions::default()).unwrap();
         let placed = to_returns(
             &cloud.points,
@@ -113,8 +106,7 @@ fn check(capture: &Path, index: u32, configs: &[(String, f32)], files: &[&str]) 
             name,
         )
         .unwrap();
-        let timed = name == "timed.csv";
-        assert_eq!(placed.time_unit, timed.then_some("s"), "{name}");
+        assert_eq!(placed.time.map(|t| t.unit), timed.then_some("s"), "{name}");
         for (config, tolerance) in configs {
             let tolerance = *tolerance;
             let text = std::fs::read_to_string(
@@ -218,5 +210,5 @@ fn on_the_shared_capture_too() {
         .collect();
     assert_eq!(deterministic.len(), 2);
     check(&path, 3, &deterministic, &ALL[..4]);
-    check(&path, 3, &configs(), &["timed.csv"]);
+    check(&path, 3, &configs(), &["timed.pcd", "timed.csv"]);
 }

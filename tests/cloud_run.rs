@@ -157,6 +157,73 @@ fn a_scan_with_times_is_placed_by_them() {
 }
 
 #[test]
+fn a_scan_with_times_is_written_back_with_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("fog.toml");
+    std::fs::write(&config, FOG).unwrap();
+    let scan = dir.path().join("timed.csv");
+    write_timed_csv(&fixture_frame(1), &scan);
+    let out = dir.path().join("out");
+    bin2()
+        .args(["--quiet", "run"])
+        .arg(&scan)
+        .arg("-c")
+        .arg(&config)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    let input: Vec<String> = std::fs::read_to_string(&scan)
+        .unwrap()
+        .lines()
+        .map(String::from)
+        .collect();
+    let written = std::fs::read_to_string(out.join("timed/frame_00000.csv")).unwrap();
+    let fates = std::fs::read_to_string(out.join("timed/frame_00000.fate.csv")).unwrap();
+    let mut lines = written.lines();
+    assert_eq!(lines.next(), Some("x,y,z,intensity,ring,time"));
+    let (mut same, mut added) = (0, Vec::new());
+    for (line, fate) in lines.zip(fates.lines().skip(1)) {
+        let point: i64 = fate.split(',').next().unwrap().parse().unwrap();
+        let time = line.rsplit(',').next().unwrap();
+        if point >= 0 {
+            // Fog changes no time: each recorded point's time is its input's, as written.
+            let stored = input[point as usize + 1].rsplit(',').next().unwrap();
+            assert_eq!(time, stored, "point {point}");
+            same += 1;
+        } else {
+            added.push(time.parse::<f64>().unwrap());
+        }
+    }
+    assert!(same > 20_000 && !added.is_empty(), "{same} {}", added.len());
+    // An added echo's time lies in the input's span (the frame's own times).
+    let span: Vec<f64> = input[1..]
+        .iter()
+        .map(|l| l.rsplit(',').next().unwrap().parse().unwrap())
+        .collect();
+    let (lo, hi) = span
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &t| (a.min(t), b.max(t)));
+    assert!(added.iter().all(|&t| t >= lo - 1e-4 && t <= hi + 1e-4));
+    // The noisy scan run again is placed by its times, on the same firings.
+    let again = dir.path().join("again");
+    bin2()
+        .args(["--quiet", "run"])
+        .arg(out.join("timed/frame_00000.csv"))
+        .arg("-c")
+        .arg(&config)
+        .arg("-o")
+        .arg(&again)
+        .assert()
+        .success();
+    let v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(again.join("frame_00000/summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(v["capture_summary"]["placed_by_time"], "s");
+    assert_eq!(v["capture_summary"]["firings"], 1085);
+}
+
+#[test]
 fn the_summary_says_how_the_scan_was_placed_on_the_sensor() {
     let dir = tempfile::tempdir().unwrap();
     let scan = dir.path().join("t.pcd.bin");
@@ -350,16 +417,21 @@ fn every_format_written_reads_back_as_written() {
             cluster: -1,
         })
         .collect();
-    for (format, name) in [
-        (Format::Kitti, "a.bin"),
-        (Format::NuScenes, "a.pcd.bin"),
-        (Format::Pcd, "a.pcd"),
-        (Format::Csv, "a.csv"),
+    // Times as a tool stores them: seconds of the epoch, to the nanosecond's f64 step.
+    let times: Vec<f64> = (0..5).map(|k| 1.7e9 + 0.1 / 3.0 * f64::from(k)).collect();
+    for (format, name, timed) in [
+        (Format::Kitti, "a.bin", false),
+        (Format::NuScenes, "a.pcd.bin", false),
+        (Format::Pcd, "a.pcd", false),
+        (Format::Csv, "a.csv", false),
+        (Format::Pcd, "t.pcd", true),
+        (Format::Csv, "t.csv", true),
     ] {
         let mut bytes = Vec::new();
         Scan {
             format,
             points: &points,
+            times: timed.then_some(&times[..]),
         }
         .write_to(&mut bytes)
         .unwrap();
@@ -381,5 +453,8 @@ fn every_format_written_reads_back_as_written() {
                 assert_eq!(got.ring, Some(want.ring), "{name}");
             }
         }
+        let got: Vec<Option<f64>> = cloud.points.iter().map(|p| p.time).collect();
+        let want: Vec<Option<f64>> = times.iter().map(|&t| timed.then_some(t)).collect();
+        assert_eq!(got, want, "{name}");
     }
 }

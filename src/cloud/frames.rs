@@ -8,7 +8,7 @@
 //! (given, or found beside the scan: [`super::truth::labels_beside`]) are read and checked
 //! against the scan when it is opened too, and kept as its ground truth.
 
-use super::returns::{to_returns, ReturnsOptions};
+use super::returns::{to_returns, ReturnsOptions, TimeField};
 use super::truth::{labels_beside, read_truth, CloudTruth, LabelsBeside};
 use super::{read_file, CloudPoint, Format, IntensityScale, ReadOptions};
 use crate::error::{Error, Result};
@@ -60,6 +60,9 @@ pub struct CloudSummary {
     /// The unit of the time field that placed the points on their firings ("s", "ms",
     /// "us", "ns"); null when they were placed by azimuth.
     pub placed_by_time: Option<&'static str>,
+    /// That time field, to write the points' times back in it.
+    #[serde(skip)]
+    pub time_field: Option<TimeField>,
 }
 
 /// One point-cloud file as a frame source.
@@ -72,6 +75,8 @@ pub struct CloudReader {
     done: bool,
     /// Input index of each return of the frame handed out (empty before).
     order: Vec<u32>,
+    /// The points' times as stored, in input order, when a time field placed them.
+    times: Vec<f64>,
     /// The scan's ground truth, when labels were given or found (boxed: a reader is moved
     /// around in `run`'s jobs).
     truth: Option<Box<CloudTruth>>,
@@ -90,6 +95,7 @@ impl CloudReader {
             summary,
             done: false,
             order: Vec::new(),
+            times: Vec::new(),
             truth,
         })
     }
@@ -107,6 +113,15 @@ impl CloudReader {
     /// The input point index of each return of the frame handed out, in return order.
     pub fn order(&self) -> &[u32] {
         &self.order
+    }
+
+    /// The time field that placed the points of the frame handed out, and their times
+    /// as stored (input order); `None` when they were placed by azimuth.
+    pub fn times(&self) -> Option<(&TimeField, &[f64])> {
+        self.summary
+            .time_field
+            .as_ref()
+            .map(|f| (f, &self.times[..]))
     }
 
     /// The scan's ground truth (labels given or found beside it), taken out of the reader.
@@ -193,7 +208,8 @@ fn load(path: &Path, options: &CloudOptions) -> Result<Loaded> {
         sharing_a_slot: placed.shared,
         laser_from_elevation: placed.from_elevation,
         laser_ambiguous: placed.ambiguous,
-        placed_by_time: placed.time_unit,
+        placed_by_time: placed.time.map(|t| t.unit),
+        time_field: placed.time,
     };
     if placed.returns.is_empty() {
         return Err(Error::Invalid(format!("{shown}: the file holds no point")));
@@ -221,7 +237,7 @@ impl FrameSource for CloudReader {
         if !frames.contains(&0) {
             return Ok(Vec::new());
         }
-        let (frame, _, summary, order, _) = load(&self.path, &self.options)?;
+        let (frame, _, summary, order, points) = load(&self.path, &self.options)?;
         if summary != self.summary {
             return Err(Error::Invalid(format!(
                 "{}: the file changed while it was being processed",
@@ -229,6 +245,9 @@ impl FrameSource for CloudReader {
             )));
         }
         self.order = order;
+        if let Some(f) = &summary.time_field {
+            self.times = points.iter().map(|p| p.time.unwrap_or(f.t0)).collect();
+        }
         Ok(vec![frame])
     }
 

@@ -46,7 +46,7 @@
 //!   time is its own; two points of one slot share it (a dual return, a merged sweep),
 //!   none moves. A real capture's frame written with its times keeps every firing
 //!   (`tests/cloud_equivalence.rs`), where on the azimuth grid a turn whose speed varies
-//!   moves some points. [`CloudReturns::time_unit`] says which placed them.
+//!   moves some points. [`CloudReturns::time`] says which placed them.
 //! - packet and block from the firing (firings numbered from 0 at the turn's start,
 //!   `sequences_per_packet` firings a packet in single return mode: 12 on the HDL-32E and
 //!   VLP-32C, 24 on the VLP-16, 6 on the HDL-64E), time = `start_time` + the firing's and
@@ -102,10 +102,42 @@ pub struct CloudReturns {
     /// Of those, points in the middle half between two neighbouring beams of the table
     /// (or more than half a spacing beyond the outermost): their laser is a guess.
     pub ambiguous: usize,
-    /// The unit the points' time field was read in when it placed them ("s", "ms", "us"
-    /// or "ns"); `None` when they were placed by azimuth (no time field, or one whose
-    /// span fits one turn in no unit).
-    pub time_unit: Option<&'static str>,
+    /// The time field that placed the points, with how its values map to the returns'
+    /// times and back; `None` when they were placed by azimuth (no time field, or one
+    /// whose span fits one turn in no unit).
+    pub time: Option<TimeField>,
+}
+
+/// A time field that placed points by time: its unit and how a point's time (as stored)
+/// becomes its return's time (seconds from the turn's earliest firing start, plus
+/// `start_time`), and back.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimeField {
+    /// "s", "ms", "us" or "ns".
+    pub unit: &'static str,
+    /// The unit in seconds.
+    pub unit_s: f64,
+    /// The earliest time, as stored.
+    pub t0: f64,
+    /// The returns' time base (`ReturnsOptions::start_time`).
+    pub start_time: f64,
+    /// Microseconds from the earliest firing's start to `t0`'s (a multiple of the firing
+    /// period, at most 0: the earliest point's laser may fire after its firing starts).
+    pub lead_us: f64,
+}
+
+impl TimeField {
+    /// The return's time of a point stored with time `t`.
+    #[inline]
+    pub fn to_return(&self, t: f64) -> f64 {
+        self.start_time + ((t - self.t0) * self.unit_s * 1e6 - self.lead_us) * 1e-6
+    }
+
+    /// The time to store for a return of time `time` (the inverse of
+    /// [`TimeField::to_return`], to rounding).
+    pub fn to_file(&self, time: f64) -> f64 {
+        self.t0 + ((time - self.start_time) * 1e6 + self.lead_us) * 1e-6 / self.unit_s
+    }
 }
 
 /// Units a time field is tried in, with their length in seconds: the first in which the
@@ -590,7 +622,7 @@ pub fn to_returns(
     // A point whose slot an earlier point took shares it (its time says it is that
     // firing's: a dual return, or a merged sweep), rather than moving.
     let mut n = n;
-    let mut lowest = 0;
+    let mut lowest = 0i64;
     if by_time.is_some() && !placed.is_empty() {
         lowest = time_firings.iter().copied().min().unwrap_or(0);
         let last = time_firings.iter().copied().max().unwrap_or(0);
@@ -651,17 +683,21 @@ pub fn to_returns(
     // then moving them was a fifth of the conversion, most of it the copy's pages),
     // with the room the noise chain keeps for added echoes (it would move them otherwise).
     let mut returns = Vec::with_capacity(order.len() + crate::noise::room_for_added(order.len()));
+    let time_field = by_time.map(|(unit, unit_s, t0)| TimeField {
+        unit,
+        unit_s,
+        t0,
+        start_time: options.start_time,
+        lead_us: lowest as f64 * sequence_us,
+    });
     returns.extend(order.iter().map(|&i| {
         let q = &placed[i as usize];
         let l = usize::from(q.laser);
         let firing = i64::from(q.firing);
         // By time, the point's own, from the start of the earliest firing.
-        let time_us = match by_time {
-            Some((_, unit_s, t0)) => {
-                let t = points[i as usize].time.unwrap_or(t0);
-                (t - t0) * unit_s * 1e6 - lowest as f64 * sequence_us
-            }
-            None => firing as f64 * sequence_us + laser_us[l],
+        let time = match &time_field {
+            Some(f) => f.to_return(points[i as usize].time.unwrap_or(f.t0)),
+            None => options.start_time + (firing as f64 * sequence_us + laser_us[l]) * 1e-6,
         };
         Return {
             x: q.x,
@@ -670,7 +706,7 @@ pub fn to_returns(
             range: q.range,
             azimuth: q.azimuth,
             elevation: q.elevation,
-            time: options.start_time + time_us * 1e-6,
+            time,
             packet: (firing / per_packet) as u32,
             raw_distance: q.raw_distance,
             intensity: q.intensity,
@@ -688,7 +724,7 @@ pub fn to_returns(
         shared,
         from_elevation,
         ambiguous,
-        time_unit: by_time.map(|(u, _, _)| u),
+        time: time_field,
     })
 }
 
@@ -1108,7 +1144,7 @@ mod tests {
         ] {
             let pts = uneven_turn(1500, unit_s, t0);
             let out = to_returns(&pts, &HDL32E, &options, "t").unwrap();
-            assert_eq!(out.time_unit, Some(unit));
+            assert_eq!(out.time.map(|t| t.unit), Some(unit));
             assert_eq!((out.firings, out.moved, out.shared), (1500, 0, 0), "{unit}");
             for (j, r) in out.returns.iter().enumerate() {
                 let i = out.order[j] as usize;
@@ -1124,7 +1160,7 @@ mod tests {
                 .map(|p| CloudPoint { time: None, ..*p })
                 .collect();
             let out = to_returns(&untimed, &HDL32E, &options, "t").unwrap();
-            assert_eq!(out.time_unit, None);
+            assert_eq!(out.time, None);
             let off = out
                 .returns
                 .iter()
@@ -1145,7 +1181,7 @@ mod tests {
         long.last_mut().unwrap().time = Some(1e12);
         for pts in [same, long] {
             let out = to_returns(&pts, &HDL32E, &options, "t").unwrap();
-            assert_eq!(out.time_unit, None);
+            assert_eq!(out.time, None);
             assert_eq!(out.firings, 2170);
         }
         // Two points of one firing and laser (a dual return) share its slot.

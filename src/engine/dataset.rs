@@ -388,7 +388,7 @@ fn run_file(
                 serde_json::to_writer_pretty(&mut *w, &score).map_err(std::io::Error::other)
             })?;
         }
-        super::frame_files::write_scan_files(format, &order, rows, scan_out, fate_out, inputs)
+        super::frame_files::write_scan_files(format, &order, rows, None, scan_out, fate_out, inputs)
     })();
     if written.is_err() {
         // The sidecars went first: without their scan they are no output of this file.

@@ -5,6 +5,7 @@
 use super::spool::SpoolEntry;
 use super::Plan;
 use crate::cloud::frames::CloudReader;
+use crate::cloud::returns::TimeField;
 use crate::pipeline::report::{FrameClusters, FrameReport, FATE_CODES};
 use crate::pipeline::FrameResult;
 use crate::writers::ply::{PlyColumns, PlyFrame};
@@ -174,11 +175,18 @@ pub(crate) fn scan_points(r: &FrameResult) -> Vec<ScanPoint> {
         .collect()
 }
 
+/// The times the sensor reports for the kept returns of a processed scan, in the order
+/// of [`scan_points`]' rows (seconds, the returns' time base).
+pub(crate) fn reported_times(r: &FrameResult) -> Vec<f64> {
+    r.survivors.iter().map(|s| s.time).collect()
+}
+
 /// Writes frame `index` of a scan back in the scan's own format, in the input's point
 /// order (echoes the noise added after the recorded points), with its sidecar of fates.
 pub(crate) fn write_scan(
     reader: &CloudReader,
     rows: Vec<ScanPoint>,
+    reported: &[f64],
     index: u32,
     dir: &Path,
     inputs: &[&Path],
@@ -190,17 +198,34 @@ pub(crate) fn write_scan(
         crate::writers::scan::extension(format)
     ));
     let fates = dir.join(format!("{stem}.fate.csv"));
-    write_scan_files(format, reader.order(), rows, &scan, &fates, inputs)
+    let times = reader.times().map(|(field, stored)| ScanTimes {
+        field,
+        stored,
+        reported,
+    });
+    write_scan_files(format, reader.order(), rows, times, &scan, &fates, inputs)
+}
+
+/// The times of a scan placed by its time field, for writing them back in that field.
+pub(crate) struct ScanTimes<'a> {
+    /// The field.
+    pub field: &'a TimeField,
+    /// The points' times as stored, input order.
+    pub stored: &'a [f64],
+    /// The reported time of each row of [`scan_points`], in its order.
+    pub reported: &'a [f64],
 }
 
 /// Writes a scan's noisy points as `format` to `scan` and their fates to `fates`, in the
 /// input's point order (`order`: the input index of each return of the frame), echoes the
 /// noise added after the recorded points. The sidecar is written first, so that a scan
-/// file is there only once both are complete.
+/// file is there only once both are complete. `times`: where a time field placed the
+/// points, their times, written back in that field.
 pub(crate) fn write_scan_files(
     format: crate::cloud::Format,
     order: &[u32],
     mut rows: Vec<ScanPoint>,
+    times: Option<ScanTimes<'_>>,
     scan: &Path,
     fates: &Path,
     inputs: &[&Path],
@@ -209,12 +234,30 @@ pub(crate) fn write_scan_files(
     for p in &mut rows {
         p.point = p.point.and_then(|k| order.get(k as usize).copied());
     }
-    let rows = in_input_order(rows, order.len());
+    // A point whose time no stage changed gets its time as stored, exactly; the others
+    // (a clock's error, an added echo) their return's time in the field's unit. In row
+    // order, before the rows are put in input order (then these with them).
+    // One reported time a row (`reported_times` of the same result); anything else
+    // writes no time rather than misplacing one.
+    let times = times.filter(|t| t.reported.len() == rows.len());
+    let stored: Option<Vec<f64>> = times.map(|t| {
+        rows.iter()
+            .zip(t.reported)
+            .map(
+                |(p, &time)| match p.point.and_then(|i| t.stored.get(i as usize)) {
+                    Some(&s) if t.field.to_return(s) == time => s,
+                    _ => t.field.to_file(time),
+                },
+            )
+            .collect()
+    });
+    let (rows, stored) = in_input_order(rows, stored, order.len());
     write_file(&Fates { points: &rows }, fates, inputs)?;
     write_file(
         &Scan {
             format,
             points: &rows,
+            times: stored.as_deref(),
         },
         scan,
         inputs,
@@ -222,34 +265,44 @@ pub(crate) fn write_scan_files(
     Ok(())
 }
 
-/// `rows` with the recorded points in input order (`point`, below `points`), then the
-/// added echoes in their order: placed by index rather than sorted (a stable sort was a
-/// tenth of a dataset run), which gives the same order as long as no input point is
-/// there twice; a sort where one is.
-fn in_input_order(rows: Vec<ScanPoint>, points: usize) -> Vec<ScanPoint> {
+/// `rows` (and `times`, one a row) with the recorded points in input order (`point`,
+/// below `points`), then the added echoes in their order: placed by index rather than
+/// sorted (a stable sort was a tenth of a dataset run), which gives the same order as
+/// long as no input point is there twice; a stable sort where one is.
+fn in_input_order(
+    rows: Vec<ScanPoint>,
+    times: Option<Vec<f64>>,
+    points: usize,
+) -> (Vec<ScanPoint>, Option<Vec<f64>>) {
     const NONE: u32 = u32::MAX;
     let mut at = vec![NONE; points];
     let mut echoes = Vec::new();
+    let mut placed = true;
     for (j, p) in rows.iter().enumerate() {
         match p.point.and_then(|i| at.get_mut(i as usize)) {
             Some(slot) if *slot == NONE => *slot = j as u32,
-            Some(_) => return sorted_by_point(rows),
-            None if p.point.is_some() => return sorted_by_point(rows),
-            None => echoes.push(j as u32),
+            None if p.point.is_none() => echoes.push(j as u32),
+            _ => {
+                placed = false;
+                break;
+            }
         }
     }
-    // Sized up front: a filtered iterator collects by doubling, and the moves of the
-    // growing vector were a sixth of this function.
-    let mut out = Vec::with_capacity(rows.len());
-    out.extend(at.iter().filter(|&&j| j != NONE).map(|&j| rows[j as usize]));
-    out.extend(echoes.iter().map(|&j| rows[j as usize]));
-    out
-}
-
-/// `rows` sorted as [`in_input_order`] places them (stable).
-fn sorted_by_point(mut rows: Vec<ScanPoint>) -> Vec<ScanPoint> {
-    rows.sort_by_key(|p| p.point.map_or((1, 0), |i| (0, i)));
-    rows
+    let order: Vec<u32> = if placed {
+        // Sized up front: a filtered iterator collects by doubling, and the moves of the
+        // growing vector were a sixth of this function.
+        let mut order = Vec::with_capacity(rows.len());
+        order.extend(at.iter().copied().filter(|&j| j != NONE));
+        order.extend_from_slice(&echoes);
+        order
+    } else {
+        let mut order: Vec<u32> = (0..rows.len() as u32).collect();
+        order.sort_by_key(|&j| rows[j as usize].point.map_or((1, 0), |i| (0, i)));
+        order
+    };
+    let gather = |j: &u32| rows[*j as usize];
+    let times = times.map(|t| order.iter().map(|&j| t[j as usize]).collect());
+    (order.iter().map(gather).collect(), times)
 }
 
 /// Range of return `i` before noise: 0 for a return a stage added (it has no clean origin).
@@ -323,8 +376,15 @@ mod tests {
             for i in (1..rows.len()).rev() {
                 rows.swap(i, rng.random_range(0..=i));
             }
-            let want = sorted_by_point(rows.clone());
-            assert_eq!(in_input_order(rows, points), want, "case {case}");
+            let mut want = rows.clone();
+            want.sort_by_key(|p| p.point.map_or((1, 0), |i| (0, i)));
+            // Each row's time (here its index) goes with it.
+            let times: Vec<f64> = (0..rows.len()).map(|j| j as f64).collect();
+            let (got, got_times) = in_input_order(rows.clone(), Some(times), points);
+            assert_eq!(got, want, "case {case}");
+            for (p, &t) in got.iter().zip(&got_times.unwrap()) {
+                assert_eq!(*p, rows[t as usize], "case {case}");
+            }
         }
     }
 }

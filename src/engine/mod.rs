@@ -27,7 +27,11 @@ use crate::writers::scan::ScanPoint;
 use crate::writers::staging::{self, OutputFolder};
 use crate::writers::FrameOutput;
 use anyhow::Result;
-use frame_files::{frame_outputs, scan_points, write_scan};
+use frame_files::{frame_outputs, reported_times, scan_points, write_scan};
+
+/// A scan's rows to write back, and the time each reports (empty unless a time field
+/// placed its points).
+type ScanRows = (Vec<ScanPoint>, Vec<f64>);
 use inputs::{DEFAULT_CAPTURE, DEFAULT_CAPTURE_NAME};
 use reports::{
     check_target, cluster_document, documents, is_run_output, is_run_path, no_frame_error,
@@ -217,7 +221,10 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
                 let job_plan = plan.for_sensor(options.sensor).map_err(|e| {
                     anyhow::anyhow!("{}: {e:#}; nothing was written", path.display())
                 })?;
-                (Source::Cloud(CloudReader::open(path, &options)?), job_plan)
+                (
+                    Source::Cloud(Box::new(CloudReader::open(path, &options)?)),
+                    job_plan,
+                )
             }
             None => open_capture_source(path, plan)?,
         };
@@ -349,8 +356,8 @@ enum Source {
     Capture(Box<FrameReader>),
     /// A capture of another described sensor (VLP-16, VLP-32C, HDL-64E, VLS-128).
     Model(Box<ModelFrameReader>),
-    /// A point-cloud scan, placed on the sensor's firings.
-    Cloud(CloudReader),
+    /// A point-cloud scan, placed on the sensor's firings (boxed, as the others).
+    Cloud(Box<CloudReader>),
 }
 
 impl Source {
@@ -473,8 +480,10 @@ fn run_source(
         Source::Cloud(r) => r.take_truth(),
         Source::Capture(_) | Source::Model(_) => None,
     };
+    // A scan placed by its time field gets its times written back in it.
+    let timed = native && matches!(&reader, Source::Cloud(r) if r.summary().time_field.is_some());
     let scored = std::sync::Mutex::new(None);
-    let work = |f: Frame| -> Result<(SpoolEntry, Vec<crate::frame::Return>, Vec<ScanPoint>)> {
+    let work = |f: Frame| -> Result<(SpoolEntry, Vec<crate::frame::Return>, ScanRows)> {
         let result = plan.pipeline.process(f)?;
         if let Some(t) = &truth {
             let bands = &crate::sweep::metrics::DEFAULT_BANDS;
@@ -489,8 +498,13 @@ fn run_source(
         } else {
             Vec::new()
         };
+        let times = if timed {
+            reported_times(&result)
+        } else {
+            Vec::new()
+        };
         let (entry, returns) = frame_outputs(plan, result, source, dir, inputs, !native)?;
-        Ok((entry, returns, rows))
+        Ok((entry, returns, (rows, times)))
     };
     // Frames arrive here in order: the noisy capture can be written up to this one.
     let mut done = |entry: SpoolEntry| -> Result<()> {
@@ -517,12 +531,18 @@ fn run_source(
             },
         )?,
         Source::Cloud(r) => {
-            stream_frames(r, &plan.frames, warmup, work, |(e, _, rows), r| {
-                if native {
-                    write_scan(r, rows, e.report.index, dir, inputs)?;
-                }
-                done(e)
-            })?;
+            stream_frames(
+                &mut **r,
+                &plan.frames,
+                warmup,
+                work,
+                |(e, _, (rows, times)), r| {
+                    if native {
+                        write_scan(r, rows, &times, e.report.index, dir, inputs)?;
+                    }
+                    done(e)
+                },
+            )?;
         }
     }
     progress.finish_and_clear();

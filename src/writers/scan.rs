@@ -46,6 +46,9 @@ pub struct Scan<'a> {
     pub format: Format,
     /// The points, in the order written.
     pub points: &'a [ScanPoint],
+    /// Each point's time as the input stored it (PCD and CSV write it as a `time`
+    /// field when given; the other formats have none).
+    pub times: Option<&'a [f64]>,
 }
 
 /// File name extension of a scan written in `format`.
@@ -74,6 +77,32 @@ impl Output for Scan<'_> {
             Format::NuScenes => write_records(out, self.points, |p| {
                 floats_le::<5, 20>([p.x, p.y, p.z, f32::from(p.intensity), f32::from(p.ring)])
             })?,
+            Format::Pcd if self.times.is_some() => {
+                let n = self.points.len();
+                write!(
+                    out,
+                    "# .PCD v0.7 - lidar-noise\nVERSION 0.7\nFIELDS x y z intensity ring time\n\
+                     SIZE 4 4 4 4 2 8\nTYPE F F F F U F\nCOUNT 1 1 1 1 1 1\nWIDTH {n}\n\
+                     HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA binary\n"
+                )?;
+                let times = self.times.unwrap_or_default();
+                let mut buf = Vec::with_capacity(26 * n.min(1 << 16));
+                for (p, t) in self.points.iter().zip(times) {
+                    buf.extend_from_slice(&floats_le::<4, 16>([
+                        p.x,
+                        p.y,
+                        p.z,
+                        f32::from(p.intensity),
+                    ]));
+                    buf.extend_from_slice(&p.ring.to_le_bytes());
+                    buf.extend_from_slice(&t.to_le_bytes());
+                    if buf.len() >= 64 << 10 {
+                        out.write_all(&buf)?;
+                        buf.clear();
+                    }
+                }
+                out.write_all(&buf)?;
+            }
             Format::Pcd => {
                 let n = self.points.len();
                 write!(
@@ -94,12 +123,24 @@ impl Output for Scan<'_> {
                     record
                 })?;
             }
-            Format::Csv => {
-                writeln!(out, "x,y,z,intensity,ring")?;
-                for p in self.points {
-                    writeln!(out, "{},{},{},{},{}", p.x, p.y, p.z, p.intensity, p.ring)?;
+            Format::Csv => match self.times {
+                Some(times) => {
+                    writeln!(out, "x,y,z,intensity,ring,time")?;
+                    for (p, t) in self.points.iter().zip(times) {
+                        writeln!(
+                            out,
+                            "{},{},{},{},{},{t}",
+                            p.x, p.y, p.z, p.intensity, p.ring
+                        )?;
+                    }
                 }
-            }
+                None => {
+                    writeln!(out, "x,y,z,intensity,ring")?;
+                    for p in self.points {
+                        writeln!(out, "{},{},{},{},{}", p.x, p.y, p.z, p.intensity, p.ring)?;
+                    }
+                }
+            },
         }
         Ok(())
     }

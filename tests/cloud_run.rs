@@ -108,16 +108,8 @@ fn a_scan_with_times_is_placed_by_them() {
     let config = dir.path().join("fog.toml");
     std::fs::write(&config, FOG).unwrap();
     let run = |input: &Path, extra: &[&str], out: &Path| {
-        bin2()
-            .args(["--quiet", "run"])
-            .arg(input)
-            .args(extra)
-            .arg("-c")
-            .arg(&config)
-            .args(["--no-ply", "-o"])
-            .arg(out)
-            .assert()
-            .success();
+        let extra: Vec<&str> = extra.iter().copied().chain(["--no-ply"]).collect();
+        common::run_ok(input, &extra, &config, out);
     };
     let summary = |path: &Path| -> serde_json::Value {
         serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
@@ -164,15 +156,7 @@ fn a_scan_with_times_is_written_back_with_them() {
     let scan = dir.path().join("timed.csv");
     write_timed_csv(&fixture_frame(1), &scan);
     let out = dir.path().join("out");
-    bin2()
-        .args(["--quiet", "run"])
-        .arg(&scan)
-        .arg("-c")
-        .arg(&config)
-        .arg("-o")
-        .arg(&out)
-        .assert()
-        .success();
+    common::run_ok(&scan, &[], &config, &out);
     let input: Vec<String> = std::fs::read_to_string(&scan)
         .unwrap()
         .lines()
@@ -207,15 +191,7 @@ fn a_scan_with_times_is_written_back_with_them() {
     assert!(added.iter().all(|&t| t >= lo - 1e-4 && t <= hi + 1e-4));
     // The noisy scan run again is placed by its times, on the same firings.
     let again = dir.path().join("again");
-    bin2()
-        .args(["--quiet", "run"])
-        .arg(out.join("timed/frame_00000.csv"))
-        .arg("-c")
-        .arg(&config)
-        .arg("-o")
-        .arg(&again)
-        .assert()
-        .success();
+    common::run_ok(&out.join("timed/frame_00000.csv"), &[], &config, &again);
     let v: serde_json::Value =
         serde_json::from_slice(&std::fs::read(again.join("frame_00000/summary.json")).unwrap())
             .unwrap();

@@ -70,15 +70,7 @@ fn decoded_per_laser(path: &Path, model: &SensorModel) -> Vec<u64> {
 
 /// `run` of `capture` with `config` into `out`, partial sweeps too, reports only.
 fn run_every_sweep(capture: &Path, config: &Path, out: &Path) {
-    bin2()
-        .args(["--quiet", "run", "--keep-partial", "--no-ply"])
-        .arg(capture)
-        .arg("-c")
-        .arg(config)
-        .arg("-o")
-        .arg(out)
-        .assert()
-        .success();
+    common::run_ok(capture, &["--keep-partial", "--no-ply"], config, out);
 }
 
 /// The vertex count a PLY file's header declares.

@@ -204,6 +204,25 @@ pub fn bin2() -> assert_cmd::Command {
     c
 }
 
+/// `run INPUT ARGS -c CONFIG -o OUT` (quiet, two threads), which must succeed.
+pub fn run_ok(
+    input: &std::path::Path,
+    args: &[&str],
+    config: &std::path::Path,
+    out: &std::path::Path,
+) {
+    bin2()
+        .args(["--quiet", "run"])
+        .arg(input)
+        .args(args)
+        .arg("-c")
+        .arg(config)
+        .arg("-o")
+        .arg(out)
+        .assert()
+        .success();
+}
+
 /// The crossroad fixture capture.
 pub fn crossroad() -> PathBuf {
     fixtures().join("crossroad.pcap")

@@ -272,15 +272,11 @@ fn cloud_points_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<CloudPoint>> {
                 .for_each(|&x, &y, &z, &i, &r| out.push(point(x, y, z, i, Some(r as u16))));
         }
     }
-    // A time field places the points by time, as `run` places a file's.
+    // A time field places the points by time, as `run` places a file's (the conversion
+    // refuses a time that is not a finite number, naming the point).
     if cols.get_item("time")?.is_some() {
         let time = column::<f64>(cols, "time", Some(n))?;
-        for (i, (p, &t)) in out.iter_mut().zip(time.as_array()).enumerate() {
-            if !t.is_finite() {
-                return Err(PyValueError::new_err(format!(
-                    "points: point {i} (0-based): time is {t}, not a finite number"
-                )));
-            }
+        for (p, &t) in out.iter_mut().zip(time.as_array()) {
             p.time = Some(t);
         }
     }

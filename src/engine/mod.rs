@@ -28,10 +28,6 @@ use crate::writers::staging::{self, OutputFolder};
 use crate::writers::FrameOutput;
 use anyhow::Result;
 use frame_files::{frame_outputs, reported_times, scan_points, write_scan};
-
-/// A scan's rows to write back, and the time each reports (empty unless a time field
-/// placed its points).
-type ScanRows = (Vec<ScanPoint>, Vec<f64>);
 use inputs::{DEFAULT_CAPTURE, DEFAULT_CAPTURE_NAME};
 use reports::{
     check_target, cluster_document, documents, is_run_output, is_run_path, no_frame_error,
@@ -42,6 +38,10 @@ use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 pub use stream::stream_frames;
+
+/// A scan's rows to write back, and the time each reports (empty unless a time field
+/// placed its points).
+type ScanRows = (Vec<ScanPoint>, Vec<f64>);
 
 /// Validated settings of a run: what is computed and written for every frame.
 #[derive(Clone)]

@@ -67,80 +67,62 @@ impl Output for Scan<'_> {
     }
 
     fn write_to(&self, out: &mut dyn Write) -> std::io::Result<()> {
+        if let Some(times) = self.times {
+            if times.len() != self.points.len() {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    format!(
+                        "{} times for {} points: give one a point",
+                        times.len(),
+                        self.points.len()
+                    ),
+                ));
+            }
+        }
         match self.format {
             // Points gathered a chunk at a time into a buffer, one `write_all` a chunk: a
             // call through `dyn Write` for every 4-byte value (a small `memcpy` each) was
             // a twentieth of a dataset run.
-            Format::Kitti => write_records(out, self.points, |p| {
+            Format::Kitti => write_records(out, self.points, |_, p| {
                 floats_le::<4, 16>([p.x, p.y, p.z, f32::from(p.intensity) / 255.0])
             })?,
-            Format::NuScenes => write_records(out, self.points, |p| {
+            Format::NuScenes => write_records(out, self.points, |_, p| {
                 floats_le::<5, 20>([p.x, p.y, p.z, f32::from(p.intensity), f32::from(p.ring)])
             })?,
-            Format::Pcd if self.times.is_some() => {
-                let n = self.points.len();
-                write!(
-                    out,
-                    "# .PCD v0.7 - lidar-noise\nVERSION 0.7\nFIELDS x y z intensity ring time\n\
-                     SIZE 4 4 4 4 2 8\nTYPE F F F F U F\nCOUNT 1 1 1 1 1 1\nWIDTH {n}\n\
-                     HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA binary\n"
-                )?;
-                let times = self.times.unwrap_or_default();
-                let mut buf = Vec::with_capacity(26 * n.min(1 << 16));
-                for (p, t) in self.points.iter().zip(times) {
-                    buf.extend_from_slice(&floats_le::<4, 16>([
-                        p.x,
-                        p.y,
-                        p.z,
-                        f32::from(p.intensity),
-                    ]));
-                    buf.extend_from_slice(&p.ring.to_le_bytes());
-                    buf.extend_from_slice(&t.to_le_bytes());
-                    if buf.len() >= 64 << 10 {
-                        out.write_all(&buf)?;
-                        buf.clear();
-                    }
-                }
-                out.write_all(&buf)?;
-            }
             Format::Pcd => {
                 let n = self.points.len();
+                // The time field, where given, after the others.
+                let (field, size, kind, count) = match self.times {
+                    Some(_) => (" time", " 8", " F", " 1"),
+                    None => ("", "", "", ""),
+                };
                 write!(
                     out,
-                    "# .PCD v0.7 - lidar-noise\nVERSION 0.7\nFIELDS x y z intensity ring\n\
-                     SIZE 4 4 4 4 2\nTYPE F F F F U\nCOUNT 1 1 1 1 1\nWIDTH {n}\nHEIGHT 1\n\
-                     VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA binary\n"
+                    "# .PCD v0.7 - lidar-noise\nVERSION 0.7\nFIELDS x y z intensity ring{field}\n\
+                     SIZE 4 4 4 4 2{size}\nTYPE F F F F U{kind}\nCOUNT 1 1 1 1 1{count}\n\
+                     WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA binary\n"
                 )?;
-                write_records(out, self.points, |p| {
-                    let mut record = [0u8; 18];
-                    record[..16].copy_from_slice(&floats_le::<4, 16>([
-                        p.x,
-                        p.y,
-                        p.z,
-                        f32::from(p.intensity),
-                    ]));
-                    record[16..].copy_from_slice(&p.ring.to_le_bytes());
-                    record
-                })?;
+                match self.times {
+                    Some(times) => write_records(out, self.points, |k, p| {
+                        let mut record = [0u8; 26];
+                        record[..18].copy_from_slice(&pcd_record(p));
+                        record[18..].copy_from_slice(&times[k].to_le_bytes());
+                        record
+                    })?,
+                    None => write_records(out, self.points, |_, p| pcd_record(p))?,
+                }
             }
-            Format::Csv => match self.times {
-                Some(times) => {
-                    writeln!(out, "x,y,z,intensity,ring,time")?;
-                    for (p, t) in self.points.iter().zip(times) {
-                        writeln!(
-                            out,
-                            "{},{},{},{},{},{t}",
-                            p.x, p.y, p.z, p.intensity, p.ring
-                        )?;
+            Format::Csv => {
+                let field = if self.times.is_some() { ",time" } else { "" };
+                writeln!(out, "x,y,z,intensity,ring{field}")?;
+                for (k, p) in self.points.iter().enumerate() {
+                    write!(out, "{},{},{},{},{}", p.x, p.y, p.z, p.intensity, p.ring)?;
+                    match self.times {
+                        Some(times) => writeln!(out, ",{}", times[k])?,
+                        None => writeln!(out)?,
                     }
                 }
-                None => {
-                    writeln!(out, "x,y,z,intensity,ring")?;
-                    for p in self.points {
-                        writeln!(out, "{},{},{},{},{}", p.x, p.y, p.z, p.intensity, p.ring)?;
-                    }
-                }
-            },
+            }
         }
         Ok(())
     }
@@ -156,18 +138,26 @@ fn floats_le<const N: usize, const B: usize>(values: [f32; N]) -> [u8; B] {
     bytes
 }
 
-/// Writes `record(p)` for every point, 64 KB at a time.
+/// A PCD record of `p` without a time: x y z intensity (float32), ring (u16).
+fn pcd_record(p: &ScanPoint) -> [u8; 18] {
+    let mut record = [0u8; 18];
+    record[..16].copy_from_slice(&floats_le::<4, 16>([p.x, p.y, p.z, f32::from(p.intensity)]));
+    record[16..].copy_from_slice(&p.ring.to_le_bytes());
+    record
+}
+
+/// Writes `record(k, p)` for every point `p` (index `k`), 64 KB at a time.
 fn write_records<const B: usize>(
     out: &mut dyn Write,
     points: &[ScanPoint],
-    record: impl Fn(&ScanPoint) -> [u8; B],
+    record: impl Fn(usize, &ScanPoint) -> [u8; B],
 ) -> std::io::Result<()> {
     let per_chunk = (64 << 10) / B;
     let mut buf = Vec::with_capacity(per_chunk * B);
-    for chunk in points.chunks(per_chunk) {
+    for (c, chunk) in points.chunks(per_chunk).enumerate() {
         buf.clear();
-        for p in chunk {
-            buf.extend_from_slice(&record(p));
+        for (j, p) in chunk.iter().enumerate() {
+            buf.extend_from_slice(&record(c * per_chunk + j, p));
         }
         out.write_all(&buf)?;
     }
@@ -457,5 +447,31 @@ mod tests {
         let mut got = Vec::new();
         Fates { points: &points }.write_to(&mut got).unwrap();
         assert_eq!(String::from_utf8(got).unwrap(), want);
+    }
+
+    #[test]
+    fn times_must_be_one_a_point() {
+        let p = ScanPoint {
+            x: 1.0,
+            y: 2.0,
+            z: 3.0,
+            intensity: 4,
+            ring: 5,
+            point: Some(0),
+            fate: 0,
+            cause: 255,
+            range_clean: 3.7,
+            ground: 0,
+            cluster: -1,
+        };
+        for format in [Format::Pcd, Format::Csv] {
+            let scan = Scan {
+                format,
+                points: &[p, p],
+                times: Some(&[0.5]),
+            };
+            let e = scan.write_to(&mut Vec::new()).unwrap_err();
+            assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput, "{format:?}");
+        }
     }
 }

@@ -508,15 +508,7 @@ mod tests {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         let mut floats = ryu::Buffer::new();
-        let mut check = |v: f32| {
-            let mut space = [0; ROW_MAX];
-            let mut row = Row {
-                bytes: &mut space,
-                len: 0,
-            };
-            row.float(&mut floats, v);
-            assert_eq!(&row.bytes[..row.len], v.to_string().as_bytes(), "{v:e}");
-        };
+        let mut check = |v: f32| assert_displayed(&mut floats, v);
         for v in [
             0.0f32,
             -0.0,
@@ -557,19 +549,23 @@ mod tests {
         }
     }
 
-    /// Row::float's text of `v` against `Display`'s, for the bit patterns `bits`.
+    /// Asserts that `Row::float` writes `v` as `Display` does.
+    fn assert_displayed(floats: &mut ryu::Buffer, v: f32) {
+        let mut space = [0; ROW_MAX];
+        let mut row = Row {
+            bytes: &mut space,
+            len: 0,
+        };
+        row.float(floats, v);
+        assert_eq!(&row.bytes[..row.len], v.to_string().as_bytes(), "{v:e}");
+    }
+
+    /// [`assert_displayed`] for the floats of the bit patterns `bits`; how many.
     fn floats_match_display(bits: impl Iterator<Item = u32>) -> usize {
         let mut floats = ryu::Buffer::new();
         let mut checked = 0;
         for b in bits {
-            let v = f32::from_bits(b);
-            let mut space = [0; ROW_MAX];
-            let mut row = Row {
-                bytes: &mut space,
-                len: 0,
-            };
-            row.float(&mut floats, v);
-            assert_eq!(&row.bytes[..row.len], v.to_string().as_bytes(), "{v:e}");
+            assert_displayed(&mut floats, f32::from_bits(b));
             checked += 1;
         }
         checked

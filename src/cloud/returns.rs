@@ -322,18 +322,12 @@ impl BeamTable {
     fn judged(&self, i: usize, value: f64, at: impl Fn(usize) -> f64) -> (u8, bool) {
         let e = at(i);
         let n = self.elevation.len();
-        // The neighbour on the point's side of the nearest beam, else the other one.
-        let j = if value >= e {
-            if i + 1 < n {
-                i + 1
-            } else {
-                i.saturating_sub(1)
-            }
-        } else if i > 0 {
-            i - 1
-        } else {
-            (i + 1).min(n - 1)
-        };
+        // The neighbour on the point's side of the nearest beam, else the other one. Both
+        // candidates first, then one select: which side a point lies is a coin toss, and
+        // as a branch it mispredicted on every other point.
+        let above = if i + 1 < n { i + 1 } else { i.saturating_sub(1) };
+        let below = if i > 0 { i - 1 } else { (i + 1).min(n - 1) };
+        let j = if value >= e { above } else { below };
         let gap = (at(j) - e).abs();
         let ambiguous = gap > 0.0 && (value - e).abs() > 0.25 * gap;
         (self.by_elevation[i], ambiguous)

@@ -325,7 +325,11 @@ impl BeamTable {
         // The neighbour on the point's side of the nearest beam, else the other one. Both
         // candidates first, then one select: which side a point lies is a coin toss, and
         // as a branch it mispredicted on every other point.
-        let above = if i + 1 < n { i + 1 } else { i.saturating_sub(1) };
+        let above = if i + 1 < n {
+            i + 1
+        } else {
+            i.saturating_sub(1)
+        };
         let below = if i > 0 { i - 1 } else { (i + 1).min(n - 1) };
         let j = if value >= e { above } else { below };
         let gap = (at(j) - e).abs();

@@ -334,21 +334,27 @@ impl Row<'_> {
         // No integer lies between v and its text (it would be a shorter text), so the
         // whole parts agree: `as` truncates, and v is below 2^20.
         let whole = v.abs() as u32;
-        let mut fraction = digits - u64::from(whole) * POW10[places as usize];
+        // Below 10^places, and places is at most 8 (`PLACES` of shifts to 26).
+        let fraction = (digits - u64::from(whole) * POW10[places as usize]) as u32;
         self.uint(whole);
         self.byte(b'.');
-        let end = self.len + places as usize;
-        let mut at = end;
-        while at >= self.len + 2 {
-            let pair = (fraction % 100) as usize * 2;
-            fraction /= 100;
-            at -= 2;
-            self.bytes[at..at + 2].copy_from_slice(&DIGIT_PAIRS[pair..pair + 2]);
-        }
-        if at > self.len {
-            self.bytes[at - 1] = b'0' + fraction as u8;
-        }
-        self.len = end;
+        // The fraction's eight digits as one word, shifted past the leading ones not
+        // wanted: no branch on the count of places, which changes from row to row (a
+        // loop a pair and a last odd digit mispredicted as it did).
+        let pair = |p: u32| {
+            let p = p as usize * 2;
+            u64::from(u16::from_le_bytes([DIGIT_PAIRS[p], DIGIT_PAIRS[p + 1]]))
+        };
+        let (high, low) = (fraction / 10_000, fraction % 10_000);
+        // Little-endian: the first digit in the lowest byte.
+        let word = pair(high / 100)
+            | pair(high % 100) << 16
+            | pair(low / 100) << 32
+            | pair(low % 100) << 48;
+        let word = word >> ((8 - places) * 8);
+        // Eight bytes: the row has room past its longest text.
+        self.bytes[self.len..self.len + 8].copy_from_slice(&word.to_le_bytes());
+        self.len += places as usize;
     }
 }
 
@@ -438,16 +444,22 @@ fn shortest_fixed(v: f32) -> Option<(u64, u32)> {
     // The integers in the range at d0 places: a..=b, at least one (it is over 1 wide).
     let a = ((lo + mask) >> shift) + (odd & u64::from(lo & mask == 0));
     let b = (hi >> shift) - (odd & u64::from(hi & mask == 0));
-    let mut places = d0;
-    let (mut a, mut b) = (a, b);
-    // A multiple of ten in a..=b is a text a place shorter.
-    while a.div_ceil(10) <= b / 10 {
-        (a, b) = (a.div_ceil(10), b / 10);
-        places -= 1;
-        if places == 0 {
-            // Whole: the caller's.
-            return None;
+    // A multiple of ten in a..=b is a text a place shorter. The first step is taken by
+    // selects (it is taken about every other time, and as a branch it mispredicted as
+    // often); further steps are rare.
+    let (a1, b1) = (a.div_ceil(10), b / 10);
+    let shorter = a1 <= b1;
+    let (mut a, mut b) = if shorter { (a1, b1) } else { (a, b) };
+    let mut places = d0 - u32::from(shorter);
+    if shorter {
+        while places > 0 && a.div_ceil(10) <= b / 10 {
+            (a, b) = (a.div_ceil(10), b / 10);
+            places -= 1;
         }
+    }
+    if places == 0 {
+        // Whole: the caller's.
+        return None;
     }
     // The integer nearest |v| 10^places; exactly halfway, two texts tie.
     let scaled = 2 * m * POW10[places as usize];

@@ -449,13 +449,14 @@ fn shortest_fixed(v: f32) -> Option<(u64, u32)> {
     // often); further steps are rare.
     let (a1, b1) = (a.div_ceil(10), b / 10);
     let shorter = a1 <= b1;
-    let (mut a, mut b) = if shorter { (a1, b1) } else { (a, b) };
+    // Masks, not `if`: the compiler made a select of the pair a branch.
+    let keep = u64::from(shorter).wrapping_neg();
+    let (mut a, mut b) = ((a1 & keep) | (a & !keep), (b1 & keep) | (b & !keep));
     let mut places = d0 - u32::from(shorter);
-    if shorter {
-        while places > 0 && a.div_ceil(10) <= b / 10 {
-            (a, b) = (a.div_ceil(10), b / 10);
-            places -= 1;
-        }
+    // Where the first step was not taken, the same test fails again at once.
+    while places > 0 && a.div_ceil(10) <= b / 10 {
+        (a, b) = (a.div_ceil(10), b / 10);
+        places -= 1;
     }
     if places == 0 {
         // Whole: the caller's.

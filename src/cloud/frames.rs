@@ -57,12 +57,19 @@ pub struct CloudSummary {
     pub laser_from_elevation: usize,
     /// Of those, points between two beams of the table, whose laser is a guess.
     pub laser_ambiguous: usize,
-    /// The unit of the time field that placed the points on their firings ("s", "ms",
-    /// "us", "ns"); null when they were placed by azimuth.
-    pub placed_by_time: Option<&'static str>,
-    /// That time field, to write the points' times back in it.
-    #[serde(skip)]
+    /// The time field that placed the points on their firings (kept to write their times
+    /// back in it); `None` when they were placed by azimuth. Serialized as
+    /// `placed_by_time`: its unit ("s", "ms", "us", "ns") or null.
+    #[serde(rename = "placed_by_time", serialize_with = "time_unit")]
     pub time_field: Option<TimeField>,
+}
+
+/// Serializes a time field as its unit (null for none).
+fn time_unit<S: serde::Serializer>(
+    field: &Option<TimeField>,
+    s: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    serde::Serialize::serialize(&field.map(|f| f.unit), s)
 }
 
 /// One point-cloud file as a frame source.
@@ -208,7 +215,6 @@ fn load(path: &Path, options: &CloudOptions) -> Result<Loaded> {
         sharing_a_slot: placed.shared,
         laser_from_elevation: placed.from_elevation,
         laser_ambiguous: placed.ambiguous,
-        placed_by_time: placed.time.map(|t| t.unit),
         time_field: placed.time,
     };
     if placed.returns.is_empty() {

@@ -259,13 +259,47 @@ impl Row<'_> {
     }
 
     /// Appends `v` in decimal and a comma: four bytes copied from a table and the length
-    /// added (the fate, cause and ground bytes; one or three digits, whose varying count
+    /// added (the fate, cause and ground bytes; one to three digits, whose varying count
     /// mispredicted `uint`'s branches).
     #[inline(always)]
     fn small(&mut self, v: u8) {
         let (text, len) = SMALL[usize::from(v)];
         self.bytes[self.len..self.len + 4].copy_from_slice(&text);
         self.len += usize::from(len);
+    }
+
+    /// Appends `digits / 10^places` with `places` (at least 1) digits after the point,
+    /// where that is the shortest text of `v` ([`shortest_fixed`]), so `v`'s whole part
+    /// is the text's.
+    #[inline]
+    fn fixed(&mut self, v: f32, digits: u64, places: u32) {
+        if v < 0.0 {
+            self.byte(b'-');
+        }
+        // No integer lies between v and its text (it would be a shorter text), so the
+        // whole parts agree: `as` truncates, and v is below 2^20.
+        let whole = v.abs() as u32;
+        // Below 10^places, and places is at most 8 (`PLACES` of shifts to 26).
+        let fraction = (digits - u64::from(whole) * POW10[places as usize]) as u32;
+        self.uint(whole);
+        self.byte(b'.');
+        // The fraction's eight digits as one word, shifted past the leading ones not
+        // wanted: no branch on the count of places, which changes from row to row (a
+        // loop a pair and a last odd digit mispredicted as it did).
+        let pair = |p: u32| {
+            let p = p as usize * 2;
+            u64::from(u16::from_le_bytes([DIGIT_PAIRS[p], DIGIT_PAIRS[p + 1]]))
+        };
+        let (high, low) = (fraction / 10_000, fraction % 10_000);
+        // Little-endian: the first digit in the lowest byte.
+        let word = pair(high / 100)
+            | pair(high % 100) << 16
+            | pair(low / 100) << 32
+            | pair(low % 100) << 48;
+        let word = word >> ((8 - places) * 8);
+        // Eight bytes: the row has room past its longest text.
+        self.bytes[self.len..self.len + 8].copy_from_slice(&word.to_le_bytes());
+        self.len += places as usize;
     }
 
     /// Appends `v` in decimal, two digits a step from the last.
@@ -319,42 +353,6 @@ impl Row<'_> {
         // Writing to a String cannot fail.
         let _ = write!(s, "{v}");
         self.text(s.as_bytes());
-    }
-}
-
-impl Row<'_> {
-    /// Appends `digits / 10^places` with `places` (at least 1) digits after the point,
-    /// where that is the shortest text of `v` ([`shortest_fixed`]), so `v`'s whole part
-    /// is the text's.
-    #[inline]
-    fn fixed(&mut self, v: f32, digits: u64, places: u32) {
-        if v < 0.0 {
-            self.byte(b'-');
-        }
-        // No integer lies between v and its text (it would be a shorter text), so the
-        // whole parts agree: `as` truncates, and v is below 2^20.
-        let whole = v.abs() as u32;
-        // Below 10^places, and places is at most 8 (`PLACES` of shifts to 26).
-        let fraction = (digits - u64::from(whole) * POW10[places as usize]) as u32;
-        self.uint(whole);
-        self.byte(b'.');
-        // The fraction's eight digits as one word, shifted past the leading ones not
-        // wanted: no branch on the count of places, which changes from row to row (a
-        // loop a pair and a last odd digit mispredicted as it did).
-        let pair = |p: u32| {
-            let p = p as usize * 2;
-            u64::from(u16::from_le_bytes([DIGIT_PAIRS[p], DIGIT_PAIRS[p + 1]]))
-        };
-        let (high, low) = (fraction / 10_000, fraction % 10_000);
-        // Little-endian: the first digit in the lowest byte.
-        let word = pair(high / 100)
-            | pair(high % 100) << 16
-            | pair(low / 100) << 32
-            | pair(low % 100) << 48;
-        let word = word >> ((8 - places) * 8);
-        // Eight bytes: the row has room past its longest text.
-        self.bytes[self.len..self.len + 8].copy_from_slice(&word.to_le_bytes());
-        self.len += places as usize;
     }
 }
 

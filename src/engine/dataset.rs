@@ -378,7 +378,7 @@ fn run_file(
         .pipeline
         .process_points(frame)
         .map_err(|e| anyhow::anyhow!("{}: {e:#}", path.display()))?;
-    let rows = super::frame_files::scan_points(&result);
+    let rows = super::frame_files::scan_points_in_input_order(&result, &order);
     let kept = rows.len();
     let written = (|| -> Result<()> {
         if let (Some(t), Some(out)) = (&truth, truth_out) {
@@ -388,7 +388,9 @@ fn run_file(
                 serde_json::to_writer_pretty(&mut *w, &score).map_err(std::io::Error::other)
             })?;
         }
-        super::frame_files::write_scan_files(format, &order, rows, None, scan_out, fate_out, inputs)
+        super::frame_files::write_ordered_scan_files(
+            format, &rows, None, scan_out, fate_out, inputs,
+        )
     })();
     if written.is_err() {
         // The sidecars went first: without their scan they are no output of this file.

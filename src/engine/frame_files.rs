@@ -152,6 +152,33 @@ fn write_ply(
 /// The kept returns of a processed scan as points to write back (`point` is the return's
 /// index in the frame until [`write_scan`] maps it to the input's).
 pub(crate) fn scan_points(r: &FrameResult) -> Vec<ScanPoint> {
+    scan_points_of(r, |k| k.map(|k| k as u32))
+}
+
+/// The kept returns of a processed scan as points to write back, in the input's point
+/// order (`order`: the input index of each return of the frame), as
+/// [`write_ordered_scan_files`] takes them: mapped and placed as the rows are built (a
+/// pass over the rows each was a twentieth of a dataset run).
+pub(crate) fn scan_points_in_input_order(r: &FrameResult, order: &[u32]) -> Vec<ScanPoint> {
+    let mut placing = Placing::new(order.len());
+    let mut j = 0;
+    let rows = scan_points_of(r, |k| {
+        let point = k.and_then(|k| order.get(k).copied());
+        placing.add(j, point);
+        j += 1;
+        point
+    });
+    let at = placing.order(&rows);
+    at.iter().map(|&j| rows[j as usize]).collect()
+}
+
+/// The kept returns of a processed scan as points to write back, `point` given by `index`
+/// from the return's index in the frame (`None` for an added return), called a row at a
+/// time in order.
+fn scan_points_of(
+    r: &FrameResult,
+    mut index: impl FnMut(Option<usize>) -> Option<u32>,
+) -> Vec<ScanPoint> {
     r.kept
         .iter()
         .zip(&r.survivors)
@@ -164,7 +191,7 @@ pub(crate) fn scan_points(r: &FrameResult) -> Vec<ScanPoint> {
                 z: s.z,
                 intensity: s.intensity,
                 ring: u16::from(s.ring),
-                point: (k < r.noisy.clean_len).then_some(k as u32),
+                point: index((k < r.noisy.clean_len).then_some(k)),
                 fate: r.noisy.fate[k] as u8,
                 cause: r.noisy.cause[k],
                 range_clean: clean_range(r, k),
@@ -203,7 +230,12 @@ pub(crate) fn write_scan(
         stored,
         reported,
     });
-    write_scan_files(format, reader.order(), rows, times, &scan, &fates, inputs)
+    let order = reader.order();
+    let mut rows = rows;
+    for p in &mut rows {
+        p.point = p.point.and_then(|k| order.get(k as usize).copied());
+    }
+    write_scan_files(format, order.len(), rows, times, &scan, &fates, inputs)
 }
 
 /// The times of a scan placed by its time field, for writing them back in that field.
@@ -217,23 +249,19 @@ pub(crate) struct ScanTimes<'a> {
 }
 
 /// Writes a scan's noisy points as `format` to `scan` and their fates to `fates`, in the
-/// input's point order (`order`: the input index of each return of the frame), echoes the
-/// noise added after the recorded points. The sidecar is written first, so that a scan
-/// file is there only once both are complete. `times`: where a time field placed the
-/// points, their times, written back in that field.
+/// input's point order (`rows`' `point`: the index in the input of `points`, `None` for
+/// an added echo), echoes the noise added after the recorded points. The sidecar is
+/// written first, so that a scan file is there only once both are complete. `times`:
+/// where a time field placed the points, their times, written back in that field.
 pub(crate) fn write_scan_files(
     format: crate::cloud::Format,
-    order: &[u32],
-    mut rows: Vec<ScanPoint>,
+    points: usize,
+    rows: Vec<ScanPoint>,
     times: Option<ScanTimes<'_>>,
     scan: &Path,
     fates: &Path,
     inputs: &[&Path],
 ) -> Result<()> {
-    use crate::writers::scan::{Fates, Scan};
-    for p in &mut rows {
-        p.point = p.point.and_then(|k| order.get(k as usize).copied());
-    }
     // A point whose time no stage changed gets its time as stored, exactly; the others
     // (a clock's error, an added echo) their return's time in the field's unit. In row
     // order, before the rows are put in input order (then these with them).
@@ -251,13 +279,28 @@ pub(crate) fn write_scan_files(
             )
             .collect()
     });
-    let (rows, stored) = in_input_order(rows, stored, order.len());
-    write_file(&Fates { points: &rows }, fates, inputs)?;
+    let (rows, stored) = in_input_order(rows, stored, points);
+    write_ordered_scan_files(format, &rows, stored.as_deref(), scan, fates, inputs)
+}
+
+/// Writes a scan's noisy points as `format` to `scan` and their fates to `fates`, in
+/// the order of `rows` (and `times`, one a row, the field's values where given). The
+/// sidecar is written first, so that a scan file is there only once both are complete.
+pub(crate) fn write_ordered_scan_files(
+    format: crate::cloud::Format,
+    rows: &[ScanPoint],
+    times: Option<&[f64]>,
+    scan: &Path,
+    fates: &Path,
+    inputs: &[&Path],
+) -> Result<()> {
+    use crate::writers::scan::{Fates, Scan};
+    write_file(&Fates { points: rows }, fates, inputs)?;
     write_file(
         &Scan {
             format,
-            points: &rows,
-            times: stored.as_deref(),
+            points: rows,
+            times,
         },
         scan,
         inputs,
@@ -274,35 +317,64 @@ fn in_input_order(
     times: Option<Vec<f64>>,
     points: usize,
 ) -> (Vec<ScanPoint>, Option<Vec<f64>>) {
-    const NONE: u32 = u32::MAX;
-    let mut at = vec![NONE; points];
-    let mut echoes = Vec::new();
-    let mut placed = true;
+    let mut placing = Placing::new(points);
     for (j, p) in rows.iter().enumerate() {
-        match p.point.and_then(|i| at.get_mut(i as usize)) {
-            Some(slot) if *slot == NONE => *slot = j as u32,
-            None if p.point.is_none() => echoes.push(j as u32),
-            _ => {
-                placed = false;
-                break;
-            }
-        }
+        placing.add(j, p.point);
     }
-    let order: Vec<u32> = if placed {
-        // Sized up front: a filtered iterator collects by doubling, and the moves of the
-        // growing vector were a sixth of this function.
-        let mut order = Vec::with_capacity(rows.len());
-        order.extend(at.iter().copied().filter(|&j| j != NONE));
-        order.extend_from_slice(&echoes);
-        order
-    } else {
-        let mut order: Vec<u32> = (0..rows.len() as u32).collect();
-        order.sort_by_key(|&j| rows[j as usize].point.map_or((1, 0), |i| (0, i)));
-        order
-    };
+    let order = placing.order(&rows);
     let gather = |j: &u32| rows[*j as usize];
     let times = times.map(|t| order.iter().map(|&j| t[j as usize]).collect());
     (order.iter().map(gather).collect(), times)
+}
+
+/// The rows of a scan placed at their points' input indices as they come, for
+/// [`in_input_order`].
+struct Placing {
+    /// Per input point, the row that holds it ([`Placing::NONE`]: none).
+    at: Vec<u32>,
+    /// The rows of added echoes, in their order.
+    echoes: Vec<u32>,
+    /// Whether every row so far had an input point of its own, or none.
+    placed: bool,
+}
+
+impl Placing {
+    const NONE: u32 = u32::MAX;
+
+    fn new(points: usize) -> Self {
+        Placing {
+            at: vec![Self::NONE; points],
+            echoes: Vec::new(),
+            placed: true,
+        }
+    }
+
+    /// Places row `j`, of input point `point` (`None`: an added echo).
+    #[inline]
+    fn add(&mut self, j: usize, point: Option<u32>) {
+        match point.and_then(|i| self.at.get_mut(i as usize)) {
+            Some(slot) if *slot == Self::NONE => *slot = j as u32,
+            None if point.is_none() => self.echoes.push(j as u32),
+            _ => self.placed = false,
+        }
+    }
+
+    /// The rows in output order: the recorded points by input index, then the echoes;
+    /// a stable sort of `rows` by point where some input point was there twice.
+    fn order(self, rows: &[ScanPoint]) -> Vec<u32> {
+        if self.placed {
+            // Sized up front: a filtered iterator collects by doubling, and the moves of
+            // the growing vector were a sixth of this function.
+            let mut order = Vec::with_capacity(rows.len());
+            order.extend(self.at.iter().copied().filter(|&j| j != Self::NONE));
+            order.extend_from_slice(&self.echoes);
+            order
+        } else {
+            let mut order: Vec<u32> = (0..rows.len() as u32).collect();
+            order.sort_by_key(|&j| rows[j as usize].point.map_or((1, 0), |i| (0, i)));
+            order
+        }
+    }
 }
 
 /// Range of return `i` before noise: 0 for a return a stage added (it has no clean origin).

@@ -378,7 +378,7 @@ fn run_file(
         .pipeline
         .process_points(frame)
         .map_err(|e| anyhow::anyhow!("{}: {e:#}", path.display()))?;
-    let rows = super::frame_files::scan_points_in_input_order(&result, &order);
+    let (rows, rows_order) = super::frame_files::scan_points_in_input_order(&result, &order);
     let kept = rows.len();
     let written = (|| -> Result<()> {
         if let (Some(t), Some(out)) = (&truth, truth_out) {
@@ -388,8 +388,13 @@ fn run_file(
                 serde_json::to_writer_pretty(&mut *w, &score).map_err(std::io::Error::other)
             })?;
         }
-        super::frame_files::write_ordered_scan_files(
-            format, &rows, None, scan_out, fate_out, inputs,
+        super::frame_files::write_scan_files_in_order(
+            format,
+            &rows,
+            &rows_order,
+            scan_out,
+            fate_out,
+            inputs,
         )
     })();
     if written.is_err() {

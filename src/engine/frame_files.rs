@@ -155,11 +155,15 @@ pub(crate) fn scan_points(r: &FrameResult) -> Vec<ScanPoint> {
     scan_points_of(r, |k| k.map(|k| k as u32))
 }
 
-/// The kept returns of a processed scan as points to write back, in the input's point
-/// order (`order`: the input index of each return of the frame), as
-/// [`write_ordered_scan_files`] takes them: mapped and placed as the rows are built (a
-/// pass over the rows each was a twentieth of a dataset run).
-pub(crate) fn scan_points_in_input_order(r: &FrameResult, order: &[u32]) -> Vec<ScanPoint> {
+/// The kept returns of a processed scan as points to write back, `point` the index in
+/// the input (`order`: the input index of each return of the frame), and the order of
+/// the rows in the input's point order (echoes the noise added after the recorded
+/// points), as [`write_scan_files_in_order`] takes them: mapped and placed as the rows
+/// are built (a pass over the rows each was a twentieth of a dataset run).
+pub(crate) fn scan_points_in_input_order(
+    r: &FrameResult,
+    order: &[u32],
+) -> (Vec<ScanPoint>, Vec<u32>) {
     let mut placing = Placing::new(order.len());
     let mut j = 0;
     let rows = scan_points_of(r, |k| {
@@ -169,7 +173,46 @@ pub(crate) fn scan_points_in_input_order(r: &FrameResult, order: &[u32]) -> Vec<
         point
     });
     let at = placing.order(&rows);
-    at.iter().map(|&j| rows[j as usize]).collect()
+    (rows, at)
+}
+
+/// Writes a scan's noisy points as `format` to `scan` and their fates to `fates`, the
+/// rows taken in `order`: both files in one pass over the rows where the format's
+/// records are of fixed size, else the rows put in order first. The sidecar is committed
+/// first, so that a scan file is there only once both are complete.
+pub(crate) fn write_scan_files_in_order(
+    format: crate::cloud::Format,
+    rows: &[ScanPoint],
+    order: &[u32],
+    scan: &Path,
+    fates: &Path,
+    inputs: &[&Path],
+) -> Result<()> {
+    use crate::writers::atomic::AtomicFile;
+    // No buffer of their own: the chunks come whole (64 KB), and a buffer would copy them.
+    let mut fate_file = AtomicFile::with_buffer(fates, inputs, 0)?;
+    let mut scan_file = AtomicFile::with_buffer(scan, inputs, 0)?;
+    let written = crate::writers::scan::write_scan_and_fates(
+        format,
+        rows,
+        order,
+        &mut |b| scan_file.write_all(b),
+        &mut |b| fate_file.write_all(b),
+    );
+    match written {
+        Some(done) => {
+            done?;
+            fate_file.commit()?;
+            scan_file.commit()?;
+            Ok(())
+        }
+        None => {
+            // Dropped uncommitted: their temporary files go.
+            drop((fate_file, scan_file));
+            let rows: Vec<ScanPoint> = order.iter().map(|&j| rows[j as usize]).collect();
+            write_ordered_scan_files(format, &rows, None, scan, fates, inputs)
+        }
+    }
 }
 
 /// The kept returns of a processed scan as points to write back, `point` given by `index`

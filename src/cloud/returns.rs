@@ -289,19 +289,8 @@ impl BeamTable {
         let mut changes: Vec<f64> = self.bounds.clone();
         for i in 0..n {
             let e = self.elevation[i];
-            for side in [1.0, -1.0] {
-                // `judged`'s neighbour on this side of beam i.
-                let j = if side > 0.0 {
-                    if i + 1 < n {
-                        i + 1
-                    } else {
-                        i.saturating_sub(1)
-                    }
-                } else if i > 0 {
-                    i - 1
-                } else {
-                    (i + 1).min(n - 1)
-                };
+            let (above, below) = self.neighbours(i);
+            for (side, j) in [(1.0, above), (-1.0, below)] {
                 let gap = (self.elevation[j] - e).abs();
                 changes.push(e + side * 0.25 * gap);
             }
@@ -401,21 +390,29 @@ impl BeamTable {
         self.judged(lo, z, at)
     }
 
-    /// The laser of beam `i`, nearest to `value` (the point's elevation or height; `at`
-    /// gives each beam's), and whether the choice is ambiguous.
+    /// The beams whose gap to beam `i` judges a point above it and below it: its
+    /// neighbours, or at the outermost beams the one neighbour on either side.
     #[inline]
-    fn judged(&self, i: usize, value: f64, at: impl Fn(usize) -> f64) -> (u8, bool) {
-        let e = at(i);
+    fn neighbours(&self, i: usize) -> (usize, usize) {
         let n = self.elevation.len();
-        // The neighbour on the point's side of the nearest beam, else the other one. Both
-        // candidates first, then one select: which side a point lies is a coin toss, and
-        // as a branch it mispredicted on every other point.
         let above = if i + 1 < n {
             i + 1
         } else {
             i.saturating_sub(1)
         };
         let below = if i > 0 { i - 1 } else { (i + 1).min(n - 1) };
+        (above, below)
+    }
+
+    /// The laser of beam `i`, nearest to `value` (the point's elevation or height; `at`
+    /// gives each beam's), and whether the choice is ambiguous.
+    #[inline]
+    fn judged(&self, i: usize, value: f64, at: impl Fn(usize) -> f64) -> (u8, bool) {
+        let e = at(i);
+        // The neighbour on the point's side of the nearest beam. Both candidates first,
+        // then one select: which side a point lies is a coin toss, and as a branch it
+        // mispredicted on every other point.
+        let (above, below) = self.neighbours(i);
         let j = if value >= e { above } else { below };
         let gap = (at(j) - e).abs();
         let ambiguous = gap > 0.0 && (value - e).abs() > 0.25 * gap;

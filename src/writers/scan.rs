@@ -241,16 +241,8 @@ impl FateRows {
             let low = (1u64 << (8 * t)) - 1;
             self.index = self.index - (0x0909_0909_0909_0909 & low) + (1u64 << (8 * t));
         } else {
-            let mut space = [b'0'; ROW_MAX];
-            let mut row = Row {
-                bytes: &mut space,
-                len: 0,
-            };
-            row.uint(point);
-            let len = row.len;
-            let mut digits = [b'0'; 8];
-            digits[8 - len..].copy_from_slice(&space[..len]);
-            self.index = u64::from_be_bytes(digits);
+            // The first digit in the highest byte.
+            self.index = eight_digits(point).swap_bytes();
         }
         self.last = Some(point);
     }
@@ -440,17 +432,7 @@ impl Row<'_> {
         // The fraction's eight digits as one word, shifted past the leading ones not
         // wanted: no branch on the count of places, which changes from row to row (a
         // loop a pair and a last odd digit mispredicted as it did).
-        let pair = |p: u32| {
-            let p = p as usize * 2;
-            u64::from(u16::from_le_bytes([DIGIT_PAIRS[p], DIGIT_PAIRS[p + 1]]))
-        };
-        let (high, low) = (fraction / 10_000, fraction % 10_000);
-        // Little-endian: the first digit in the lowest byte.
-        let word = pair(high / 100)
-            | pair(high % 100) << 16
-            | pair(low / 100) << 32
-            | pair(low % 100) << 48;
-        let word = word >> ((8 - places) * 8);
+        let word = eight_digits(fraction) >> ((8 - places) * 8);
         // Eight bytes: the row has room past its longest text.
         self.bytes[self.len..self.len + 8].copy_from_slice(&word.to_le_bytes());
         self.len += places as usize;
@@ -508,6 +490,19 @@ impl Row<'_> {
         let _ = write!(s, "{v}");
         self.text(s.as_bytes());
     }
+}
+
+/// The eight decimal digits of `v` (below 10^8), '0'-padded on the left, as the bytes of
+/// a little-endian word: the first digit in the lowest byte.
+#[inline(always)]
+fn eight_digits(v: u32) -> u64 {
+    debug_assert!(v < 100_000_000);
+    let pair = |p: u32| {
+        let p = p as usize * 2;
+        u64::from(u16::from_le_bytes([DIGIT_PAIRS[p], DIGIT_PAIRS[p + 1]]))
+    };
+    let (high, low) = (v / 10_000, v % 10_000);
+    pair(high / 100) | pair(high % 100) << 16 | pair(low / 100) << 32 | pair(low % 100) << 48
 }
 
 /// 10^k for k in 0..=9.

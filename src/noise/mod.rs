@@ -866,8 +866,8 @@ pub(crate) fn round_clamped(x: f64, max: u16) -> u16 {
 /// The intensity rule on recorded bytes `bytes` in place (module documentation,
 /// "Intensity"): each kept return's byte times g P / P_i, rounded once and clamped;
 /// other returns get their current byte (`current`, else their recorded one). True when
-/// some byte differs from the current one. Free of branches so it vectorises, with AVX2
-/// where the processor has it (see [`transmission::wide`]).
+/// some byte differs from the current one. Free of branches so it vectorises, with
+/// AVX-512 or AVX2 where the processor has it (see [`transmission::wide`]).
 fn intensity_bytes(
     bytes: &mut [u8],
     current: Option<&[u8]>,
@@ -876,11 +876,27 @@ fn intensity_bytes(
 ) -> bool {
     #[cfg(target_arch = "x86_64")]
     {
+        if transmission::avx512() {
+            // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
+            return unsafe { intensity_bytes_avx512(bytes, current, columns, g) };
+        }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the processor has AVX2 (checked on the line above).
             return unsafe { intensity_bytes_avx2(bytes, current, columns, g) };
         }
     }
+    intensity_bytes_body(bytes, current, columns, g)
+}
+
+/// [`intensity_bytes`] compiled with AVX-512.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq")]
+unsafe fn intensity_bytes_avx512(
+    bytes: &mut [u8],
+    current: Option<&[u8]>,
+    columns: (&[f64], &[f64], &[Fate]),
+    g: f64,
+) -> bool {
     intensity_bytes_body(bytes, current, columns, g)
 }
 
@@ -1276,16 +1292,35 @@ mod tests {
 
     #[test]
     fn the_wide_intensity_loop_gives_the_plain_loops_bits() {
-        // The AVX2 build (where this machine has it) against the loop compiled for the
-        // baseline: the same bytes, with and without current bytes.
+        // The AVX2 and AVX-512 builds (where this machine has them) against the loop
+        // compiled for the baseline: the same bytes, with and without current bytes.
         let (bytes, power, ideal, fate, _, _) = mixed_columns(10_007);
         let current: Vec<u8> = bytes.iter().map(|b| b.wrapping_mul(3)).collect();
-        for cur in [None, Some(&current[..])] {
-            for g in [1.0, 0.37, 2.5] {
-                let (mut a, mut b) = (bytes.clone(), bytes.clone());
-                let any_a = intensity_bytes(&mut a, cur, (&power, &ideal, &fate), g);
-                let any_b = intensity_bytes_body(&mut b, cur, (&power, &ideal, &fate), g);
-                assert_eq!((a, any_a), (b, any_b));
+        type Rule = fn(&mut [u8], Option<&[u8]>, (&[f64], &[f64], &[Fate]), f64) -> bool;
+        let mut builds: Vec<(&str, Rule)> = vec![("picked", intensity_bytes)];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the processor has AVX2 (checked on the line above).
+                builds.push(("avx2", |b, c, cols, g| unsafe {
+                    intensity_bytes_avx2(b, c, cols, g)
+                }));
+            }
+            if transmission::avx512() {
+                // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
+                builds.push(("avx512", |b, c, cols, g| unsafe {
+                    intensity_bytes_avx512(b, c, cols, g)
+                }));
+            }
+        }
+        for (name, build) in &builds {
+            for cur in [None, Some(&current[..])] {
+                for g in [1.0, 0.37, 2.5] {
+                    let (mut a, mut b) = (bytes.clone(), bytes.clone());
+                    let any_a = build(&mut a, cur, (&power, &ideal, &fate), g);
+                    let any_b = intensity_bytes_body(&mut b, cur, (&power, &ideal, &fate), g);
+                    assert_eq!((a, any_a), (b, any_b), "{name}");
+                }
             }
         }
     }

@@ -504,8 +504,8 @@ impl Rain {
 
 /// Multiplies each alive return's power by exp(-`two_alpha` R) and moves its range by
 /// `delta(R, power after, power before, draw)`, in one pass the compiler vectorises (the
-/// same arithmetic, in the same order, as a return-by-return loop), with AVX2 where the
-/// processor has it (see [`crate::noise::transmission::wide`]).
+/// same arithmetic, in the same order, as a return-by-return loop), with AVX-512 or AVX2
+/// where the processor has it (see [`crate::noise::transmission::wide`]).
 fn attenuate_and_move(
     columns: (&mut [f32], &mut [f64], &[Fate]),
     draws: &[f64],
@@ -514,12 +514,29 @@ fn attenuate_and_move(
 ) {
     #[cfg(target_arch = "x86_64")]
     {
+        if crate::noise::transmission::avx512() {
+            // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
+            unsafe { attenuate_and_move_avx512(columns, draws, two_alpha, delta) };
+            return;
+        }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the processor has AVX2 (checked on the line above).
             unsafe { attenuate_and_move_avx2(columns, draws, two_alpha, delta) };
             return;
         }
     }
+    attenuate_and_move_body(columns, draws, two_alpha, delta);
+}
+
+/// [`attenuate_and_move`] compiled with AVX-512.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq")]
+unsafe fn attenuate_and_move_avx512(
+    columns: (&mut [f32], &mut [f64], &[Fate]),
+    draws: &[f64],
+    two_alpha: f64,
+    delta: impl Fn(f64, f64, f64, f64) -> f64,
+) {
     attenuate_and_move_body(columns, draws, two_alpha, delta);
 }
 
@@ -702,8 +719,8 @@ mod tests {
 
     #[test]
     fn the_wide_rain_pass_gives_the_plain_loops_bits() {
-        // The AVX2 build (where this machine has it) against the loop compiled for the
-        // baseline, for LISA's range noise with its zero-power case.
+        // The AVX2 and AVX-512 builds (where this machine has them) against the loop
+        // compiled for the baseline, for LISA's range noise with its zero-power case.
         let mut rng = ChaCha8Rng::seed_from_u64(9);
         let fates = [
             Fate::Kept,
@@ -727,13 +744,48 @@ mod tests {
                 0.0
             }
         };
-        let (mut r1, mut p1) = (range.clone(), power.clone());
-        attenuate_and_move((&mut r1, &mut p1, &fate), &draws, 0.004, delta);
         let (mut r2, mut p2) = (range.clone(), power.clone());
         attenuate_and_move_body((&mut r2, &mut p2, &fate), &draws, 0.004, delta);
-        assert!(r1.iter().zip(&r2).all(|(a, b)| a.to_bits() == b.to_bits()));
-        assert!(p1.iter().zip(&p2).all(|(a, b)| a.to_bits() == b.to_bits()));
+        // Each build this processor runs (the one `attenuate_and_move` picks among them).
+        type Pass<'a> = dyn Fn(&mut [f32], &mut [f64]) + 'a;
+        let mut builds: Vec<(&str, Box<Pass>)> = vec![(
+            "picked",
+            Box::new(|r, p| attenuate_and_move((r, p, &fate), &draws, 0.004, delta)),
+        )];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                builds.push((
+                    "avx2",
+                    // SAFETY: the processor has AVX2 (checked on the line above).
+                    Box::new(|r, p| unsafe {
+                        attenuate_and_move_avx2((r, p, &fate), &draws, 0.004, delta)
+                    }),
+                ));
+            }
+            if crate::noise::transmission::avx512() {
+                builds.push((
+                    "avx512",
+                    // SAFETY: the processor has AVX-512 F and DQ (checked above).
+                    Box::new(|r, p| unsafe {
+                        attenuate_and_move_avx512((r, p, &fate), &draws, 0.004, delta)
+                    }),
+                ));
+            }
+        }
+        for (name, pass) in &builds {
+            let (mut r1, mut p1) = (range.clone(), power.clone());
+            pass(&mut r1, &mut p1);
+            assert!(
+                r1.iter().zip(&r2).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{name}"
+            );
+            assert!(
+                p1.iter().zip(&p2).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{name}"
+            );
+        }
         // And it did something: alive returns moved and lost power.
-        assert!(p1.iter().zip(&power).filter(|(a, b)| a < b).count() > n / 3);
+        assert!(p2.iter().zip(&power).filter(|(a, b)| a < b).count() > n / 3);
     }
 }

@@ -335,11 +335,7 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
         cell_of,
     } = if total + ib <= 64 {
         let idx_mask = (1u64 << ib) - 1;
-        let mut items: Vec<u64> = points
-            .iter()
-            .enumerate()
-            .map(|(i, p)| key_of(p) << ib | i as u64)
-            .collect();
+        let mut items = packed_keys(points, inv, off, (sx, sy), ib);
         radix_sort_packed(&mut items, ib, total);
         let order = items.iter().map(|&k| (k >> ib, (k & idx_mask) as u32));
         Voxels::of(points, rule.ranges, order)
@@ -436,6 +432,62 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
     };
 
     Some((cell_of, sets))
+}
+
+/// Each point's voxel key (as `link_cells`'s `key_of`) shifted up by `ib` bits with the
+/// point's index in the low bits, compiled for AVX-512 where the processor has it: its
+/// conversions from doubles to 64-bit integers make the loop a vector one (with AVX2 or
+/// SSE2 each conversion is a scalar instruction). The same keys on every build.
+fn packed_keys(
+    points: &[[f32; 3]],
+    inv: f64,
+    off: [f64; 3],
+    shifts: (u32, u32),
+    ib: u32,
+) -> Vec<u64> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if crate::noise::transmission::avx512() {
+            // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
+            return unsafe { packed_keys_avx512(points, inv, off, shifts, ib) };
+        }
+    }
+    packed_keys_body(points, inv, off, shifts, ib)
+}
+
+/// [`packed_keys`] compiled with AVX-512.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq")]
+unsafe fn packed_keys_avx512(
+    points: &[[f32; 3]],
+    inv: f64,
+    off: [f64; 3],
+    shifts: (u32, u32),
+    ib: u32,
+) -> Vec<u64> {
+    packed_keys_body(points, inv, off, shifts, ib)
+}
+
+/// The loop of [`packed_keys`].
+#[inline(always)]
+fn packed_keys_body(
+    points: &[[f32; 3]],
+    inv: f64,
+    off: [f64; 3],
+    (sx, sy): (u32, u32),
+    ib: u32,
+) -> Vec<u64> {
+    // A loop over a zeroed vector, not `collect`: `collect`'s loop is a function of its
+    // own, not inlined into the AVX-512 build.
+    let mut keys = vec![0u64; points.len()];
+    for (i, (k, p)) in keys.iter_mut().zip(points).enumerate() {
+        // SAFETY: each value lies in [2, span + 3] (see `link_cells`), finite and far
+        // inside i64. Unchecked, because `as` saturates, and that test per value kept
+        // the conversions scalar even with AVX-512's vector one.
+        let f = |a: usize| unsafe { (p[a] as f64 * inv - off[a]).to_int_unchecked::<i64>() } as u64;
+        *k = (f(0) << sx | f(1) << sy | f(2)) << ib | i as u64;
+    }
+    keys
 }
 
 /// The voxels of [`link_cells`]: sorted keys, each voxel's first position in key order,
@@ -766,6 +818,39 @@ mod tests {
                 sets.len(),
                 "no voxel links at 0.19 m"
             );
+        }
+    }
+
+    /// The AVX-512 build of the voxel keys (where this machine has it) gives the baseline
+    /// build's keys, on points spread as `link_cells` spreads them.
+    #[test]
+    fn every_build_of_the_voxel_keys_gives_the_same_keys() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+        let points: Vec<[f32; 3]> = (0..10_007)
+            .map(|_| [0, 1, 2].map(|_| rng.random_range(-80.0f32..80.0)))
+            .collect();
+        // The offsets and field shifts of a 0.5 m cutoff: fields 2 and up, 10 bits each.
+        let inv = 3f64.sqrt() / 0.5;
+        let off = [0, 1, 2].map(|_| (-80.0 * inv).floor() - 2.0);
+        let plain = packed_keys_body(&points, inv, off, (20, 10), 14);
+        // Each key is the point's own fields and index.
+        for (i, (k, p)) in plain.iter().zip(&points).enumerate() {
+            let f = |a: usize| (f64::from(p[a]) * inv - off[a]).floor() as u64;
+            assert_eq!(*k, (f(0) << 20 | f(1) << 10 | f(2)) << 14 | i as u64);
+        }
+        assert_eq!(
+            packed_keys(&points, inv, off, (20, 10), 14),
+            plain,
+            "picked"
+        );
+        #[cfg(target_arch = "x86_64")]
+        {
+            if crate::noise::transmission::avx512() {
+                // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
+                let wide = unsafe { packed_keys_avx512(&points, inv, off, (20, 10), 14) };
+                assert_eq!(wide, plain, "avx512");
+            }
         }
     }
 

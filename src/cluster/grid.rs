@@ -203,7 +203,9 @@ pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec
         lo: cutoff,
         hi: cutoff,
     };
-    let (cell_of, mut sets) = link_cells(&fp.points, &rule)?;
+    let Linked {
+        cell_of, mut sets, ..
+    } = link_cells(&fp.points, &rule)?;
     // Labels in input order, numbered by each component's smallest input index.
     let n_cells = sets.len();
     let cell_of_input = if fp.is_identity() {
@@ -235,6 +237,82 @@ pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec
     Some(labels)
 }
 
+/// The fixed cut's clustering with `min_points` applied (as [`super::apply_min_points`]
+/// on [`components`]' partition), in one pass over the points: the voxel sets' point
+/// counts come from the voxels, so each point's label is decided as it is met (a part
+/// below `min_points` is noise, the others are numbered in order of their first point).
+/// The partition, its part sizes and the labels were four passes over the points, the
+/// sizes' increments scattered. `None` where [`components`] gives `None`.
+pub(crate) fn clustering(
+    fp: &FinitePoints,
+    n: usize,
+    cutoff: f64,
+    min_points: usize,
+) -> Option<super::Clustering> {
+    if fp.points.is_empty() {
+        let singletons: Vec<u32> = (0..n as u32).collect();
+        return Some(super::apply_min_points(&singletons, min_points));
+    }
+    let rule = Rule {
+        cutoff_m: cutoff,
+        per_m: 0.0,
+        ranges: None,
+        lo: cutoff,
+        hi: cutoff,
+    };
+    let Linked {
+        cell_of,
+        mut sets,
+        cell_start,
+    } = link_cells(&fp.points, &rule)?;
+    // Each voxel's root, and the points under each root (`cell_start` ends with the
+    // point count).
+    let n_cells = sets.len();
+    let mut root_of = vec![0u32; n_cells];
+    let mut points_under = vec![0u32; n_cells];
+    for (c, root) in root_of.iter_mut().enumerate() {
+        *root = sets.find(c as u32);
+        points_under[*root as usize] += cell_start[c + 1] - cell_start[c];
+    }
+    // A root's label: -1 (noise) for small sets, -2 (a cluster not numbered yet) else.
+    let mut id: Vec<i32> = points_under
+        .iter()
+        .map(|&k| if (k as usize) < min_points { -1 } else { -2 })
+        .collect();
+    let mut next = 0i32;
+    let mut label = |c: u32| -> i32 {
+        if c == u32::MAX {
+            // A point that is not finite is a part of its own.
+            if min_points > 1 {
+                return -1;
+            }
+            next += 1;
+            return next - 1;
+        }
+        let slot = &mut id[root_of[c as usize] as usize];
+        if *slot == -2 {
+            *slot = next;
+            next += 1;
+        }
+        *slot
+    };
+    let labels: Vec<i32> = if fp.is_identity() {
+        cell_of.iter().map(|&c| label(c)).collect()
+    } else {
+        let mut by_input = vec![u32::MAX; n];
+        for (f, &c) in cell_of.iter().enumerate() {
+            by_input[fp.global(f) as usize] = c;
+        }
+        by_input.iter().map(|&c| label(c)).collect()
+    };
+    let n_noise_points = labels.iter().filter(|&&l| l < 0).count();
+    Some(super::Clustering {
+        labels,
+        n_clusters: next as usize,
+        n_noise_points,
+    })
+}
+
 /// Pair rule of one grid pass: a pair links when `d <= cutoff_m + per_m * max(range_i,
 /// range_j)` (`per_m` 0 and no ranges: the fixed cutoff). `lo` and `hi` bound every pair
 /// cutoff of the pass from below and above.
@@ -261,7 +339,7 @@ pub(crate) struct Rule<'a> {
 /// than `rule.lo` and linked points lie at most two voxels apart per axis: so the voxel
 /// coordinate is `floor(v * (1 / side))`, a multiplication, whose relative rounding error
 /// (~1e-16) is far inside the 1e-6 shrink of the side.
-pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, UnionFind)> {
+pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<Linked> {
     // The 1e-6 shrink keeps same-voxel pairs below the cutoff despite rounding in the voxel
     // assignment and in the distance itself (both ~1e-16 relative).
     let side = rule.lo / 3f64.sqrt() * (1.0 - 1e-6);
@@ -271,7 +349,11 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
     let inv = 1.0 / side;
     let m = points.len();
     if m == 0 {
-        return Some((Vec::new(), UnionFind::new(0)));
+        return Some(Linked {
+            cell_of: Vec::new(),
+            sets: UnionFind::new(0),
+            cell_start: vec![0],
+        });
     }
     // Coordinate bounds in f32 (no division per point); `floor(v * inv)` is monotone in `v`,
     // so the voxel bounds are the voxels of the coordinate bounds.
@@ -431,7 +513,19 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<(Vec<u32>, 
         }
     };
 
-    Some((cell_of, sets))
+    Some(Linked {
+        cell_of,
+        sets,
+        cell_start,
+    })
+}
+
+/// What [`link_cells`] found: each point's voxel, the union-find over the voxels, and
+/// each voxel's first point in voxel order (and one past the last point).
+pub(crate) struct Linked {
+    pub(crate) cell_of: Vec<u32>,
+    pub(crate) sets: UnionFind,
+    pub(crate) cell_start: Vec<u32>,
 }
 
 /// Each point's voxel key (as `link_cells`'s `key_of`) shifted up by `ib` bits with the
@@ -808,11 +902,11 @@ mod tests {
                     points.push([i as f32 * 0.2, 5.0 * l as f32, 0.1 * (i % 3) as f32]);
                 }
             }
-            let (_, mut sets) = link_cells(&points, &rule(0.5)).unwrap();
+            let mut sets = link_cells(&points, &rule(0.5)).unwrap().sets;
             assert!(sets.len() >= 2 * SPLIT_MIN_CELLS, "the halves are taken");
             assert_eq!(sets.component_labels().1, lines, "{lines} lines");
             // Below the 0.2 m spacing no two points link: every voxel is its own set.
-            let (_, mut sets) = link_cells(&points, &rule(0.19)).unwrap();
+            let mut sets = link_cells(&points, &rule(0.19)).unwrap().sets;
             assert_eq!(
                 sets.component_labels().1,
                 sets.len(),
@@ -850,6 +944,40 @@ mod tests {
                 // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
                 let wide = unsafe { packed_keys_avx512(&points, inv, off, (20, 10), 14) };
                 assert_eq!(wide, plain, "avx512");
+            }
+        }
+    }
+
+    /// The grid's own labels are `apply_min_points` of its partition: random clumps and
+    /// scattered points, some not finite, every `min_points` from 0 to past the largest
+    /// part, on both sides of the halves' split.
+    #[test]
+    fn the_grids_labels_are_the_partitions_with_min_points() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
+        for case in 0..60 {
+            let n = [0, 1, 5, 300, 3000][case % 5];
+            let mut points: Vec<[f32; 3]> = (0..n)
+                .map(|_| {
+                    let c = rng.random_range(0..8) as f32 * 3.0;
+                    [0, 1, 2].map(|_| c + rng.random_range(-1.5f32..1.5))
+                })
+                .collect();
+            for k in 0..n / 50 {
+                let i = rng.random_range(0..n);
+                points[i][k % 3] = [f32::NAN, f32::INFINITY][k % 2];
+            }
+            let fp = FinitePoints::new(&points).unwrap();
+            let cutoff = [0.3, 0.5, 1.0][case % 3];
+            let partition = components(&fp, n, cutoff).unwrap();
+            let largest = (0..n as u32)
+                .map(|c| partition.iter().filter(|&&x| x == c).count())
+                .max()
+                .unwrap_or(0);
+            for min_points in [0, 1, 2, 3, 10, largest, largest + 1] {
+                let got = clustering(&fp, n, cutoff, min_points).unwrap();
+                let want = super::super::apply_min_points(&partition, min_points);
+                assert_eq!(got, want, "case {case}, min_points {min_points}");
             }
         }
     }

@@ -404,7 +404,9 @@ fn adaptive_shells(fp: &FinitePoints, n: usize, cutoff_m: f64, per_m: f64) -> Op
                 lo,
                 hi,
             };
-            let (cell_of, mut sets) = grid::link_cells(&pts, &rule)?;
+            let grid::Linked {
+                cell_of, mut sets, ..
+            } = grid::link_cells(&pts, &rule)?;
             // Fold the pass's voxel sets into the point union-find.
             let mut first = vec![u32::MAX; sets.len()];
             for (k, &c) in cell_of.iter().enumerate() {
@@ -472,6 +474,16 @@ pub fn apply_min_points(partition: &[u32], min_points: usize) -> Clustering {
 /// which is exact for every merge below the bound.
 pub fn cluster(points: &[[f32; 3]], opts: &ClusterOptions) -> Result<Clustering> {
     let partition = match opts.cut {
+        CutRule::Distance if opts.cutoff_per_m == 0.0 => {
+            check_non_negative("cutoff_m", opts.cutoff_m)?;
+            let fp = FinitePoints::new(points)?;
+            // The fixed cut's voxel grid labels the points itself (one pass instead of
+            // the partition's and `apply_min_points`' four).
+            if let Some(c) = grid::clustering(&fp, points.len(), opts.cutoff_m, opts.min_points) {
+                return Ok(c);
+            }
+            distance_components(points, opts.cutoff_m, 0.0)?
+        }
         CutRule::Distance => distance_components(points, opts.cutoff_m, opts.cutoff_per_m)?,
         CutRule::Inconsistent { threshold } => {
             if threshold.is_nan() {

@@ -196,27 +196,13 @@ pub(crate) fn components(fp: &FinitePoints, n: usize, cutoff: f64) -> Option<Vec
     if fp.points.is_empty() {
         return Some((0..n as u32).collect());
     }
-    let rule = Rule {
-        cutoff_m: cutoff,
-        per_m: 0.0,
-        ranges: None,
-        lo: cutoff,
-        hi: cutoff,
-    };
+    let rule = Rule::fixed(cutoff);
     let Linked {
         cell_of, mut sets, ..
     } = link_cells(&fp.points, &rule)?;
     // Labels in input order, numbered by each component's smallest input index.
     let n_cells = sets.len();
-    let cell_of_input = if fp.is_identity() {
-        cell_of
-    } else {
-        let mut by_input = vec![u32::MAX; n];
-        for (f, &c) in cell_of.iter().enumerate() {
-            by_input[fp.global(f) as usize] = c;
-        }
-        by_input
-    };
+    let cell_of_input = in_input_order(fp, n, cell_of);
     let mut root_label = vec![u32::MAX; n_cells];
     let mut next = 0u32;
     let labels = cell_of_input
@@ -253,13 +239,7 @@ pub(crate) fn clustering(
         let singletons: Vec<u32> = (0..n as u32).collect();
         return Some(super::apply_min_points(&singletons, min_points));
     }
-    let rule = Rule {
-        cutoff_m: cutoff,
-        per_m: 0.0,
-        ranges: None,
-        lo: cutoff,
-        hi: cutoff,
-    };
+    let rule = Rule::fixed(cutoff);
     let Linked {
         cell_of,
         mut sets,
@@ -296,21 +276,29 @@ pub(crate) fn clustering(
         }
         *slot
     };
-    let labels: Vec<i32> = if fp.is_identity() {
-        cell_of.iter().map(|&c| label(c)).collect()
-    } else {
-        let mut by_input = vec![u32::MAX; n];
-        for (f, &c) in cell_of.iter().enumerate() {
-            by_input[fp.global(f) as usize] = c;
-        }
-        by_input.iter().map(|&c| label(c)).collect()
-    };
+    let labels: Vec<i32> = in_input_order(fp, n, cell_of)
+        .iter()
+        .map(|&c| label(c))
+        .collect();
     let n_noise_points = labels.iter().filter(|&&l| l < 0).count();
     Some(super::Clustering {
         labels,
         n_clusters: next as usize,
         n_noise_points,
     })
+}
+
+/// The voxel of each of the `n` input points, `u32::MAX` for those that are not finite,
+/// from the voxels of the finite points (`cell_of`, in `fp`'s order).
+fn in_input_order(fp: &FinitePoints, n: usize, cell_of: Vec<u32>) -> Vec<u32> {
+    if fp.is_identity() {
+        return cell_of;
+    }
+    let mut by_input = vec![u32::MAX; n];
+    for (f, &c) in cell_of.iter().enumerate() {
+        by_input[fp.global(f) as usize] = c;
+    }
+    by_input
 }
 
 /// Pair rule of one grid pass: a pair links when `d <= cutoff_m + per_m * max(range_i,
@@ -327,6 +315,19 @@ pub(crate) struct Rule<'a> {
     pub(crate) lo: f64,
     /// Largest pair cutoff of the pass.
     pub(crate) hi: f64,
+}
+
+impl Rule<'_> {
+    /// The fixed cut: pairs at most `cutoff` apart link.
+    fn fixed(cutoff: f64) -> Self {
+        Rule {
+            cutoff_m: cutoff,
+            per_m: 0.0,
+            ranges: None,
+            lo: cutoff,
+            hi: cutoff,
+        }
+    }
 }
 
 /// Voxel of each point and the union-find over voxels after linking, for the points of one

@@ -550,22 +550,28 @@ const PLACES: [u32; 32] = {
     table
 };
 
+/// `v` (below 1000) in decimal, padded to four bytes, and the text's length.
+const fn decimal(v: usize) -> ([u8; 4], usize) {
+    let (mut text, mut len) = ([0u8; 4], 0);
+    if v >= 100 {
+        text[len] = b'0' + (v / 100) as u8;
+        len += 1;
+    }
+    if v >= 10 {
+        text[len] = b'0' + (v / 10 % 10) as u8;
+        len += 1;
+    }
+    text[len] = b'0' + (v % 10) as u8;
+    (text, len + 1)
+}
+
 /// 0 to 999 in decimal, padded to four bytes, and the text's length.
 const THOUSAND: [([u8; 4], u8); 1000] = {
     let mut table = [([0u8; 4], 0u8); 1000];
     let mut v = 0;
     while v < 1000 {
-        let (mut text, mut len) = ([0u8; 4], 0);
-        if v >= 100 {
-            text[len] = b'0' + (v / 100) as u8;
-            len += 1;
-        }
-        if v >= 10 {
-            text[len] = b'0' + (v / 10 % 10) as u8;
-            len += 1;
-        }
-        text[len] = b'0' + (v % 10) as u8;
-        table[v] = (text, len as u8 + 1);
+        let (text, len) = decimal(v);
+        table[v] = (text, len as u8);
         v += 1;
     }
     table
@@ -576,18 +582,9 @@ const SMALL: [([u8; 4], u8); 256] = {
     let mut table = [([0u8; 4], 0u8); 256];
     let mut v = 0;
     while v < 256 {
-        let (mut text, mut len) = ([0u8; 4], 0);
-        if v >= 100 {
-            text[len] = b'0' + (v / 100) as u8;
-            len += 1;
-        }
-        if v >= 10 {
-            text[len] = b'0' + (v / 10 % 10) as u8;
-            len += 1;
-        }
-        text[len] = b'0' + (v % 10) as u8;
-        text[len + 1] = b',';
-        table[v] = (text, len as u8 + 2);
+        let (mut text, len) = decimal(v);
+        text[len] = b',';
+        table[v] = (text, len as u8 + 1);
         v += 1;
     }
     table

@@ -288,7 +288,13 @@ pub fn distance_components(
     } else if let Some(labels) = adaptive_shells(&fp, points.len(), cutoff_m, cutoff_per_m) {
         return Ok(labels);
     }
-    let mut uf = UnionFind::new(points.len());
+    Ok(tree_components(&fp, points.len(), cutoff_m, cutoff_per_m))
+}
+
+/// [`distance_components`] of the `n` points (finite ones in `fp`) by a k-d tree radius
+/// search, where the voxel grids do not apply.
+fn tree_components(fp: &FinitePoints, n: usize, cutoff_m: f64, cutoff_per_m: f64) -> Vec<u32> {
+    let mut uf = UnionFind::new(n);
     if fp.points.len() > 1 {
         let tree = fp.tree();
         let pts = &fp.points;
@@ -338,7 +344,7 @@ pub fn distance_components(
             }
         }
     }
-    Ok(uf.component_labels().0)
+    uf.component_labels().0
 }
 
 /// Largest ratio of the largest to the smallest pair cutoff inside one grid pass: the voxel
@@ -479,10 +485,11 @@ pub fn cluster(points: &[[f32; 3]], opts: &ClusterOptions) -> Result<Clustering>
             let fp = FinitePoints::new(points)?;
             // The fixed cut's voxel grid labels the points itself (one pass instead of
             // the partition's and `apply_min_points`' four).
-            if let Some(c) = grid::clustering(&fp, points.len(), opts.cutoff_m, opts.min_points) {
-                return Ok(c);
+            match grid::clustering(&fp, points.len(), opts.cutoff_m, opts.min_points) {
+                Some(c) => return Ok(c),
+                // Where the grid does not apply, the partition of the k-d tree.
+                None => tree_components(&fp, points.len(), opts.cutoff_m, 0.0),
             }
-            distance_components(points, opts.cutoff_m, 0.0)?
         }
         CutRule::Distance => distance_components(points, opts.cutoff_m, opts.cutoff_per_m)?,
         CutRule::Inconsistent { threshold } => {
@@ -518,6 +525,35 @@ pub fn points_of(returns: &[crate::frame::Return]) -> Vec<[f32; 3]> {
 mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
+
+    /// Where the voxel grid does not apply (a zero cutoff, coordinates beyond its keys),
+    /// `cluster` takes the k-d tree's partition: the same labels as `apply_min_points`
+    /// of `distance_components`, and pairs within the cutoff still link.
+    #[test]
+    fn the_fixed_cut_beyond_the_grid_is_the_trees() {
+        let far = 1e12f32;
+        let points = [
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0],
+            [far, 0.0, 0.0],
+            [far, 0.25, 0.0],
+            [f32::NAN, 0.0, 0.0],
+            [-far, 0.0, 0.0],
+        ];
+        for (cutoff_m, min_points) in [(0.0, 1), (0.0, 2), (0.5, 1), (0.5, 2)] {
+            let opts = ClusterOptions {
+                cutoff_m,
+                min_points,
+                ..ClusterOptions::default()
+            };
+            let got = cluster(&points, &opts).unwrap();
+            let partition = distance_components(&points, cutoff_m, 0.0).unwrap();
+            assert_eq!(got, apply_min_points(&partition, min_points), "{cutoff_m}");
+            // The two equal points always link; the pair 0.25 m apart at 0.5 m only.
+            assert_eq!(partition[0], partition[1]);
+            assert_eq!(partition[2] == partition[3], cutoff_m == 0.5);
+        }
+    }
 
     /// `apply_min_points` against the rule written out one point at a time, on random
     /// partitions (parts of every size, interleaved) and thresholds.

@@ -400,10 +400,11 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<Linked> {
         return None;
     }
     let (sx, sy) = (wy + wz, wz);
-    let off = lo.map(|l| (l - 2) as f64);
-    let key_of = |p: &[f32; 3]| -> u64 {
-        let f = |a: usize| (p[a] as f64 * inv - off[a]) as i64 as u64;
-        f(0) << sx | f(1) << sy | f(2)
+    let grid = KeyGrid {
+        inv,
+        off: lo.map(|l| (l - 2) as f64),
+        sx,
+        sy,
     };
     // The points in key order: (key, point index) packed in one u64 when both fit (one
     // array to sort and scatter instead of two, read straight off the sorted array), else
@@ -418,12 +419,12 @@ pub(crate) fn link_cells(points: &[[f32; 3]], rule: &Rule) -> Option<Linked> {
         cell_of,
     } = if total + ib <= 64 {
         let idx_mask = (1u64 << ib) - 1;
-        let mut items = packed_keys(points, inv, off, (sx, sy), ib);
+        let mut items = packed_keys(points, grid, ib);
         radix_sort_packed(&mut items, ib, total);
         let order = items.iter().map(|&k| (k >> ib, (k & idx_mask) as u32));
         Voxels::of(points, rule.ranges, order)
     } else {
-        let mut keys: Vec<u64> = points.iter().map(key_of).collect();
+        let mut keys: Vec<u64> = points.iter().map(|p| grid.key(p)).collect();
         let mut order: Vec<u32> = (0..m as u32).collect();
         radix_sort(&mut keys, &mut order, total);
         Voxels::of(points, rule.ranges, keys.into_iter().zip(order))
@@ -529,58 +530,60 @@ pub(crate) struct Linked {
     pub(crate) cell_start: Vec<u32>,
 }
 
-/// Each point's voxel key (as `link_cells`'s `key_of`) shifted up by `ib` bits with the
+/// How [`link_cells`] turns a point into its voxel key: fields `trunc(v * inv - off)` on
+/// the three axes, x shifted up by `sx`, y by `sy`.
+#[derive(Clone, Copy)]
+struct KeyGrid {
+    inv: f64,
+    off: [f64; 3],
+    sx: u32,
+    sy: u32,
+}
+
+impl KeyGrid {
+    /// The voxel key of `p`.
+    #[inline(always)]
+    fn key(&self, p: &[f32; 3]) -> u64 {
+        // SAFETY: each value lies in [2, span + 3] (see `link_cells`), finite and far
+        // inside i64. Unchecked, because `as` saturates, and that test per value kept
+        // the conversions scalar even with AVX-512's vector one.
+        let f =
+            |a: usize| unsafe { (p[a] as f64 * self.inv - self.off[a]).to_int_unchecked::<i64>() }
+                as u64;
+        f(0) << self.sx | f(1) << self.sy | f(2)
+    }
+}
+
+/// Each point's voxel key ([`KeyGrid::key`]) shifted up by `ib` bits with the
 /// point's index in the low bits, compiled for AVX-512 where the processor has it: its
 /// conversions from doubles to 64-bit integers make the loop a vector one (with AVX2 or
 /// SSE2 each conversion is a scalar instruction). The same keys on every build.
-fn packed_keys(
-    points: &[[f32; 3]],
-    inv: f64,
-    off: [f64; 3],
-    shifts: (u32, u32),
-    ib: u32,
-) -> Vec<u64> {
+fn packed_keys(points: &[[f32; 3]], grid: KeyGrid, ib: u32) -> Vec<u64> {
     #[cfg(target_arch = "x86_64")]
     {
         if crate::noise::transmission::avx512() {
             // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
-            return unsafe { packed_keys_avx512(points, inv, off, shifts, ib) };
+            return unsafe { packed_keys_avx512(points, grid, ib) };
         }
     }
-    packed_keys_body(points, inv, off, shifts, ib)
+    packed_keys_body(points, grid, ib)
 }
 
 /// [`packed_keys`] compiled with AVX-512.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq")]
-unsafe fn packed_keys_avx512(
-    points: &[[f32; 3]],
-    inv: f64,
-    off: [f64; 3],
-    shifts: (u32, u32),
-    ib: u32,
-) -> Vec<u64> {
-    packed_keys_body(points, inv, off, shifts, ib)
+unsafe fn packed_keys_avx512(points: &[[f32; 3]], grid: KeyGrid, ib: u32) -> Vec<u64> {
+    packed_keys_body(points, grid, ib)
 }
 
 /// The loop of [`packed_keys`].
 #[inline(always)]
-fn packed_keys_body(
-    points: &[[f32; 3]],
-    inv: f64,
-    off: [f64; 3],
-    (sx, sy): (u32, u32),
-    ib: u32,
-) -> Vec<u64> {
+fn packed_keys_body(points: &[[f32; 3]], grid: KeyGrid, ib: u32) -> Vec<u64> {
     // A loop over a zeroed vector, not `collect`: `collect`'s loop is a function of its
     // own, not inlined into the AVX-512 build.
     let mut keys = vec![0u64; points.len()];
     for (i, (k, p)) in keys.iter_mut().zip(points).enumerate() {
-        // SAFETY: each value lies in [2, span + 3] (see `link_cells`), finite and far
-        // inside i64. Unchecked, because `as` saturates, and that test per value kept
-        // the conversions scalar even with AVX-512's vector one.
-        let f = |a: usize| unsafe { (p[a] as f64 * inv - off[a]).to_int_unchecked::<i64>() } as u64;
-        *k = (f(0) << sx | f(1) << sy | f(2)) << ib | i as u64;
+        *k = grid.key(p) << ib | i as u64;
     }
     keys
 }
@@ -928,22 +931,24 @@ mod tests {
         // The offsets and field shifts of a 0.5 m cutoff: fields 2 and up, 10 bits each.
         let inv = 3f64.sqrt() / 0.5;
         let off = [0, 1, 2].map(|_| (-80.0 * inv).floor() - 2.0);
-        let plain = packed_keys_body(&points, inv, off, (20, 10), 14);
+        let grid = KeyGrid {
+            inv,
+            off,
+            sx: 20,
+            sy: 10,
+        };
+        let plain = packed_keys_body(&points, grid, 14);
         // Each key is the point's own fields and index.
         for (i, (k, p)) in plain.iter().zip(&points).enumerate() {
             let f = |a: usize| (f64::from(p[a]) * inv - off[a]).floor() as u64;
             assert_eq!(*k, (f(0) << 20 | f(1) << 10 | f(2)) << 14 | i as u64);
         }
-        assert_eq!(
-            packed_keys(&points, inv, off, (20, 10), 14),
-            plain,
-            "picked"
-        );
+        assert_eq!(packed_keys(&points, grid, 14), plain, "picked");
         #[cfg(target_arch = "x86_64")]
         {
             if crate::noise::transmission::avx512() {
                 // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
-                let wide = unsafe { packed_keys_avx512(&points, inv, off, (20, 10), 14) };
+                let wide = unsafe { packed_keys_avx512(&points, grid, 14) };
                 assert_eq!(wide, plain, "avx512");
             }
         }

@@ -945,7 +945,7 @@ mod tests {
         for model in crate::sensor::MODELS {
             let beams = BeamTable::new(model);
             let want = |e: f64| beams.bounds.partition_point(|&b| b < e);
-            let mut elevations = vec![-90.0, 90.0, -1e9, 1e9, f64::NAN, 0.0, -0.0];
+            let mut elevations = vec![-90.0, 90.0, -1e9, 1e9, 0.0, -0.0];
             for &b in &beams.bounds {
                 elevations.extend([b, b.next_down(), b.next_up()]);
             }
@@ -973,7 +973,7 @@ mod tests {
                 model.name,
                 beams.direct.len()
             );
-            let mut elevations = vec![-90.0, 90.0, -1e9, 1e9, f64::NAN, 0.0, -0.0];
+            let mut elevations = vec![-90.0, 90.0, -1e9, 1e9, 0.0, -0.0];
             // Every bin's edges and middle, and the places the answer changes, each with
             // its neighbouring floats.
             for b in 0..=beams.direct.len() {
@@ -1000,9 +1000,6 @@ mod tests {
             elevations.extend(around);
             elevations.extend((0..200_000).map(|_| rng.random_range(-91.0..91.0)));
             for e in elevations {
-                if e.is_nan() {
-                    continue;
-                }
                 assert_eq!(beams.nearest(e), beams.searched(e), "{} at {e}", model.name);
             }
         }

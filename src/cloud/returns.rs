@@ -977,7 +977,11 @@ mod tests {
     fn each_models_shared_table_is_built_once_and_is_its_own() {
         for model in crate::sensor::MODELS {
             let shared = BeamTable::of(model);
-            assert!(Arc::ptr_eq(&shared, &BeamTable::of(model)), "{}", model.name);
+            assert!(
+                Arc::ptr_eq(&shared, &BeamTable::of(model)),
+                "{}",
+                model.name
+            );
             let fresh = BeamTable::new(model);
             assert_eq!(shared.by_elevation, fresh.by_elevation, "{}", model.name);
             assert_eq!(shared.direct, fresh.direct, "{}", model.name);

@@ -341,6 +341,19 @@ impl Slots {
     ) -> Option<(Return, usize)> {
         let (firing, laser) = self.split(slot);
         let t = self.nearest_of_laser(firing, laser, 1000)?;
+        self.vacant_return_from(returns, slot, range, t)
+    }
+
+    /// [`Slots::vacant_return`] with its template `t` found by the caller (the nearest
+    /// return of the slot's laser within 1000 firings).
+    fn vacant_return_from(
+        &self,
+        returns: &[Return],
+        slot: SlotId,
+        range: f32,
+        t: usize,
+    ) -> Option<(Return, usize)> {
+        let firing = self.split(slot).0;
         let template = returns[t];
         let tf = self.split(self.slot_of[t]).0;
         let (mut azimuth, mut time) = (f64::from(template.azimuth), template.time);
@@ -952,12 +965,17 @@ fn resolve_slot(
         }
         return;
     }
+    // A vacant slot's template (`Slots::vacant_return`), found once for the occlusion
+    // check and the return (searching twice for it was a tenth of a fog stage's slots).
+    let nearest = if vacant {
+        let (firing, laser) = slots.split(slot);
+        slots.nearest_of_laser(firing, laser, 1000)
+    } else {
+        None
+    };
     // Occlusion removes the beam: no echo in an occluded slot.
     let occluded = if vacant {
-        let (firing, laser) = slots.split(slot);
-        slots
-            .nearest_of_laser(firing, laser, 1000)
-            .is_some_and(|t| frame.fate[t] == Fate::Occluded)
+        nearest.is_some_and(|t| frame.fate[t] == Fate::Occluded)
     } else {
         occupants.iter().any(|&i| frame.fate[i] == Fate::Occluded)
     };
@@ -1053,8 +1071,8 @@ fn resolve_slot(
             }
             (Some(i), Err(k)) => frame.replace(i, echo, group[k].stage),
             (None, Err(k)) if vacant => {
-                if let Some((mut ret, template)) =
-                    slots.vacant_return(&frame.clean, slot, echo.range)
+                if let Some((mut ret, template)) = nearest
+                    .and_then(|t| slots.vacant_return_from(&frame.clean, slot, echo.range, t))
                 {
                     if let Some(kind) = kind {
                         ret.kind = kind;

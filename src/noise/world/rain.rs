@@ -45,8 +45,16 @@
 //!
 //! ## model = "goodin"
 //!
-//! Exactly as before issue 29 (ranges, powers, fates, causes and draws; tested by a
-//! digest, tests/golden/rain_goodin_digest.txt). With rain rate R in mm/h: extinction alpha = 0.01 R^0.6 (1/m, their Eq. 5); power
+//! As before issue 29 (ranges, powers, fates, causes and draws; tested by a digest,
+//! tests/golden/rain_goodin_digest.txt), but for its arithmetic, which since 2026-11-28
+//! gives the same bits on every machine: the attenuation and the range noise's
+//! 1 - exp(-R) by the project's own exp ([`exp_nonpositive`], within 2 ulp), R^0.6 by
+//! the libm crate's pow. The platform's exp and pow had been kept for the study's bits,
+//! but glibc picks them by processor (with or without FMA) and their last bits differ:
+//! with glibc's non-FMA builds (forced by `GLIBC_TUNABLES`), 20 of a nuScenes sweep's
+//! 34,688 powers moved by an ulp and the digest test failed.
+//!
+//! With rain rate R in mm/h: extinction alpha = 0.01 R^0.6 (1/m, their Eq. 5); power
 //! P_n = P * exp(-2 alpha R_i) with the range before the noise (Eq. 7); range
 //! R_n = R_i + sigma z with sigma = 0.02 R_i (1 - exp(-R))^2 and z standard normal
 //! (Eq. 9, `range_noise = "goodin"`), or R_n = R_i + u with u uniform in +-1.5 cm
@@ -76,6 +84,7 @@ use super::mie::{self, Dsd, VolumeOptics};
 use super::particles::{Particles, Population, Reflectance};
 use crate::config::reader::Section;
 use crate::error::Result;
+use crate::noise::transmission::exp_nonpositive;
 use crate::noise::{Fate, NoiseStage, NoisyFrame};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -168,12 +177,15 @@ pub struct Rain {
 
 /// Extinction coefficient alpha (1/m) at `rate` mm/h (Goodin Eq. 5).
 pub fn extinction_per_m(rate_mm_h: f64) -> f64 {
-    0.01 * rate_mm_h.powf(0.6)
+    // The libm crate's pow, not the platform's: the same bits on every machine (module
+    // documentation).
+    0.01 * libm::pow(rate_mm_h, 0.6)
 }
 
 /// Standard deviation (m) of the range noise at `range` metres and `rate` mm/h (Eq. 9).
 pub fn range_sigma_m(range_m: f64, rate_mm_h: f64) -> f64 {
-    let g = 1.0 - (-rate_mm_h).exp();
+    // A rate is not negative (checked when the stage is built).
+    let g = 1.0 - exp_nonpositive(-rate_mm_h);
     0.02 * range_m * g * g
 }
 
@@ -467,8 +479,7 @@ impl Rain {
         });
     }
 
-    /// Goodin's attenuation (libm's exp, so its study's powers stay bit for bit) and range
-    /// noise of the recorded returns.
+    /// Goodin's attenuation and range noise of the recorded returns.
     fn goodin_returns(
         &self,
         frame: &mut NoisyFrame,
@@ -489,7 +500,8 @@ impl Rain {
             }
             let r_i = f64::from(*range);
             let before = *power;
-            *power *= (-two_alpha * r_i).exp();
+            // The project's exp, not the platform's: the same bits on every machine.
+            *power *= exp_nonpositive(-two_alpha * r_i);
             let delta = match self.range_noise {
                 RangeNoise::Goodin => self.sigma_per_m * r_i * draw,
                 RangeNoise::Mavs => draw,

@@ -189,15 +189,6 @@ pub(crate) fn write_scan_files_in_order(
     inputs: &[&Path],
 ) -> Result<()> {
     use crate::writers::atomic::AtomicFile;
-    let in_order = || {
-        let rows: Vec<ScanPoint> = order.iter().map(|&j| rows[j as usize]).collect();
-        write_ordered_scan_files(format, &rows, None, scan, fates, inputs)
-    };
-    // Decided before the files are opened: opening them for a format the one pass does
-    // not write created and removed two temporary files a scan.
-    if !crate::writers::scan::writes_in_one_pass(format) {
-        return in_order();
-    }
     // No buffer of their own: the chunks come whole (64 KB), and a buffer would copy them.
     let mut fate_file = AtomicFile::with_buffer(fates, inputs, 0)?;
     let mut scan_file = AtomicFile::with_buffer(scan, inputs, 0)?;
@@ -216,10 +207,10 @@ pub(crate) fn write_scan_files_in_order(
             Ok(())
         }
         None => {
-            // Not reached (`writes_in_one_pass`); dropped uncommitted, their temporary
-            // files go.
+            // Dropped uncommitted: their temporary files go.
             drop((fate_file, scan_file));
-            in_order()
+            let rows: Vec<ScanPoint> = order.iter().map(|&j| rows[j as usize]).collect();
+            write_ordered_scan_files(format, &rows, None, scan, fates, inputs)
         }
     }
 }

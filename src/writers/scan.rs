@@ -311,15 +311,6 @@ impl FateRows {
     }
 }
 
-/// Whether [`write_scan_and_fates`] writes `format` (its records are of fixed size), so
-/// that a caller opens files only for a format it writes.
-pub(crate) fn writes_in_one_pass(format: Format) -> bool {
-    match format {
-        Format::Kitti | Format::NuScenes => true,
-        Format::Pcd | Format::Csv => false,
-    }
-}
-
 /// Writes a scan of fixed binary records (KITTI, nuScenes) and its fate CSV in one pass
 /// over `rows` taken in `order`, each file's bytes handed to `scan` and `fates` a chunk
 /// at a time: rows put in order first and then read once a file were three more passes
@@ -981,7 +972,6 @@ mod tests {
             )
             .expect("a fixed-record format")
             .unwrap();
-            assert!(writes_in_one_pass(format), "{format:?}");
             let mut want = Vec::new();
             Scan {
                 format,
@@ -1003,7 +993,6 @@ mod tests {
             let mut none = |_: &[u8]| Ok::<(), ()>(());
             let mut also = |_: &[u8]| Ok::<(), ()>(());
             assert!(write_scan_and_fates(format, &rows, &order, &mut none, &mut also).is_none());
-            assert!(!writes_in_one_pass(format), "{format:?}");
         }
     }
 }

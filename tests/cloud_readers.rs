@@ -162,6 +162,19 @@ fn non_finite_coordinates_name_the_point() {
         ReadOptions::default(),
     );
     assert!(e.contains("point 2 ") && e.contains("y is NaN"), "{e}");
+    // The first offending point is named, whichever value it is (a KITTI scan is checked
+    // as it is parsed).
+    let mut v = vec![0.0f32; 4 * 6];
+    v[3 * 4 + 3] = f32::NEG_INFINITY; // point 3, intensity
+    v[5 * 4] = f32::NAN; // point 5, x
+    let e = err(
+        &write(dir.path(), "last.bin", &le(&v)),
+        ReadOptions::default(),
+    );
+    assert!(
+        e.contains("last.bin") && e.contains("point 3 ") && e.contains("intensity is -inf"),
+        "{e}"
+    );
     let mut v = vec![0.0f32; 5 * 2];
     v[5 + 2] = f32::INFINITY; // point 1, z
     let e = err(

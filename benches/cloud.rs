@@ -3,7 +3,9 @@
 //! turn, ranges 4 to 60 m) read from memory and from a file in the page cache (target:
 //! at least 1 GB/s), and its points turned into HDL-64E S2 returns (the firing grid, the
 //! laser from the elevation); and its way out: the per-point `fate.csv` sidecar a dataset
-//! run writes beside each scan.
+//! run writes beside each scan. With `LIDAR_NOISE_BENCH_KITTI=path/to/scan.bin` also the
+//! same conversion of that real scan (whose points collide on the firing grid and share
+//! slots as a synthesized one's do not; SemanticKITTI 00/000964 has been the project's).
 //!
 //! `cargo bench --bench cloud` (one core: `taskset -c 0 cargo bench --bench cloud`).
 
@@ -61,6 +63,14 @@ fn bench_cloud(c: &mut Criterion) {
     group.bench_function("kitti_120k_to_hdl64e_returns", |b| {
         b.iter(|| to_returns(&cloud.points, &HDL64E_S2, &returns, "000000.bin").unwrap())
     });
+    if let Some(real) = std::env::var_os("LIDAR_NOISE_BENCH_KITTI") {
+        let real = read_file(Path::new(&real), &options).expect("LIDAR_NOISE_BENCH_KITTI");
+        group.throughput(Throughput::Elements(real.points.len() as u64));
+        group.bench_function("kitti_real_to_hdl64e_returns", |b| {
+            b.iter(|| to_returns(&real.points, &HDL64E_S2, &returns, "real.bin").unwrap())
+        });
+        group.throughput(Throughput::Elements(cloud.points.len() as u64));
+    }
     // The scan's points as a dataset run writes them back: each its clean range (the
     // float text is most of the cost), a few removed by a stage, the low beams ground,
     // the others in clusters of a few hundred points.

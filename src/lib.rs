@@ -24,6 +24,7 @@ pub mod noise;
 pub mod options;
 pub mod par;
 pub mod pipeline;
+pub(crate) mod radix;
 pub mod sensor;
 pub mod signals;
 pub mod sweep;

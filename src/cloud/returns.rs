@@ -647,9 +647,9 @@ pub fn to_returns(
         n as usize * lasers
     };
     // The point in each slot (u32::MAX: none); a point that had to share a slot is listed
-    // in `sharing` instead, as (slot, point), in file order.
+    // in `sharing` instead, as slot << 32 | point, in file order.
     let mut point_at = vec![u32::MAX; slots];
-    let mut sharing: Vec<(u32, u32)> = Vec::new();
+    let mut sharing: Vec<u64> = Vec::new();
     // Points whose own slot an earlier point had claimed, in file order.
     let mut lost: Vec<u32> = Vec::new();
     let (mut moved, mut from_elevation, mut ambiguous) = (0, 0, 0);
@@ -775,7 +775,7 @@ pub fn to_returns(
             if point_at[slot] == u32::MAX {
                 point_at[slot] = i as u32;
             } else {
-                sharing.push((slot as u32, i as u32));
+                sharing.push((slot as u64) << 32 | i as u64);
             }
         }
     }
@@ -796,26 +796,27 @@ pub fn to_returns(
                 q.firing = f as u32;
                 point_at[f as usize * lasers + l] = i;
             }
-            None => sharing.push(((k as usize * lasers + l) as u32, i)),
+            None => sharing.push(((k as usize * lasers + l) as u64) << 32 | u64::from(i)),
         }
     }
     let shared = sharing.len();
     // Firing order, then laser, then file order (the same points always give the same
     // returns): the slots walked in order, a slot's own point before those sharing it
-    // (pushed in file order, so a stable sort by slot keeps them so; that is the order
-    // of the pairs themselves, as each is pushed once, so an unstable sort of the pairs
-    // gives it too, with the fewer mispredicted branches of its partitioning).
-    sharing.sort_unstable();
+    // (pushed in file order, so a stable sort by slot keeps them so: a radix sort of the
+    // slot bits alone, where a comparison sort of the pairs was a sixteenth of a real
+    // KITTI scan's conversion, whose 120,000 points leave about 16,000 sharing).
+    let slot_bits = u64::BITS - (point_at.len() as u64).leading_zeros();
+    crate::radix::sort_packed(&mut sharing, 32, slot_bits);
     let mut order = Vec::with_capacity(points.len());
     let mut rest = sharing.iter().peekable();
     for (slot, &i) in point_at.iter().enumerate() {
         if i != u32::MAX {
             order.push(i);
-            while let Some(&&(s, j)) = rest.peek() {
-                if s as usize != slot {
+            while let Some(&&k) = rest.peek() {
+                if (k >> 32) as usize != slot {
                     break;
                 }
-                order.push(j);
+                order.push(k as u32);
                 rest.next();
             }
         }
@@ -1326,6 +1327,42 @@ mod tests {
         let pts: Vec<CloudPoint> = (0..7).map(|_| on_grid(40, 0, 10.0)).collect();
         let out = to_returns(&pts, &HDL32E, &ReturnsOptions::default(), "t").unwrap();
         assert_eq!((out.moved, out.shared), (4, 2));
+    }
+
+    #[test]
+    fn points_sharing_slots_follow_their_slots_own_point_in_file_order() {
+        // Crowded slots in file order against slot order (a later firing first, lasers
+        // interleaved), ranges telling the points apart: each of the crowded slots keeps
+        // its first point, the neighbours within reach take four more, the rest share.
+        let crowds = [(300, 7), (40, 0), (40, 1), (41, 0), (12, 31)];
+        let pts: Vec<CloudPoint> = (0..9)
+            .flat_map(|n| {
+                crowds
+                    .iter()
+                    .map(move |&(k, l)| on_grid(k, l, 10.0 + f64::from(n) * 0.01))
+            })
+            .collect();
+        let out = to_returns(&pts, &HDL32E, &ReturnsOptions::default(), "t").unwrap();
+        assert!(out.shared >= 8, "{}", out.shared);
+        assert_eq!(out.order.len(), pts.len());
+        // Returns in firing order, then laser, then file order: strictly ascending.
+        let key = |r: &Return, i: u32| (r.packet * 12 + u32::from(r.block), r.laser, i);
+        let keys: Vec<_> = out
+            .returns
+            .iter()
+            .zip(&out.order)
+            .map(|(r, &i)| key(r, i))
+            .collect();
+        assert!(keys.windows(2).all(|w| w[0] < w[1]), "{keys:?}");
+        // Each point once, at its own range.
+        let mut seen = out.order.clone();
+        seen.sort_unstable();
+        assert!(seen.iter().copied().eq(0..pts.len() as u32));
+        for (r, &i) in out.returns.iter().zip(&out.order) {
+            let p = &pts[i as usize];
+            let (x, y, z) = (f64::from(p.x), f64::from(p.y), f64::from(p.z));
+            assert_eq!(r.range, (x * x + y * y + z * z).sqrt() as f32, "point {i}");
+        }
     }
 
     #[test]

@@ -790,7 +790,21 @@ pub fn to_returns(
         let q = &mut placed[i as usize];
         let (k, l) = (i64::from(q.firing), usize::from(q.laser));
         let free = |f: i64| (0..n).contains(&f) && point_at[f as usize * lasers + l] == u32::MAX;
-        match (1..=REACH).flat_map(|d| [k - d, k + d]).find(|&f| free(f)) {
+        // The nearer firings first, the earlier side first: k - 1, k + 1, k - 2, k + 2
+        // (a loop: `flat_map` and `find` made a real KITTI scan's conversion 4.54 ms,
+        // this 4.36).
+        let mut found = None;
+        for d in 1..=REACH {
+            if free(k - d) {
+                found = Some(k - d);
+                break;
+            }
+            if free(k + d) {
+                found = Some(k + d);
+                break;
+            }
+        }
+        match found {
             Some(f) => {
                 moved += 1;
                 q.firing = f as u32;

@@ -37,7 +37,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<(Vec<CloudPoint>, Fields)> {
                 ring: None,
                 time: None,
             };
-            sound &= p.x.is_finite() & p.y.is_finite() & p.z.is_finite() & p.intensity.is_finite();
+            sound &= p.values_finite();
             p
         })
         .collect();

@@ -56,14 +56,17 @@ pub struct CloudPoint {
 }
 
 impl CloudPoint {
+    /// Whether x, y, z and intensity are all finite numbers.
+    #[inline]
+    pub(crate) fn values_finite(&self) -> bool {
+        // `&`, not `&&`: no branch a value in the loops over a scan that call it.
+        self.x.is_finite() & self.y.is_finite() & self.z.is_finite() & self.intensity.is_finite()
+    }
+
     /// The first of x, y, z and intensity that is not a finite number, with its value.
     pub fn non_finite(&self) -> Option<(&'static str, f32)> {
         // One test for the common case: all finite.
-        if self.x.is_finite()
-            && self.y.is_finite()
-            && self.z.is_finite()
-            && self.intensity.is_finite()
-        {
+        if self.values_finite() {
             return None;
         }
         [
@@ -283,12 +286,7 @@ pub fn check_points(points: &[CloudPoint], path: &Path, lasers: Option<u16>) -> 
     let limit = lasers.unwrap_or(u16::MAX);
     let ring_ok = |p: &CloudPoint| lasers.is_none() || p.ring.is_none_or(|r| r < limit);
     let sound = points.iter().fold(true, |ok, p| {
-        ok & p.x.is_finite()
-            & p.y.is_finite()
-            & p.z.is_finite()
-            & p.intensity.is_finite()
-            & p.time.is_none_or(f64::is_finite)
-            & ring_ok(p)
+        ok & p.values_finite() & p.time.is_none_or(f64::is_finite) & ring_ok(p)
     });
     if sound {
         return Ok(());

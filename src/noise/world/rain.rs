@@ -404,7 +404,7 @@ impl NoiseStage for Rain {
     fn apply(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
         // One pass for both models: goodin's build refuses `range_noise = "lisa"`, so for
         // goodin the draws, powers and ranges are exactly those of before the mie model.
-        self.attenuate_and_draw(frame, rng, 2.0 * self.alpha, frame.threshold);
+        self.attenuate_and_draw(frame, rng);
         // Drop echoes after every range draw, from the same stream: goodin's LISA cone,
         // or mie's population through the sensor's optics.
         if let Some(b) = &self.backscatter {
@@ -437,13 +437,8 @@ impl Rain {
     /// vectorises (the same arithmetic, in the same order, as a return-by-return loop;
     /// goodin's own loop, a return at a time with a draw among the arithmetic, made the
     /// paper chain's bench 1.55 ms where this pass makes it 1.09).
-    fn attenuate_and_draw(
-        &self,
-        frame: &mut NoisyFrame,
-        rng: &mut ChaCha8Rng,
-        two_alpha: f64,
-        p_th: f64,
-    ) {
+    fn attenuate_and_draw(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
+        let (two_alpha, p_th) = (2.0 * self.alpha, frame.threshold);
         DRAWS.with_borrow_mut(|draws| {
             draws.clear();
             // The model's draw in its own loop (one match a frame, not one a return).

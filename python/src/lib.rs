@@ -252,12 +252,21 @@ fn cloud_points_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<CloudPoint>> {
         None => xyzi.for_each(|&x, &y, &z, &i| out.push(point(x, y, z, i, None))),
         Some(RingColumn::Float(r)) => {
             let r = r.as_array();
-            if let Some(e) = r.iter().enumerate().find_map(|(i, &v)| ring_of(i, v).err()) {
-                return Err(e);
+            // Checked as the points are built, without a branch: a ring is valid exactly
+            // when the saturating cast gives it back (a whole number from 0 to 65535; NaN
+            // casts to 0). Only when one is not is the column searched for the first,
+            // which `ring_of` names (a pass of its own was half of this conversion).
+            let mut valid = true;
+            xyzi.and(&r).for_each(|&x, &y, &z, &i, &r| {
+                let ring = r as u16;
+                valid &= f32::from(ring) == r;
+                out.push(point(x, y, z, i, Some(ring)));
+            });
+            if !valid {
+                if let Some(e) = r.iter().enumerate().find_map(|(i, &v)| ring_of(i, v).err()) {
+                    return Err(e);
+                }
             }
-            // Checked above: the casts below are exact.
-            xyzi.and(&r)
-                .for_each(|&x, &y, &z, &i, &r| out.push(point(x, y, z, i, Some(r as u16))));
         }
         Some(RingColumn::Int(r)) => {
             let r = r.as_array();

@@ -965,6 +965,26 @@ fn resolve_slot(
         }
         return;
     }
+    // The other common case: a vacant slot, one echo, single-return mode (a weather
+    // stage's echo where no target answered). The echo alone contends, so it is the
+    // slot's return when detectable and the beam is not occluded; the general machinery
+    // below makes the same choice (it was a third of a fog stage on a nuScenes sweep).
+    if let ([], [c], SlotMode::Strongest | SlotMode::Last) = (occupants, group, slots.mode) {
+        let (firing, laser) = slots.split(slot);
+        let nearest = slots.nearest_of_laser(firing, laser, 1000);
+        if nearest.is_some_and(|t| frame.fate[t] == Fate::Occluded)
+            || !frame.detectable(c.echo.range, c.echo.power)
+        {
+            return;
+        }
+        if let Some((mut ret, template)) =
+            nearest.and_then(|t| slots.vacant_return_from(&frame.clean, slot, c.echo.range, t))
+        {
+            ret.intensity = frame.echo_intensity(&c.echo);
+            frame.push_added(ret, c.echo.power, c.stage, template);
+        }
+        return;
+    }
     // A vacant slot's template (`Slots::vacant_return`), found once for the occlusion
     // check and the return (searching twice for it was a tenth of a fog stage's slots).
     let nearest = if vacant {

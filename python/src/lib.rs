@@ -16,7 +16,7 @@ use lidar_noise::cloud::{self, CloudPoint, IntensityScale};
 use lidar_noise::config::Config;
 use lidar_noise::error::Error;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
-use lidar_noise::noise::{stage_rng, stage_tags, NoiseChain, NoisyFrame};
+use lidar_noise::noise::{stage_rng, stage_tags, NoiseChain, NoisyFrame, Reported};
 use lidar_noise::pipeline::Pipeline;
 use lidar_noise::sensor::SensorModel;
 use numpy::ndarray::Zip;
@@ -368,18 +368,6 @@ impl ReturnColumns {
     }
 }
 
-/// Return `i` of a noisy frame as `run --keep-dropped` writes it: noisy where the sensor
-/// reports it (the library's `noisy_return`, what `survivors` gives for it), as recorded
-/// where it was dropped. Per row, rather than the survivors collected first and a map
-/// to them: no copy of the frame's returns a call.
-fn reported(noisy: &NoisyFrame, i: usize) -> Return {
-    if noisy.fate[i].is_alive() {
-        noisy.noisy_return(i)
-    } else {
-        noisy.clean[i]
-    }
-}
-
 /// Range of return `i` before noise: 0 for a return a stage added.
 fn clean_range(noisy: &NoisyFrame, i: usize) -> f32 {
     if i < noisy.clean_len {
@@ -444,7 +432,11 @@ impl RecordLayout {
 
     /// The records of `rows` (indices into the noisy frame), written straight into the
     /// bytes numpy will view as the structured array (no column copies).
+    /// Each row's return is as `run --keep-dropped` writes it: noisy where the sensor
+    /// reports it (what `survivors` gives for it), as recorded where it was dropped;
+    /// built per row ([`NoisyFrame::reported`]), not from the survivors collected first.
     fn records(&self, noisy: &NoisyFrame, rows: &[u32]) -> Vec<u8> {
+        let reported = noisy.reported();
         let mut buf = vec![0u8; rows.len() * self.itemsize];
         if self.itemsize == ALIGNED_ITEMSIZE && self.at == ALIGNED_AT {
             // numpy's aligned layout of APPLIED_DTYPE (what the package passes): offsets
@@ -453,12 +445,12 @@ impl RecordLayout {
             // which stalled on every record (store forwarding).
             for (rec, &i) in buf.chunks_exact_mut(ALIGNED_ITEMSIZE).zip(rows) {
                 let rec: &mut [u8; ALIGNED_ITEMSIZE] = rec.try_into().expect("chunks are exact");
-                fill_record(rec, &ALIGNED_AT, noisy, i as usize);
+                fill_record(rec, &ALIGNED_AT, noisy, &reported, i as usize);
             }
             return buf;
         }
         for (rec, &i) in buf.chunks_exact_mut(self.itemsize).zip(rows) {
-            fill_record(rec, &self.at, noisy, i as usize);
+            fill_record(rec, &self.at, noisy, &reported, i as usize);
         }
         buf
     }
@@ -473,8 +465,14 @@ const ALIGNED_ITEMSIZE: usize = 64;
 
 /// Writes the record of return `i` into `rec`, field j at byte `at[j]` (little-endian).
 #[inline(always)]
-fn fill_record(rec: &mut [u8], at: &[usize; 19], noisy: &NoisyFrame, i: usize) {
-    let r = reported(noisy, i);
+fn fill_record(
+    rec: &mut [u8],
+    at: &[usize; 19],
+    noisy: &NoisyFrame,
+    reported: &Reported<'_>,
+    i: usize,
+) {
+    let r = reported.of(i);
     let mut put = |j: usize, b: &[u8]| rec[at[j]..at[j] + b.len()].copy_from_slice(b);
     put(0, &r.x.to_le_bytes());
     put(1, &r.y.to_le_bytes());
@@ -512,7 +510,8 @@ struct Applied {
 impl Applied {
     /// Rows in `rows` order (indices into the noisy frame).
     fn of(noisy: &NoisyFrame, rows: &[u32]) -> Self {
-        let all: Vec<Return> = rows.iter().map(|&i| reported(noisy, i as usize)).collect();
+        let reported = noisy.reported();
+        let all: Vec<Return> = rows.iter().map(|&i| reported.of(i as usize)).collect();
         let clean_range = |i: usize| clean_range(noisy, i);
         Applied {
             returns: ReturnColumns::of(all.iter()),

@@ -726,6 +726,15 @@ impl NoisyFrame {
         View::of(self).noisy_return(i)
     }
 
+    /// What the sensor reports of each return, for callers that visit many: see
+    /// [`Reported::of`].
+    pub fn reported(&self) -> Reported<'_> {
+        Reported {
+            view: View::of(self),
+            fate: &self.fate,
+        }
+    }
+
     /// Counts and range statistics of this frame.
     pub fn summary(&self) -> NoiseSummary {
         NoiseSummary::from_frame(self)
@@ -746,6 +755,27 @@ fn along_beam(r: &Return, rn: f32) -> Return {
     }
     out.range = rn;
     out
+}
+
+/// The returns of a [`NoisyFrame`] as reported: noisy where the sensor still reports
+/// the return, as recorded where it was dropped (as `run --keep-dropped` writes them).
+/// The frame's optional parts are resolved once for all the returns visited, where
+/// [`NoisyFrame::noisy_return`] resolves them at every call.
+pub struct Reported<'a> {
+    view: View<'a>,
+    fate: &'a [Fate],
+}
+
+impl Reported<'_> {
+    /// Return `i` as reported.
+    #[inline(always)]
+    pub fn of(&self, i: usize) -> Return {
+        if self.fate[i].is_alive() {
+            self.view.noisy_return(i)
+        } else {
+            self.view.clean[i]
+        }
+    }
 }
 
 /// The per-return state of a [`NoisyFrame`] with its optional parts resolved once, so

@@ -132,9 +132,11 @@ def _whole_rings(ring: np.ndarray) -> np.ndarray:
     return ring.astype(np.int64)
 
 
-def _columns(points: Any) -> "tuple[str, Dict[str, np.ndarray]]":
+def _columns(points: Any, rows: bool = False) -> "tuple[str, Dict[str, np.ndarray]]":
     """Classifies ``points`` and lays it out as columns: ("returns", ...) for arrays with
-    every field of a return, ("points", ...) for plain x y z intensity [ring]."""
+    every field of a return, ("points", ...) for plain x y z intensity [ring]. With
+    ``rows``, a C-ordered float32 (N, 4) or (N, 5) array is passed whole as ``rows``
+    (for the compiled side's conversion to returns, which reads it row by row)."""
     if not isinstance(points, np.ndarray):
         raise ValueError(
             f"points: expected a numpy array, got {type(points).__name__}"
@@ -177,6 +179,8 @@ def _columns(points: Any) -> "tuple[str, Dict[str, np.ndarray]]":
         raise ValueError(
             f"points: expected a float32 or float64 array, got dtype {points.dtype}"
         )
+    if rows and points.dtype == np.float32 and points.flags.c_contiguous:
+        return "points", {"rows": points}
     cols = {
         n: points[:, i].astype(np.float32, copy=False)
         for i, n in enumerate(("x", "y", "z", "intensity"))
@@ -337,7 +341,7 @@ def points_to_returns(
     to the sensor's lasers - 1; a ``time`` field, where given, places the points on
     their firings by time rather than by azimuth."""
     _sensor_model(sensor)
-    kind, cols = _columns(points)
+    kind, cols = _columns(points, rows=True)
     if kind == "returns":
         raise ValueError("points: already returns (every field of a return is present)")
     out, order = _core.points_to_returns(cols, rotation_hz, intensity_scale, sensor)
@@ -448,7 +452,7 @@ class Chain:
         their noisy position, dropped ones where they were), then the returns stages
         added (fate "added"); ``kept`` is the mask of returns the sensor reports.
         ``seed`` defaults to the configuration's; ``frame`` keys the random streams."""
-        kind, cols = _columns(points)
+        kind, cols = _columns(points, rows=True)
         if seed is not None and (not isinstance(seed, (int, np.integer)) or seed < 0):
             raise ValueError(f"seed {seed!r}: give a non-negative integer")
         if not isinstance(frame, (int, np.integer)) or not 0 <= frame < 2**32:

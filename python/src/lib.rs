@@ -20,7 +20,7 @@ use lidar_noise::noise::{stage_rng, stage_tags, NoiseChain, NoisyFrame, Reported
 use lidar_noise::pipeline::Pipeline;
 use lidar_noise::sensor::SensorModel;
 use numpy::ndarray::Zip;
-use numpy::{Element, PyArray1, PyReadonlyArray1};
+use numpy::{Element, PyArray1, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -215,6 +215,9 @@ fn ring_of(i: usize, v: f32) -> PyResult<u16> {
 
 /// Plain points (x y z intensity, optional ring and time) of a column dictionary.
 fn cloud_points_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<CloudPoint>> {
+    if let Some(rows) = cols.get_item("rows")? {
+        return cloud_points_of_rows(&rows);
+    }
     let x = column::<f32>(cols, "x", None)?;
     let n = x.as_array().len();
     let y = column::<f32>(cols, "y", Some(n))?;
@@ -290,6 +293,50 @@ fn cloud_points_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<CloudPoint>> {
         }
     }
     Ok(out)
+}
+
+/// Plain points of a C-ordered float32 (N, 4) or (N, 5) array (x y z intensity [ring]),
+/// read row by row from its one slice: the same points as its columns give, without five
+/// strided walks (the package passes such an array whole).
+fn cloud_points_of_rows(rows: &Bound<'_, PyAny>) -> PyResult<Vec<CloudPoint>> {
+    let bad = || {
+        PyValueError::new_err("points: `rows` must be a C-ordered float32 (N, 4) or (N, 5) array")
+    };
+    let a: PyReadonlyArray2<'_, f32> = rows.extract().map_err(|_| bad())?;
+    let width = a.as_array().ncols();
+    let flat = a.as_slice().map_err(|_| bad())?;
+    let point = |r: &[f32], ring| CloudPoint {
+        x: r[0],
+        y: r[1],
+        z: r[2],
+        intensity: r[3],
+        ring,
+        time: None,
+    };
+    match width {
+        4 => Ok(flat.chunks_exact(4).map(|r| point(r, None)).collect()),
+        5 => {
+            // As for a ring column (`cloud_points_of`): checked as the points are built,
+            // the first bad ring named only when there is one.
+            let mut valid = true;
+            let out = flat
+                .chunks_exact(5)
+                .map(|r| {
+                    let ring = r[4] as u16;
+                    valid &= f32::from(ring) == r[4];
+                    point(r, Some(ring))
+                })
+                .collect();
+            if !valid {
+                let rings = flat.chunks_exact(5).map(|r| r[4]);
+                if let Some(e) = rings.enumerate().find_map(|(i, v)| ring_of(i, v).err()) {
+                    return Err(e);
+                }
+            }
+            Ok(out)
+        }
+        _ => Err(bad()),
+    }
 }
 
 /// Columns of returns (the fields of `Return`), in the given order of indices.

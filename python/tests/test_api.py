@@ -191,6 +191,29 @@ def test_bad_arrays_raise_value_error(points, message):
         ln.Chain.from_toml(RAIN).apply(points)
 
 
+def test_a_c_ordered_float32_array_gives_what_its_columns_give():
+    """A C-ordered float32 (N, 4) or (N, 5) array is read whole, row by row; every other
+    layout through its columns. The same points give the same bytes either way, with
+    the weather chain's echoes (the slots depend on every point's ring and position)."""
+    chain = ln.Chain.from_toml(REPO / "configs" / "adverse-weather.toml")
+    for ring in (False, True):
+        pts = scan(3000, seed=5, ring=ring)
+        assert pts.dtype == np.float32 and pts.flags.c_contiguous
+        whole = chain.apply(pts, frame=2)
+        for other in (np.asfortranarray(pts), pts.astype(np.float64), np.hstack([pts, pts])[:, : pts.shape[1]]):
+            assert not (other.dtype == np.float32 and other.flags.c_contiguous)
+            assert whole.tobytes() == chain.apply(other, frame=2).tobytes()
+        a, order_a = ln.points_to_returns(pts)
+        b, order_b = ln.points_to_returns(np.asfortranarray(pts))
+        assert a.tobytes() == b.tobytes() and np.array_equal(order_a, order_b)
+    # The first bad ring is named from the whole array too, after the points before it.
+    pts = scan(100, ring=True)
+    pts[9, 4] = 70000
+    pts[30, 4] = 0.5
+    with pytest.raises(ValueError, match=r"point 9 \(0-based\): ring 70000 is out of range"):
+        chain.apply(pts)
+
+
 def test_nan_and_bad_rings_name_the_point():
     chain = ln.Chain.from_toml(RAIN)
     pts = scan(100)

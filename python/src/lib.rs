@@ -213,6 +213,24 @@ fn ring_of(i: usize, v: f32) -> PyResult<u16> {
     u16::try_from(k).map_err(|_| out_of_range())
 }
 
+/// A float ring as a `u16`, and whether it is a ring: exactly when the saturating cast
+/// gives it back (a whole number from 0 to 65535; NaN casts to 0). The points are built
+/// with it, without a branch, and only a column with a bad ring is searched again
+/// ([`first_bad_ring`]): a checking pass of its own was half of the conversion.
+#[inline(always)]
+fn cast_ring(v: f32) -> (u16, bool) {
+    let ring = v as u16;
+    (ring, f32::from(ring) == v)
+}
+
+/// The error [`ring_of`] gives the first of `rings` that is not a ring, if any.
+fn first_bad_ring(rings: impl Iterator<Item = f32>) -> PyResult<()> {
+    match rings.enumerate().find_map(|(i, v)| ring_of(i, v).err()) {
+        Some(e) => Err(e),
+        None => Ok(()),
+    }
+}
+
 /// Plain points (x y z intensity, optional ring and time) of a column dictionary.
 fn cloud_points_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<CloudPoint>> {
     if let Some(rows) = cols.get_item("rows")? {
@@ -255,20 +273,14 @@ fn cloud_points_of(cols: &Bound<'_, PyDict>) -> PyResult<Vec<CloudPoint>> {
         None => xyzi.for_each(|&x, &y, &z, &i| out.push(point(x, y, z, i, None))),
         Some(RingColumn::Float(r)) => {
             let r = r.as_array();
-            // Checked as the points are built, without a branch: a ring is valid exactly
-            // when the saturating cast gives it back (a whole number from 0 to 65535; NaN
-            // casts to 0). Only when one is not is the column searched for the first,
-            // which `ring_of` names (a pass of its own was half of this conversion).
             let mut valid = true;
             xyzi.and(&r).for_each(|&x, &y, &z, &i, &r| {
-                let ring = r as u16;
-                valid &= f32::from(ring) == r;
+                let (ring, ok) = cast_ring(r);
+                valid &= ok;
                 out.push(point(x, y, z, i, Some(ring)));
             });
             if !valid {
-                if let Some(e) = r.iter().enumerate().find_map(|(i, &v)| ring_of(i, v).err()) {
-                    return Err(e);
-                }
+                first_bad_ring(r.iter().copied())?;
             }
         }
         Some(RingColumn::Int(r)) => {
@@ -316,22 +328,17 @@ fn cloud_points_of_rows(rows: &Bound<'_, PyAny>) -> PyResult<Vec<CloudPoint>> {
     match width {
         4 => Ok(flat.chunks_exact(4).map(|r| point(r, None)).collect()),
         5 => {
-            // As for a ring column (`cloud_points_of`): checked as the points are built,
-            // the first bad ring named only when there is one.
             let mut valid = true;
             let out = flat
                 .chunks_exact(5)
                 .map(|r| {
-                    let ring = r[4] as u16;
-                    valid &= f32::from(ring) == r[4];
+                    let (ring, ok) = cast_ring(r[4]);
+                    valid &= ok;
                     point(r, Some(ring))
                 })
                 .collect();
             if !valid {
-                let rings = flat.chunks_exact(5).map(|r| r[4]);
-                if let Some(e) = rings.enumerate().find_map(|(i, v)| ring_of(i, v).err()) {
-                    return Err(e);
-                }
+                first_bad_ring(flat.chunks_exact(5).map(|r| r[4]))?;
             }
             Ok(out)
         }
@@ -478,10 +485,9 @@ impl RecordLayout {
     }
 
     /// The records of `rows` (indices into the noisy frame), written straight into the
-    /// bytes numpy will view as the structured array (no column copies).
-    /// Each row's return is as `run --keep-dropped` writes it: noisy where the sensor
-    /// reports it (what `survivors` gives for it), as recorded where it was dropped;
-    /// built per row ([`NoisyFrame::reported`]), not from the survivors collected first.
+    /// bytes numpy will view as the structured array (no column copies). Each row's
+    /// return is as `run --keep-dropped` writes it ([`NoisyFrame::reported`]), built per
+    /// row rather than from the survivors collected first.
     fn records(&self, noisy: &NoisyFrame, rows: &[u32]) -> Vec<u8> {
         let reported = noisy.reported();
         let mut buf = vec![0u8; rows.len() * self.itemsize];

@@ -68,17 +68,31 @@ fn a_scan_gives_the_same_fates_as_the_capture_frame_it_came_from() {
         let c = format!("configs/{config}.toml");
         let out = dir.path().join(format!("cloud-{config}"));
         let cap = dir.path().join(format!("cap-{config}"));
+        // The threshold detection: the probabilistic one draws per frame, and the scan
+        // runs as frame 0 where the capture's frame is frame 1 (other streams).
+        let threshold = "detection.model=\"threshold\"";
         bin2()
             .args(["--quiet", "run"])
             .arg(&scan)
-            .args(["-c", &c, "--rotation-hz", "10", "--no-ply", "-o"])
+            .args([
+                "-c",
+                &c,
+                "--set",
+                threshold,
+                "--rotation-hz",
+                "10",
+                "--no-ply",
+                "-o",
+            ])
             .arg(&out)
             .assert()
             .success();
         bin2()
             .args(["--quiet", "run"])
             .arg(crossroad())
-            .args(["--frames", "1", "-c", &c, "--no-ply", "-o"])
+            .args([
+                "--frames", "1", "-c", &c, "--set", threshold, "--no-ply", "-o",
+            ])
             .arg(&cap)
             .assert()
             .success();
@@ -97,10 +111,12 @@ fn a_scan_gives_the_same_fates_as_the_capture_frame_it_came_from() {
     }
 }
 
-/// Fog at 300 m without range noise: every empty firing slot gets a fog echo and no draw
-/// decides anything, so its counts follow from where the points were placed alone (a
-/// scan runs as frame 0, the capture's frame is frame 1: their random streams differ).
-const FOG: &str = "seed = 42\n[[noise]]\ntype = \"fog\"\nvisibility_m = 300.0\n";
+/// Fog at 300 m with the optics before issue 50 (20 ns pulse, 25 mm apertures, 5 mrad
+/// field) and the threshold detection, without range noise: every empty firing slot gets
+/// a fog echo and no draw decides anything, so its counts follow from where the points
+/// were placed alone (a scan runs as frame 0, the capture's frame is frame 1: their
+/// random streams differ).
+const FOG: &str = "seed = 42\n[[noise]]\ntype = \"fog\"\nvisibility_m = 300.0\ntau_h_ns = 20\ntx_aperture_mm = 25\nrx_aperture_mm = 25\nrx_fov_mrad = 5\n[detection]\nmodel = \"threshold\"\n";
 
 #[test]
 fn a_scan_with_times_is_placed_by_them() {
@@ -322,9 +338,13 @@ fn a_scan_is_written_back_in_its_own_format_in_input_order_with_its_fates() {
         .as_u64()
         .unwrap();
     assert_eq!(written.len() as u64, kept);
-    assert!(
-        written.len() < input.len(),
-        "clear.toml drops the weakest returns"
+    // Clear air keeps every recorded return but those under the minimum range (issue 50:
+    // detection applies to what the stages change).
+    let dropped = &totals(&out.join("s/summary.json"))["dropped"];
+    assert_eq!(dropped["below_power"], 0);
+    assert_eq!(
+        written.len() as u64 + dropped["below_min_range"].as_u64().unwrap(),
+        input.len() as u64
     );
     // No noise in clear.toml: every kept point is its input point, bit for bit, and the
     // points keep the input's order.

@@ -94,15 +94,15 @@ fn overlap_by_count(b: &Biaxial, r: f64) -> f64 {
 #[test]
 fn biaxial_overlap_is_the_share_of_the_beam_the_receiver_sees() {
     let b = hdl32e();
-    for r in [0.5, 1.3, 2.0, 4.0, 7.0, 12.0, 20.0, 30.0, 34.0, 40.0, 100.0] {
+    for r in [0.5, 2.0, 2.8, 4.0, 7.0, 12.0, 20.0, 40.0, 70.0, 74.0, 100.0] {
         let want = overlap_by_count(&b, r);
         let got = b.overlap(r);
         assert!((got - want).abs() < 2e-3, "r {r}: {got} vs {want}");
     }
     // R1 and R2 by hand: the field touches the beam when w_t + w_r = d and contains it
-    // when w_r - w_t = d: with d = 30 mm, apertures 25 mm, divergence 3.3 mrad and FOV
-    // 5 mrad, R1 = 5 mm / (1.65 + 2.5) mrad = 1.205 m, R2 = 30 mm / 0.85 mrad = 35.3 m.
-    let (r1, r2) = (0.005 / (0.00165 + 0.0025), 0.030 / (0.0025 - 0.00165));
+    // when w_r - w_t = d: with d = 30 mm, apertures 20 mm, divergence 3.3 mrad and FOV
+    // 4.1 mrad, R1 = 10 mm / (1.65 + 2.05) mrad = 2.70 m, R2 = 30 mm / 0.4 mrad = 75 m.
+    let (r1, r2) = (0.010 / (0.00165 + 0.00205), 0.030 / (0.00205 - 0.00165));
     assert!((b.start_m() / r1 - 1.0).abs() < 1e-5, "{}", b.start_m());
     assert!((b.full_m() / r2 - 1.0).abs() < 1e-5, "{}", b.full_m());
     assert_eq!(b.overlap(r1 * 0.999), 0.0);
@@ -246,10 +246,17 @@ fn no_fog_echo_in_clear_air_on_the_shared_capture() {
     let Some(path) = common::shared("hdl32e/monterey.pcap") else {
         return;
     };
-    // Frames 2-4 (148,546 returns), as in the issue.
+    // Frames 2-4 (148,551 recorded returns), as in the issue: clear air keeps every one
+    // but those under the minimum range (issue 50).
     let frames = frames_of(&path, 2..5);
     assert_eq!(frames.len(), 3);
-    assert_eq!(detected(&frames), 148_546);
+    let recorded: usize = frames.iter().map(|f| f.returns.len()).sum();
+    let near: usize = frames
+        .iter()
+        .map(|f| f.returns.iter().filter(|r| r.range < 0.9).count())
+        .sum();
+    assert_eq!(recorded, 148_551);
+    assert_eq!(detected(&frames), recorded - near);
     for v in ["inf", "10000"] {
         assert_eq!(
             fog_echoes(&clear_plus(&fog_stage(v, "")), &frames),
@@ -333,4 +340,134 @@ fn measure_the_shared_capture() {
     }
     let doc = serde_json::json!({"recorded": recorded, "returns": returns, "fog_extra_options": extra, "runs": rows});
     println!("{}", serde_json::to_string_pretty(&doc).unwrap());
+}
+
+/// What the fog echoes of `frames` under `text` look like: (echoes a frame, their ranges
+/// sorted, their intensity bytes sorted, kept returns at 20-30 and 30-40 m).
+fn fog_profile(text: &str, frames: &[Frame]) -> (f64, Vec<f32>, Vec<u8>, [usize; 2]) {
+    let chain = NoiseChain::new(&common::config(text));
+    let (mut ranges, mut bytes, mut bands) = (Vec::new(), Vec::new(), [0usize; 2]);
+    for f in frames {
+        let out = chain.process(f);
+        for i in 0..out.len() {
+            let fate = out.fate[i];
+            if matches!(fate, Fate::Replaced | Fate::Added) {
+                ranges.push(out.range[i]);
+                bytes.push(out.noisy_return(i).intensity);
+            } else if fate == Fate::Kept {
+                let r = out.range[i];
+                if (20.0..30.0).contains(&r) {
+                    bands[0] += 1;
+                } else if (30.0..40.0).contains(&r) {
+                    bands[1] += 1;
+                }
+            }
+        }
+    }
+    ranges.sort_by(f32::total_cmp);
+    bytes.sort_unstable();
+    (
+        ranges.len() as f64 / frames.len() as f64,
+        ranges,
+        bytes,
+        bands,
+    )
+}
+
+fn quantile<T: Copy>(v: &[T], q: f64) -> T {
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+/// Issue 50: at V = 90 m a fog echo is a chance per beam, not every free slot: a few
+/// dozen to a few hundred echoes a frame, spread in range beyond the overlap's start
+/// (none within 3 m, as a real HDL-32E in fog shows in its open sectors), with small
+/// non-zero intensity bytes. On the fixtures within a factor of 2 of the issue's band
+/// (20-600 a frame on the shared capture).
+#[test]
+fn fog_at_90_m_is_a_chance_per_beam_on_the_fixtures() {
+    let dir = common::fixtures();
+    let mut frames = frames_of(&dir.join("crossroad.pcap"), 0..2);
+    frames.extend(frames_of(&dir.join("parking.pcap"), 0..2));
+    let (per_frame, ranges, bytes, _) = fog_profile(&clear_plus(&fog_stage("90", "")), &frames);
+    assert!((10.0..=1200.0).contains(&per_frame), "{per_frame} a frame");
+    let (q1, med, q3) = (
+        quantile(&ranges, 0.25),
+        quantile(&ranges, 0.5),
+        quantile(&ranges, 0.75),
+    );
+    assert!(q3 - q1 >= 0.3, "interquartile range {q1}..{q3}");
+    assert!(ranges[0] >= 3.0, "nearest fog echo at {} m", ranges[0]);
+    assert!((3.0..10.0).contains(&med), "median range {med}");
+    let b = quantile(&bytes, 0.5);
+    assert!((1..=6).contains(&b), "median byte {b}");
+    assert!(bytes[0] >= 1, "a reported echo has a non-zero byte");
+}
+
+/// Issue 50 on the shared capture (frames 0-9): fog echoes at V = 90 m within the
+/// issue's band of 20-600 a frame, spread in range (interquartile at least 0.3 m), bytes
+/// of 1-6, none within 3 m; the far tail falls smoothly (kept returns at 30-40 m over
+/// those at 20-30 m at least half the real recording's 0.15).
+#[test]
+fn fog_at_90_m_on_the_shared_capture() {
+    let Some(path) = common::shared("hdl32e/monterey.pcap") else {
+        eprintln!("SKIPPED: ../shared/data is absent");
+        return;
+    };
+    let frames = frames_of(&path, 0..10);
+    let (per_frame, ranges, bytes, bands) = fog_profile(&clear_plus(&fog_stage("90", "")), &frames);
+    eprintln!(
+        "V = 90 m: {per_frame} fog echoes a frame, ranges {:.2}/{:.2}/{:.2} m, bytes median {}, bands {bands:?}",
+        quantile(&ranges, 0.25),
+        quantile(&ranges, 0.5),
+        quantile(&ranges, 0.75),
+        quantile(&bytes, 0.5)
+    );
+    assert!((20.0..=600.0).contains(&per_frame), "{per_frame} a frame");
+    assert!(quantile(&ranges, 0.75) - quantile(&ranges, 0.25) >= 0.3);
+    assert!(ranges[0] >= 3.0, "nearest fog echo at {} m", ranges[0]);
+    assert!((1..=6).contains(&quantile(&bytes, 0.5)));
+    let ratio = bands[1] as f64 / bands[0] as f64;
+    assert!(ratio >= 0.075, "30-40 m over 20-30 m: {ratio} ({bands:?})");
+    // Thinner fog, fewer echoes; none at 10 km.
+    let (at_300, ..) = fog_profile(&clear_plus(&fog_stage("300", "")), &frames);
+    assert!(at_300 < per_frame / 10.0, "{at_300} at 300 m");
+    let (at_10k, ..) = fog_profile(&clear_plus(&fog_stage("10000", "")), &frames);
+    assert_eq!(at_10k, 0.0);
+}
+
+/// Issue 50: the fog's draws are one uniform per recorded return and one per vacant slot,
+/// so a beam that reports an echo at V keeps reporting one as the fog thickens (common
+/// random numbers across a sweep of V): the set of beams with an echo grows.
+#[test]
+fn a_sweep_of_visibility_keeps_each_beam_s_draw() {
+    let dir = common::fixtures();
+    let frames = frames_of(&dir.join("crossroad.pcap"), 0..1);
+    let added = |v: &str| -> Vec<(u32, u8, u32)> {
+        let chain = NoiseChain::new(&common::config(&clear_plus(&fog_stage(
+            v,
+            "empty_slots = true",
+        ))));
+        let out = chain.process(&frames[0]);
+        let mut keys: Vec<_> = (out.clean_len..out.len())
+            .filter(|&i| out.fate[i] == Fate::Added)
+            .map(|i| {
+                let r = &out.clean[i];
+                (r.packet, r.laser, u32::from(r.block))
+            })
+            .collect();
+        keys.sort_unstable();
+        keys
+    };
+    let (thin, thick) = (added("120"), added("70"));
+    assert!(
+        !thin.is_empty() && thick.len() > thin.len(),
+        "{} {}",
+        thin.len(),
+        thick.len()
+    );
+    let missing = thin
+        .iter()
+        .filter(|k| thick.binary_search(k).is_err())
+        .count();
+    assert_eq!(missing, 0, "beams with an echo at 120 m lost it at 70 m");
 }

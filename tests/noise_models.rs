@@ -30,8 +30,16 @@ fn frame(index: u32, returns: Vec<Return>) -> Frame {
     }
 }
 
+/// The configuration of `text` with the reference study's deterministic detection
+/// threshold (as configs/paper.toml has it), which the models tested here are stated
+/// against, unless `text` says how to detect.
 fn config(text: &str) -> Config {
-    Config::from_toml_str(text, Path::new("test.toml"), &[], None)
+    let text = if text.contains("[detection]") {
+        text.to_string()
+    } else {
+        format!("{text}\n[detection]\nmodel = \"threshold\"\n")
+    };
+    Config::from_toml_str(&text, Path::new("test.toml"), &[], None)
         .unwrap_or_else(|e| panic!("config should load: {e}"))
         .0
 }

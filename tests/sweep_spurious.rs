@@ -70,8 +70,10 @@ fn a_spoofed_object_is_a_false_cluster_and_no_detection() {
         assert_eq!(num(r, "objects"), num(o, "objects"));
         assert_eq!(num(r, "detected"), num(o, "detected"));
         assert_eq!(num(r, "retained"), num(o, "retained"));
-        // Its points are reported (kept counts every reported return).
-        assert!(num(r, "kept") > num(o, "kept"));
+        // Its points are reported (kept counts every reported return): in place of
+        // recorded returns behind them (clear air keeps every recorded return, so the
+        // count does not fall) or in empty slots.
+        assert!(num(r, "kept") >= num(o, "kept"));
     }
 }
 

@@ -94,6 +94,12 @@ fn reference_echo(v: f64, r0: f64, r1: f64, r2: f64, tau_h: f64, kappa: f64) -> 
     (best.0 - C * tau_h / 2.0, best.1)
 }
 
+/// The fog optics before issue 50: a pulse of 20 ns (Hahner's), 25 mm apertures and a
+/// 5 mrad receiver field (the central estimates; the calibrated defaults are 4 ns, 20 mm
+/// and 4.1 mrad), for tests of the noiseless echo (`[detection] model = "threshold"`).
+const OLD_OPTICS: &str =
+    "tau_h_ns = 20\ntx_aperture_mm = 25\nrx_aperture_mm = 25\nrx_fov_mrad = 5\n";
+
 fn ideal() -> IdealPower {
     let c = config("seed = 1\n");
     IdealPower::new(&c.power, &c.sensor, &c.detection)
@@ -165,12 +171,18 @@ fn fog_echo_power_follows_the_paper_integral_within_1_percent() {
         );
     }
     // The echo power is proportional to beta = beta_r / V.
+    // The optics before issue 50 (pulse of 20 ns, 25 mm apertures, a 5 mrad field),
+    // whose noiseless peak reaches the threshold at 100 m (the calibrated ones never do:
+    // their echoes are the receiver's noise's, tests/fog_calibration.rs).
     let one = proposals(
-        &stage("fog", "visibility_m = 100"),
+        &stage("fog", &format!("visibility_m = 100\n{OLD_OPTICS}")),
         vec![ret(0, 50.0, 0, 0, ReturnKind::Strongest)],
     );
     let three = proposals(
-        &stage("fog", "visibility_m = 100\nbeta_r = 0.138"),
+        &stage(
+            "fog",
+            &format!("visibility_m = 100\nbeta_r = 0.138\n{OLD_OPTICS}"),
+        ),
         vec![ret(0, 50.0, 0, 0, ReturnKind::Strongest)],
     );
     assert!((three.proposals()[0].echo.power / one.proposals()[0].echo.power - 3.0).abs() < 1e-12);
@@ -224,18 +236,29 @@ fn strongest_return_keeps_a_strong_near_target_and_replaces_a_weak_far_one() {
 
 #[test]
 fn fog_fills_empty_slots_and_occluded_beams_get_no_echo() {
+    // The threshold detection (noiseless): the echo is detectable in every free slot.
+    // Under the receiver's noise it is a chance per beam (tests/fog_calibration.rs).
+    // With the optics before issue 50 (`OLD_OPTICS`) the noiseless peak is detectable.
+    let threshold = "[detection]\nmodel = \"threshold\"\n";
+    let fog = format!("visibility_m = 100\n{OLD_OPTICS}");
     let f = turn(3);
-    let out = run(&stage("fog", "visibility_m = 100"), &f);
+    let out = run(&format!("{}{threshold}", stage("fog", &fog)), &f);
     let added = out.fate.iter().filter(|x| **x == Fate::Added).count();
     // Every 7th slot of 1800 x 32 is empty.
     let empty = (0..1800 * 32u32).filter(|k| k % 7 == 3).count();
     assert_eq!(added, empty);
     assert_eq!(out.len(), f.returns.len() + added);
-    let off = run(&stage("fog", "visibility_m = 100\nempty_slots = false"), &f);
+    let off = run(
+        &format!(
+            "{}{threshold}",
+            stage("fog", &format!("{fog}empty_slots = false"))
+        ),
+        &f,
+    );
     assert_eq!(off.len(), f.returns.len());
     // Occlusion removes the beams of laser 5: none of its slots reports fog.
     let occ = run(
-        "seed = 5\n[[noise]]\ntype = \"occlusion\"\nlasers = [5]\n[[noise]]\ntype = \"fog\"\nvisibility_m = 100\n",
+        &format!("seed = 5\n[[noise]]\ntype = \"occlusion\"\nlasers = [5]\n[[noise]]\ntype = \"fog\"\n{fog}{threshold}"),
         &f,
     );
     for i in 0..occ.len() {
@@ -514,14 +537,18 @@ fn fog_range_noise_follows_hahner_v1() {
     let returns: Vec<Return> = (0..3000u32)
         .map(|k| ret((k % 32) as u8, r0 as f32, 0, k / 32, ReturnKind::Strongest))
         .collect();
+    // The optics before issue 50, whose noiseless peak is detectable at 100 m.
     let plain = proposals(
-        &stage("fog", "visibility_m = 100\nempty_slots = false"),
+        &stage(
+            "fog",
+            &format!("visibility_m = 100\nempty_slots = false\n{OLD_OPTICS}"),
+        ),
         returns.clone(),
     );
     let noisy = proposals(
         &stage(
             "fog",
-            &format!("visibility_m = 100\nempty_slots = false\nrange_noise_m = {n}"),
+            &format!("visibility_m = 100\nempty_slots = false\nrange_noise_m = {n}\n{OLD_OPTICS}"),
         ),
         returns,
     );

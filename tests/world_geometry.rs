@@ -238,7 +238,15 @@ fn separate_echoes_follow_the_strongest_rule() {
 #[test]
 fn dual_captures_report_the_second_surface_as_a_second_echo() {
     let f = bands(5.0, 8.0, true);
-    let out = run(&stage("multipath", "probability = 1"), &f);
+    // The threshold detection: a mixed pixel's shares are reported when at or above it
+    // (under the receiver's noise a weakened share is kept with a probability).
+    let out = run(
+        &format!(
+            "{}[detection]\nmodel = \"threshold\"\n",
+            stage("multipath", "probability = 1")
+        ),
+        &f,
+    );
     let thr = out.threshold;
     let (mut two, mut edges) = (0, 0);
     for i in (0..f.returns.len()).step_by(2) {

@@ -12,6 +12,9 @@
 #            /work/refs/venv/bin/pip install numpy 'scipy<1.14' tqdm
 #   LISA_SAMPLE  points LISA's per-point Monte Carlo runs on (default 0 = all; N = a subset
 #            of N drawn with seed 1; its per-point Python loop takes about 0.3 ms a point)
+# LISA runs twice: as published ("lisa") and with this tool's finite HDL-32E optics swapped
+# in by run_lisa.py --optics hdl32e ("lisa_matched": exit aperture, receiver overlap; see
+# that script's docstring), on the same points, sample and seed.
 # Nothing of the references is copied into the project: they are extracted to a temporary
 # directory outside it and imported from there. LISA's Mie library is rebuilt there from
 # its mie.c with its own Makefile (falls back to the shipped mie.so if that fails).
@@ -58,18 +61,27 @@ plys=("$tmp"/points/*.ply)
 
 fog_cmd="$py scripts/references/run_hahner_fog.py FOG_SIM_TREE POINTS/*.ply"
 lisa_cmd="$py scripts/references/run_lisa.py LISA_TREE POINTS/*.ply --rates 1,7.29,25 --snow-rates 1 --sample $sample --seed 1"
+matched_cmd="$lisa_cmd --optics hdl32e"
 start=$(date +%s)
 "$py" scripts/references/run_hahner_fog.py "$tmp/fog" "${plys[@]}" > "$tmp/fog.json"
 mid=$(date +%s)
 "$py" scripts/references/run_lisa.py "$tmp/lisa" "${plys[@]}" --rates 1,7.29,25 \
   --snow-rates 1 --sample "$sample" --seed 1 > "$tmp/lisa.json"
 end=$(date +%s)
+"$py" scripts/references/run_lisa.py "$tmp/lisa" "${plys[@]}" --rates 1,7.29,25 \
+  --snow-rates 1 --sample "$sample" --seed 1 --optics hdl32e > "$tmp/lisa_matched.json"
+matched_end=$(date +%s)
+# The real recording's figures (scripts/references/measure_radiate_fog.py, run by hand on
+# data kept outside the project) are carried over from the file as it was.
+cp docs/fidelity/references.json "$tmp/old.json" 2>/dev/null || echo '{}' > "$tmp/old.json"
 
 "$py" - "$tmp" "$fog_commit" "$lisa_commit" "$mie" "$fog_cmd" "$lisa_cmd" \
-  $((mid - start)) $((end - mid)) "$invocation" <<'PY' > docs/fidelity/references.json
+  $((mid - start)) $((end - mid)) "$invocation" "$matched_cmd" $((matched_end - end)) \
+  <<'PY' > docs/fidelity/references.json
 import datetime, json, platform, sys
 import numpy, scipy
-tmp, fog_commit, lisa_commit, mie, fog_cmd, lisa_cmd, fog_s, lisa_s, invocation = sys.argv[1:]
+(tmp, fog_commit, lisa_commit, mie, fog_cmd, lisa_cmd, fog_s, lisa_s, invocation, matched_cmd,
+ matched_s) = sys.argv[1:]
 points = ("frames 2..4 of ../shared/data/hdl32e/monterey.pcap decoded by "
           "`lidar-noise convert ../shared/data/hdl32e/monterey.pcap --frames 2..4 -o POINTS`")
 doc = {
@@ -88,8 +100,16 @@ doc = {
         "mie_library": mie + " (pylisa/mie.c via its Makefile)" if mie == "rebuilt"
         else "shipped pylisa/mie.so", "command": lisa_cmd, "wall_seconds": int(lisa_s),
         **json.load(open(tmp + "/lisa.json"))},
+    "lisa_matched": {
+        "repository": "https://github.com/velatkilic/LISA", "commit": lisa_commit,
+        "mie_library": mie + " (pylisa/mie.c via its Makefile)" if mie == "rebuilt"
+        else "shipped pylisa/mie.so", "command": matched_cmd, "wall_seconds": int(matched_s),
+        **json.load(open(tmp + "/lisa_matched.json"))},
 }
+old = json.load(open(tmp + "/old.json"))
+if "radiate_fog" in old:
+    doc["radiate_fog"] = old["radiate_fog"]
 json.dump(doc, sys.stdout, indent=1)
 print()
 PY
-echo "wrote docs/fidelity/references.json (Hahner ${fog_commit:0:10}: $((mid - start)) s, LISA ${lisa_commit:0:10}: $((end - mid)) s)"
+echo "wrote docs/fidelity/references.json (Hahner ${fog_commit:0:10}: $((mid - start)) s, LISA ${lisa_commit:0:10}: $((end - mid)) s, matched optics $((matched_end - end)) s)"

@@ -88,6 +88,32 @@ pub struct DetectionConfig {
     pub min_power: f64,
     /// Minimum range in metres (0 disables the filter).
     pub min_range_m: f64,
+    /// How detection is decided.
+    pub model: DetectionModel,
+    /// k: the threshold over the thermal and ambient noise's standard deviation.
+    pub threshold_snr: f64,
+    /// g: shot-noise variance per unit signal, in threshold units (F / N_T).
+    pub shot_noise: f64,
+}
+
+/// `[detection] model`: how the receiver decides what it reports (`noise::detection`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DetectionModel {
+    /// Power at or above `min_power` (the reference study's deterministic threshold).
+    Threshold,
+    /// A probability of the signal-to-noise ratio (receiver noise model).
+    Probabilistic,
+}
+
+impl DetectionModel {
+    /// The name used in configurations.
+    pub fn name(self) -> &'static str {
+        match self {
+            DetectionModel::Threshold => "threshold",
+            DetectionModel::Probabilistic => "probabilistic",
+        }
+    }
 }
 
 impl Default for SensorConfig {
@@ -114,6 +140,9 @@ impl Default for DetectionConfig {
         DetectionConfig {
             min_power: 0.001,
             min_range_m: 0.9,
+            model: DetectionModel::Probabilistic,
+            threshold_snr: 6.0,
+            shot_noise: 0.05,
         }
     }
 }
@@ -630,6 +659,25 @@ fn read_config(root: &Section<'_>, file: &Path) -> Result<Config> {
                 return Err(d.error("min_range_m", format!("{v} must not be negative")));
             }
             detection.min_range_m = v;
+        }
+        if let Some(m) = d.choice("model", &["threshold", "probabilistic"])? {
+            detection.model = if m == "threshold" {
+                DetectionModel::Threshold
+            } else {
+                DetectionModel::Probabilistic
+            };
+        }
+        if let Some(v) = d.f64("threshold_snr")? {
+            if !(1.0..=100.0).contains(&v) {
+                return Err(d.error("threshold_snr", format!("{v} is outside [1, 100]")));
+            }
+            detection.threshold_snr = v;
+        }
+        if let Some(v) = d.f64("shot_noise")? {
+            if !(0.0..=10.0).contains(&v) {
+                return Err(d.error("shot_noise", format!("{v} is outside [0, 10]")));
+            }
+            detection.shot_noise = v;
         }
         d.finish()?;
     }

@@ -73,7 +73,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::Arc;
 
-pub use detection::apply_detection;
+pub use detection::{apply_detection, decide_recorded, DetectionRule};
 pub use power::{IdealPower, PowerConstants};
 pub use spurious::{DenseEchoes, Echo, SlotId, Slots};
 pub use summary::NoiseSummary;
@@ -176,6 +176,11 @@ pub struct NoisyFrame {
     pub lasers: usize,
     /// The ideal-power model, for the intensity of spurious echoes.
     pub power_model: Option<Arc<IdealPower>>,
+    /// The detection rule (`None`: the threshold, as for frames built outside a chain).
+    pub detection: Option<Arc<detection::DetectionRule>>,
+    /// True once [`detection::decide_recorded`] has decided the recorded returns: those
+    /// still alive count as detected whatever their power.
+    pub decided: bool,
     /// Per-return state that only sensor stages change; `None` until one does, so that a
     /// chain without them (or with them at zero magnitude) writes the same bytes.
     pub moved: Moved,
@@ -586,6 +591,8 @@ impl NoisyFrame {
             slots: None,
             lasers: spurious::DEFAULT_LASERS,
             power_model: None,
+            detection: None,
+            decided: false,
             moved: Moved::default(),
             layout,
         }
@@ -616,6 +623,18 @@ impl NoisyFrame {
     #[inline]
     pub fn detectable(&self, range: f32, power: f64) -> bool {
         power >= self.threshold && f64::from(range) >= self.min_range
+    }
+
+    /// True if return `i` is alive and the sensor detects it: a recorded return already
+    /// decided by the probabilistic rule ([`NoisyFrame::decided`]) by its range alone,
+    /// any other by [`NoisyFrame::detectable`].
+    #[inline]
+    pub fn return_detectable(&self, i: usize) -> bool {
+        let fate = self.fate[i];
+        let settled = self.decided & (i < self.clean_len) & (fate == Fate::Kept);
+        fate.is_alive()
+            & (f64::from(self.range[i]) >= self.min_range)
+            & (settled | (self.power[i] >= self.threshold))
     }
 
     /// The intensity rule (module documentation, "Intensity"): every kept return reports
@@ -1095,6 +1114,8 @@ pub struct NoiseChain {
     stages: Vec<Arc<dyn NoiseStage>>,
     tags: Vec<u32>,
     detection: crate::config::DetectionConfig,
+    /// The detection rule with its table, shared by every frame.
+    rule: Arc<DetectionRule>,
     /// Some stage reads the frame's layout.
     layout: bool,
     /// True when a stage may propose echoes: the firing slots are built as the frame
@@ -1129,6 +1150,7 @@ impl NoiseChain {
             stages,
             tags,
             detection: config.detection.clone(),
+            rule: Arc::new(DetectionRule::new(&config.detection)),
             lasers: spurious::DEFAULT_LASERS,
         }
     }
@@ -1228,6 +1250,7 @@ impl NoiseChain {
         noisy.threshold = self.detection.min_power;
         noisy.min_range = self.detection.min_range_m;
         noisy.power_model = Some(Arc::clone(&self.power));
+        noisy.detection = Some(Arc::clone(&self.rule));
         // The ideal powers, for the intensity rule after the chain (no stage, no change).
         let ideal = if self.stages.is_empty() {
             Vec::new()
@@ -1240,7 +1263,11 @@ impl NoiseChain {
             let mut rng = stage_rng(self.seed, index, tag);
             stage.apply(&mut noisy, &mut rng);
         }
-        // Every stage's echoes compete once, per firing slot, with the return-mode rule.
+        // The recorded returns the receiver still detects (probabilistic model), then
+        // every stage's echoes compete once, per firing slot, with the return-mode rule.
+        // Without stages nothing changed: every recorded return is kept (no draw).
+        let mut rng = stage_rng(self.seed, index, detection::DETECTION_TAG);
+        decide_recorded(&mut noisy, &ideal, self.detection.min_power, &mut rng);
         spurious::resolve(&mut noisy);
         apply_detection(&mut noisy, &self.detection);
         if !self.stages.is_empty() {

@@ -656,7 +656,7 @@ impl NoisyFrame {
     fn echo_intensity(&self, echo: &Echo) -> u8 {
         self.power_model
             .as_ref()
-            .map_or(0, |m| m.intensity_of(echo.power, echo.range))
+            .map_or(0, |m| m.echo_intensity(echo.power, echo.range))
     }
 
     /// [`NoisyFrame::replace`] of every recorded return `i` in `which` by `echo[i]`.
@@ -683,7 +683,7 @@ impl NoisyFrame {
             power[i] = e.power;
             fate[i] = Fate::Replaced;
             causes[i] = cause;
-            intensity[i] = model.map_or(0, |m| m.intensity_of(e.power, e.range));
+            intensity[i] = model.map_or(0, |m| m.echo_intensity(e.power, e.range));
         }
     }
 
@@ -780,6 +780,9 @@ pub fn resolve(frame: &mut NoisyFrame) {
         if let Some(d) = &dense {
             let (threshold, min_range) = (frame.threshold, frame.min_range);
             let detectable = |r: f32, p: f64| p >= threshold && f64::from(r) >= min_range;
+            // Recorded returns the probabilistic rule decided pass the power test.
+            let decided = if frame.decided { frame.clean_len } else { 0 };
+            let settled = |i: usize, f: Fate| (i < decided) & (f == Fate::Kept);
             let (range, power, fate) = (&frame.range, &frame.power, &frame.fate);
             // Branch-free for the usual slot (whether an echo wins is a coin toss to the
             // branch predictor): every return is written, the count moves on a win.
@@ -791,7 +794,15 @@ pub fn resolve(frame: &mut NoisyFrame) {
                 let usual = *b == NONE && slots.occupants[slot as usize] == [i as u32, NONE];
                 if usual || !ok {
                     let f = fate[i];
-                    let alive = f.is_alive() & detectable(range[i], power[i]);
+                    let alive = f.is_alive()
+                        & detectable(
+                            range[i],
+                            if settled(i, f) {
+                                f64::INFINITY
+                            } else {
+                                power[i]
+                            },
+                        );
                     let better = if last {
                         e.range > range[i]
                     } else {
@@ -839,8 +850,7 @@ pub fn resolve(frame: &mut NoisyFrame) {
                     if frame.fate[i] == Fate::Occluded {
                         continue;
                     }
-                    let alive = frame.fate[i].is_alive()
-                        && frame.detectable(frame.range[i], frame.power[i]);
+                    let alive = frame.return_detectable(i);
                     let wins = !alive
                         || if last {
                             c.echo.range > frame.range[i]
@@ -954,7 +964,7 @@ fn resolve_slot(
         if frame.fate[i] == Fate::Occluded || !frame.detectable(c.echo.range, c.echo.power) {
             return;
         }
-        let alive = frame.fate[i].is_alive() && frame.detectable(frame.range[i], frame.power[i]);
+        let alive = frame.return_detectable(i);
         let wins = !alive
             || match slots.mode {
                 SlotMode::Last => c.echo.range > frame.range[i],
@@ -1009,7 +1019,7 @@ fn resolve_slot(
         let same = contenders
             .iter()
             .any(|c| c.range == range && c.power == power);
-        if frame.fate[i].is_alive() && frame.detectable(range, power) && !same {
+        if frame.return_detectable(i) && !same {
             contenders.push(Contender {
                 range,
                 power,

@@ -250,7 +250,8 @@ pub fn firing_return(
 pub fn echo_byte(power: f64, range: f32) -> u8 {
     let q = f64::from(range) / 100.0;
     let rho = (power / 1e-3 * 0.1 * q * q).clamp(0.0, 1.0);
-    (rho * 100.0).round() as u8
+    // A reported echo crossed the threshold: its byte is at least 1 (issue 50).
+    ((rho * 100.0).round() as u8).max(1)
 }
 
 /// Writes the classic pcap `src` repeated `n` times, record times shifted so that each

@@ -1,71 +1,107 @@
 //! Other LiDARs (p-diagram 15): crosstalk, pulses of another sensor timed as echoes.
 //!
-//! Model A (`model = "benchmark"`, the default; pdiagram-models.md 15, the benchmarks'
-//! corruption): a fraction p_x of the returns whose azimuth lies in the chosen sectors get
-//! a false echo at R' = R + s_x z, z standard normal, proposed in the return's firing slot
-//! with the interferer's received power P_x; the sensor's return logic then decides
-//! whether the false echo is reported (it replaces the return in strongest mode when P_x
-//! is higher, in last mode when R' is farther; see `noise::spurious`).
+//! Model I (`model = "interferer"`, the default; issue 50): a modelled interfering
+//! sensor. Another pulsed LiDAR (an HDL-32E unless told otherwise) fires N_i pulses a
+//! second (`interferer_rate_hz`; the HDL-32E fires 32 lasers every 46.08 us, its
+//! manual's firing timing, N_i = 694,444 /s) with pulse power r times ours
+//! (`interferer_power`, 1), at distance d (`interferer_distance_m`, 20 m: a car in the
+//! next lane or ahead). Its clock is not ours, so its pulses arrive at uniformly random
+//! times. One of our detectors listens T_w = 2 R_max / c after its laser fires (R_max =
+//! `max_range_m`, 100 m, the datasheet range: T_w = 0.667 us), during which the
+//! interferer fires N_i T_w pulses (0.463) on average; a fraction c_x (`coupling`) of the
+//! interferer's pulses reaches a given detector of ours strongly enough to trigger it
+//! (directly or off a surface in its field). The interferer's pulses therefore reach a
+//! firing slot as a Poisson process with mean lambda = N_i T_w c_x, and a slot gets a
+//! false echo with probability q_x = 1 - exp(-lambda) (a second pulse in the same
+//! window, probability lambda^2 / 2 ~ 5e-7, is not modelled). The echo's range is
+//! uniform over the window, R' ~ U(minimum range, R_max), whatever the slot's return.
+//! Its power is its own, from one of two paths:
+//! - direct (share 10/11): the interferer's pulse straight into our aperture, spread over
+//!   its spot: P_d = min(1, r kappa pi / (theta_w theta_h d^2)) with the HDL-32E's spot
+//!   (manual, appendix D: about 4 x 2 inches at 100 feet, theta_w = 3.33 mrad, theta_h =
+//!   1.67 mrad) and kappa the power model's constant (`noise::power`: a Lambertian target
+//!   of reflectance rho at R returns kappa rho / R^2). That is 1 (saturation) for any d
+//!   under 7.5 km with kappa = 100 m^2: the echo beats every unsaturated return in
+//!   strongest mode, in any slot (sky included: an added return).
+//! - scattered (share 1/11): its pulse diffusely reflected by the surface our detector
+//!   sees (the slot's return, of power P): a Lambertian spot sends the same power into
+//!   our aperture whoever lit it, so the echo gets the share f of the interferer's spot
+//!   that falls inside our receiver's footprint, P_x = r f P with f ~ U(0, 1) (the spot's
+//!   offset uniform over the footprint; its size theta d_s against ours theta R, d_s the
+//!   interferer's distance to the surface, is not tracked). A slot without a return has
+//!   no surface: no scattered echo. Such an echo is weaker than the return on average:
+//!   it is reported mostly in last (or dual) mode, when it lies farther.
+//!
+//! Default coupling and rate, from a measurement. Martins, Neves, Drummond and
+//! Albuquerque ("Impact of Interference on Time-Of-Flight LiDAR", RECPAD 2019; P.
+//! Martins' MSc thesis, University of Aveiro, 2019) put a Velodyne VLP-16 (the victim)
+//! 1 to 12 m from a Hesai Pandar40 (the interferer), optical centres aligned, both at
+//! 600 rpm, and counted the changed voxels against an interference-free model: in the
+//! worst case one measurement in 1000 is interfered (27 points a frame), in the best one
+//! in 100,000; over all the thesis' tests 1e-6 to 1e-3 of the points, with no clear
+//! dependence on the distance, and about ten times more with a line of sight between the
+//! sensors than with it blocked ("direct interference predominates"). They report Kim et
+//! al. (IEEE IV 2015, two 2D scanners) at 0.05 % of the points. We take their worst case
+//! (a sensor with a line of sight, a few metres away, as a neighbouring car's):
+//! c_x = 1e-3 / (N_P T_V) with the Pandar40's 720,000 pulses a second (40 lasers, 0.2
+//! deg at 10 Hz; its datasheet, not checked here) and the VLP-16's window for its 100 m
+//! range (0.667 us): c_x = 2.08e-3. For the default HDL-32E interferer and R_max =
+//! 100 m, lambda = 9.65e-4: q_x = 9.6e-4 of the firing slots in the sectors get a false
+//! echo, 8.8e-4 of them direct (reported in strongest mode) and 8.8e-5 scattered. The
+//! 10:1 split of the two paths is the thesis' "one order of magnitude". The distance d
+//! only sets the direct power (the measurement found no clear trend of the rate with
+//! distance). `fraction` sets q_x directly and overrides the coupling. Before issue 50
+//! the default (model A below with P_x = r P) tied with the return and never won: 0
+//! echoes in strongest mode whatever the rate.
+//!
+//! Model A (`model = "benchmark"`; pdiagram-models.md 15, the benchmarks' corruption): a
+//! fraction p_x (`fraction`, 0.01) of the returns whose azimuth lies in the chosen
+//! sectors get a false echo at R' = R + s_x z, z standard normal (`sigma_m`, 3 m),
+//! proposed in the return's firing slot with power r P (the interferer's reflection off
+//! the return's surface, the upper bound of the scattered path above), or `power`.
 //!
 //! Model B (`model = "physical"`): every firing slot (laser and firing, with a return or
-//! empty) of a firing whose azimuth lies in the sectors (the interferer's direction
-//! +-psi_x) gets, with probability q_x (`fraction`), a false echo at R ~ U(minimum range,
-//! R_max) with power P_x, competing in the same way (an empty slot, e.g. sky, gets an
-//! added return). The doc's q_x = 0.01 and psi_x = 5 deg (`sectors_deg = [[355, 5]]` for
-//! an interferer straight ahead) are engineering assumptions.
+//! empty) of a firing whose azimuth lies in the sectors gets, with probability q_x
+//! (`fraction`, 0.01), a false echo at R ~ U(minimum range, R_max) with the direct power
+//! P_d above (or `power`). The doc's q_x = 0.01 and psi_x = 5 deg (`sectors_deg =
+//! [[355, 5]]` for an interferer straight ahead) are engineering assumptions.
 //!
-//! Deviations, and why:
-//! - The benchmarks (3D_Corruptions_AD `lidar_crosstalk_noise`, Robo3D
-//!   `gen_crosstalk.py`) add N(0, s_x^2) to x, y and z. A sensor reports a point only along
-//!   the beam of its firing (azimuth per firing, elevation per laser), so only the
-//!   component along the beam is kept: for an isotropic Gaussian it is N(0, s_x^2) itself.
-//!   The benchmarks also perturb intensity; the doc says not to, and we do not.
-//! - The benchmarks corrupt exactly round(p_x n) points; here the count is
-//!   Binomial(n, p_x) over the n eligible returns (slots in model B), as if each were hit
-//!   independently with probability p_x. Drawing the count and then that many distinct
-//!   returns (`rand::seq::index::sample`) gives the same distribution as one Bernoulli
-//!   draw per return at the cost of O(p_x n) draws instead of n (the speed target of
-//!   issue 12). Common random numbers across `fraction` values are therefore not kept.
-//! - An echo whose range falls under the minimum range (or below zero) is not detectable
-//!   and loses its slot: the return stays.
+//! In every model the sensor's receiver decides whether a proposed echo is reported
+//! ([`NoisyFrame::detect_echo`], one uniform per echo: with the probabilistic detection
+//! its noisy peak amplitude is its power in the slot's competition), and the slot rule
+//! whether it wins (strongest mode: the higher power; last mode: the farther range;
+//! `noise::spurious`). An echo under the minimum range is not detectable and the return
+//! stays.
 //!
-//! Echo power P_x, from a model of the interfering sensor (issue 29; before it P_x = 1
-//! for every echo, which always won its slot in strongest mode). The interferer is
-//! another HDL-32E unless told otherwise: `interferer_power` = r, its pulse power over
-//! ours (1 for the same model). Powers are in this tool's unit, a fraction of our
-//! emitted power on the kappa scale (`noise::power`: a Lambertian target of reflectance
-//! rho at R returns kappa rho / R^2, kappa = eta A_rx / pi in physical terms, so any
-//! physical ratio to our own echo carries over with the same kappa):
-//! - Model A, reflected: the false echo is the interferer's pulse diffusely reflected by
-//!   the surface our beam sees (it lands near the return's range, as the benchmarks
-//!   place it). A Lambertian spot lit by a pulse of power P_t sends eta A_rx rho P_t /
-//!   (pi R^2) into our aperture whoever fired it; the interferer's spot (its divergence
-//!   times its distance d_i) puts all its power inside our footprint when d_i <= R and a
-//!   share (R / d_i)^2 of it otherwise, so P_x = r min(1, (R / d_i)^2) P <= r P, with P
-//!   the return's current power (same surface, same path back to us). We take the upper
-//!   bound P_x = r P (interferer at most as far from the surface as we are). Consequence:
-//!   an equal interferer's reflection ties with the true echo and never replaces it in
-//!   strongest mode (ties go to the recorded return); in last and dual mode the farther
-//!   echoes are reported. Source: the Lambertian lidar equation (e.g. Jelalian, Laser
-//!   Radar Systems, 1992, ch. 1), as `noise::power`.
-//! - Model B, direct: the interferer's pulse reaches our aperture straight from its
-//!   emitter, at distance d (`interferer_distance_m`), spread over its spot. The HDL-32E
-//!   manual (appendix D, "Laser Spot Size") gives a rectangular spot of about 4 x 2
-//!   inches at 100 feet: full divergences theta_w = 0.1016 / 30.48 = 3.33 mrad and
-//!   theta_h = 1.67 mrad. The aperture receives P_t A_rx / (theta_w theta_h d^2) against
-//!   eta A_rx rho P_t / (pi R^2) from our own echo, so in our unit
-//!   P_x = min(1, r kappa pi / (theta_w theta_h d^2)): with kappa = 100 m^2 that is 1
-//!   (saturation) for any d under 7.5 km, the value the stage used before, now derived.
-//! - `power` sets P_x directly (both models) and overrides the two.
+//! Deviations from the benchmarks (model A), and why:
+//! - 3D_Corruptions_AD `lidar_crosstalk_noise` and Robo3D `gen_crosstalk.py` add
+//!   N(0, s_x^2) to x, y and z. A sensor reports a point only along the beam of its
+//!   firing, so only the component along the beam is kept: for an isotropic Gaussian it
+//!   is N(0, s_x^2) itself. They also perturb intensity; the doc says not to, and we do
+//!   not.
+//! - They corrupt exactly round(p_x n) points; here the count is Binomial(n, p_x) over
+//!   the n eligible returns (slots in model B), as if each were hit independently.
 //!
-//! Defaults: p_x = 0.01 (the benchmarks' 0.4-2 %), s_x = 3 m (both benchmarks), the
-//! whole turn, r = 1 (another HDL-32E), d = 20 m (a car in the next lane, model B).
+//! Draw pattern (every draw from the stage's stream, in this order, so streams stay
+//! aligned across a sweep of the stage's strength where the model allows):
+//! - Model I: the n slots of the firings in the sectors (firing order, laser order within
+//!   a firing) are walked by geometric gaps, as `particles.rs` walks beams: one uniform
+//!   per gap (the last one overshoots n), then three per hit slot whatever happens to
+//!   the echo: the path and share f (u < 10/11 direct, else f = (u - 10/11) / (1/11)),
+//!   the range, and the detection uniform. O(q_x n) draws: about 70 on a 50k-return
+//!   frame.
+//! - Models A and B: the count Binomial(n, fraction), then that many distinct returns
+//!   (slots) by `rand::seq::index::sample`, proposed in return (slot) order; per echo
+//!   the range (A: one standard normal; B: one uniform), then the detection uniform.
+//!   Drawing the count and then the sample gives the distribution of one Bernoulli draw
+//!   per return at the cost of O(p_x n) draws (the speed target of issue 12); common
+//!   random numbers across `fraction` values are not kept.
 
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
 use crate::noise::sensor::{float, number};
-use crate::noise::{Echo, NoiseStage, NoisyFrame, StageKind};
+use crate::noise::{Echo, NoiseStage, NoisyFrame, Slots, StageKind};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Binomial, Distribution, StandardNormal};
@@ -213,26 +249,41 @@ fn read_sectors(opts: &Section<'_>, key: &str) -> Result<Option<Vec<Sector>>> {
     Ok(Some(out))
 }
 
-/// Which of the doc's two crosstalk models the stage runs.
+/// Which crosstalk model the stage runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Model {
+    /// Model I: a modelled interfering sensor, unsynchronised (the default).
+    Interferer,
     /// Model A: a fraction of the returns get a false echo about their range.
     Benchmark,
     /// Model B: a fraction of the firing slots get a false echo at a uniform range.
     Physical,
 }
 
+impl Model {
+    /// The name used in configurations.
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::Interferer => "interferer",
+            Model::Benchmark => "benchmark",
+            Model::Physical => "physical",
+        }
+    }
+}
+
 /// The crosstalk stage.
 #[derive(Clone, Debug)]
 pub struct Crosstalk {
-    /// Model A or B.
+    /// Model I, A or B.
     pub model: Model,
-    /// Model A: fraction p_x of the eligible returns; model B: probability q_x per firing
-    /// slot.
-    pub fraction: f64,
+    /// Model A: fraction p_x of the eligible returns; models I and B: probability q_x per
+    /// firing slot. `None`: model I's q_x from the interferer (module documentation),
+    /// 0.01 for A and B.
+    pub fraction: Option<f64>,
     /// Model A: SD s_x of the false echo's range about the return's range, metres.
     pub sigma_m: f64,
-    /// Model B: largest false range R_max, metres.
+    /// Models I and B: largest false range R_max, metres (model I: also our listening
+    /// window, 2 R_max / c).
     pub max_range_m: f64,
     /// Azimuth sectors of the interferers.
     pub sectors: Vec<Sector>,
@@ -241,17 +292,56 @@ pub struct Crosstalk {
     pub power: Option<f64>,
     /// Interferer's pulse power over ours (r).
     pub interferer_power: f64,
-    /// Model B: distance d of the interferer's emitter, metres.
+    /// Distance d of the interferer's emitter, metres (direct power).
     pub interferer_distance_m: f64,
+    /// Model I: the interferer's pulses a second, N_i.
+    pub interferer_rate_hz: f64,
+    /// Model I: the fraction c_x of the interferer's pulses that reach one of our
+    /// detectors strongly enough to trigger it.
+    pub coupling: f64,
 }
 
 /// Full divergences (width, height) of the HDL-32E's spot, radians: about 4 x 2 inches
 /// at 100 feet (HDL-32E user's manual, appendix D, "Laser Spot Size").
 pub const SPOT_DIVERGENCE_RAD: [f64; 2] = [0.1016 / 30.48, 0.0508 / 30.48];
 
+/// Speed of light, m/s.
+const C_M_S: f64 = 299_792_458.0;
+
+/// Pulses a second of an HDL-32E: 32 lasers every 46.08 us (user's manual, firing timing).
+pub const HDL32E_PULSE_RATE_HZ: f64 = 32.0 / 46.08e-6;
+
+/// The measurement the default coupling comes from (Martins et al., RECPAD 2019; module
+/// documentation): worst-case fraction of a VLP-16's points interfered by a Hesai
+/// Pandar40 with a line of sight, 1 to 12 m away.
+pub const MEASURED_FRACTION: f64 = 1e-3;
+/// Pulses a second of the measurement's interferer, a Hesai Pandar40 (40 lasers, 0.2 deg
+/// at 10 Hz, 720,000 points a second in single-return mode: its datasheet).
+pub const MEASURED_INTERFERER_HZ: f64 = 720_000.0;
+/// Maximum range of the measurement's victim, a VLP-16 (100 m, its datasheet), whose
+/// listening window is 2 R / c.
+pub const MEASURED_RANGE_M: f64 = 100.0;
+
+/// Share of the interferer's couplings by the direct path: "one order of magnitude"
+/// more interfered points with a line of sight than with it blocked (Martins' thesis),
+/// 10 direct for 1 scattered.
+pub const DIRECT_SHARE: f64 = 10.0 / 11.0;
+
+/// The default coupling c_x: the measured fraction over the interferer's pulses in the
+/// victim's listening window, 1e-3 / (720,000 x 0.667 us) = 2.08e-3.
+pub fn default_coupling() -> f64 {
+    MEASURED_FRACTION / (MEASURED_INTERFERER_HZ * 2.0 * MEASURED_RANGE_M / C_M_S)
+}
+
+/// Uniform in [0, 1) from one 64-bit draw.
+#[inline]
+fn uniform(rng: &mut ChaCha8Rng) -> f64 {
+    rng.random::<f64>()
+}
+
 impl Crosstalk {
-    /// Model B's direct-path power in our unit for a power model with `kappa_m2`:
-    /// min(1, r kappa pi / (theta_w theta_h d^2)), or `power` when set.
+    /// Model B's and model I's direct-path power in our unit for a power model with
+    /// `kappa_m2`: min(1, r kappa pi / (theta_w theta_h d^2)), or `power` when set.
     pub fn direct_power(&self, kappa_m2: f64) -> f64 {
         self.power.unwrap_or_else(|| {
             let [tw, th] = SPOT_DIVERGENCE_RAD;
@@ -260,25 +350,50 @@ impl Crosstalk {
         })
     }
 
+    /// Model I: mean number lambda = N_i T_w c_x of the interferer's pulses that reach a
+    /// firing slot's detector while it listens (T_w = 2 R_max / c).
+    pub fn pulses_per_slot(&self) -> f64 {
+        self.interferer_rate_hz * (2.0 * self.max_range_m / C_M_S) * self.coupling
+    }
+
+    /// The probability the stage uses: model I q_x = 1 - exp(-lambda) per firing slot
+    /// unless `fraction` is set; models A and B `fraction` (0.01 by default).
+    pub fn rate(&self) -> f64 {
+        match (self.fraction, self.model) {
+            (Some(f), _) => f,
+            (None, Model::Interferer) => -(-self.pulses_per_slot()).exp_m1(),
+            (None, _) => 0.01,
+        }
+    }
+
     /// True if a return at `azimuth` degrees lies in one of the sectors.
     #[inline]
     fn covers(&self, azimuth: f64) -> bool {
         self.sectors.iter().any(|s| s.contains(azimuth))
     }
 
-    /// How many of `n` candidates get a false echo: Binomial(n, fraction).
+    /// How many of `n` candidates get a false echo: Binomial(n, rate).
     fn count(&self, n: usize, rng: &mut ChaCha8Rng) -> usize {
-        if self.fraction >= 1.0 {
+        let p = self.rate();
+        if p >= 1.0 {
             return n;
         }
-        Binomial::new(n as u64, self.fraction).map_or(0, |b| b.sample(rng) as usize)
+        Binomial::new(n as u64, p).map_or(0, |b| b.sample(rng) as usize)
+    }
+
+    /// The power model's kappa (m^2) of the frame, or the default.
+    fn kappa(frame: &NoisyFrame) -> f64 {
+        frame
+            .power_model
+            .as_ref()
+            .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2)
     }
 
     /// Model A: false echoes about the ranges of eligible returns.
     fn apply_benchmark(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
         // The eligible returns: alive and in a sector (one pass, no draws).
         let full = self.sectors.iter().any(Sector::is_full);
-        let eligible: Vec<u32> = (0..frame.len())
+        let eligible: Vec<u32> = (0..frame.clean_len)
             .filter(|&i| {
                 frame.fate[i].is_alive() && (full || self.covers(f64::from(frame.clean[i].azimuth)))
             })
@@ -295,11 +410,29 @@ impl Crosstalk {
         for k in chosen {
             let i = eligible[k] as usize;
             let z: f64 = rng.sample(StandardNormal);
+            let u = uniform(rng);
             let range = (f64::from(frame.range[i]) + self.sigma_m * z) as f32;
             // Reflected by the surface the return comes from: r times its power.
             let power = self.power.unwrap_or(self.interferer_power * frame.power[i]);
-            frame.propose(i, Echo { range, power });
+            if let Some(e) = frame.detect_echo(Echo { range, power }, u) {
+                frame.propose(i, e);
+            }
         }
+    }
+
+    /// The firings (indices into the frame's slots) whose azimuth lies in the sectors, by
+    /// the azimuth of any of their returns (the lasers of a firing are within 0.17
+    /// degrees of each other on the HDL-32E, 10 on the HDL-64E).
+    fn firings(&self, frame: &NoisyFrame, slots: &Slots) -> Vec<u32> {
+        let full = self.sectors.iter().any(Sector::is_full);
+        (0..slots.firings.len())
+            .filter(|&f| {
+                full || slots
+                    .any_of_firing(f)
+                    .is_some_and(|i| self.covers(f64::from(frame.clean[i].azimuth)))
+            })
+            .map(|f| f as u32)
+            .collect()
     }
 
     /// Model B: false echoes at uniform ranges in firing slots, occupied or empty.
@@ -308,17 +441,7 @@ impl Crosstalk {
             return;
         }
         let slots = frame.slots();
-        let full = self.sectors.iter().any(Sector::is_full);
-        // Firings in a sector, by the azimuth of any of their returns (the lasers of a
-        // firing are within 0.17 degrees of each other on the HDL-32E, 10 on the HDL-64E).
-        let firings: Vec<u32> = (0..slots.firings.len())
-            .filter(|&f| {
-                full || slots
-                    .any_of_firing(f)
-                    .is_some_and(|i| self.covers(f64::from(frame.clean[i].azimuth)))
-            })
-            .map(|f| f as u32)
-            .collect();
+        let firings = self.firings(frame, &slots);
         let lasers = slots.lasers();
         let n = firings.len() * lasers;
         if n == 0 {
@@ -328,15 +451,77 @@ impl Crosstalk {
         let mut chosen = rand::seq::index::sample(rng, n, count).into_vec();
         chosen.sort_unstable();
         let lo = frame.min_range.max(0.0);
-        let kappa = frame
-            .power_model
-            .as_ref()
-            .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2);
-        let power = self.direct_power(kappa);
+        let power = self.direct_power(Self::kappa(frame));
         for k in chosen {
             let slot = slots.slot(firings[k / lasers] as usize, (k % lasers) as u8);
-            let range = (lo + (self.max_range_m - lo) * rng.random::<f64>()) as f32;
-            frame.propose_slot(slot, Echo { range, power });
+            let range = (lo + (self.max_range_m - lo) * uniform(rng)) as f32;
+            let u = uniform(rng);
+            if let Some(e) = frame.detect_echo(Echo { range, power }, u) {
+                frame.propose_slot(slot, e);
+            }
+        }
+    }
+
+    /// Model I: the interferer's unsynchronised pulses, direct or scattered, in firing
+    /// slots at rate q_x (module documentation).
+    fn apply_interferer(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
+        if frame.clean_len == 0 {
+            return;
+        }
+        let q = self.rate();
+        if q.is_nan() || q <= 0.0 {
+            return;
+        }
+        let slots = frame.slots();
+        let firings = self.firings(frame, &slots);
+        let lasers = slots.lasers();
+        let n = firings.len() * lasers;
+        if n == 0 {
+            return;
+        }
+        let lo = frame.min_range.max(0.0);
+        let direct = self.direct_power(Self::kappa(frame));
+        // ln(1 - q) < 0; a gap is floor(ln U / ln(1 - q)), U in (0, 1]: Geometric(q).
+        let ln_miss = (-q).ln_1p();
+        let mut k = 0usize;
+        loop {
+            let u = 1.0 - uniform(rng);
+            let gap = if q >= 1.0 {
+                0
+            } else {
+                // `as` saturates a huge gap (and maps -0 to 0).
+                (u.ln() / ln_miss).floor() as usize
+            };
+            k = k.saturating_add(gap);
+            if k >= n {
+                return;
+            }
+            // Three draws per hit slot, whatever becomes of the echo.
+            let (path, at, detect) = (uniform(rng), uniform(rng), uniform(rng));
+            let slot = slots.slot(firings[k / lasers] as usize, (k % lasers) as u8);
+            k += 1;
+            let range = (lo + (self.max_range_m - lo) * at) as f32;
+            let power = match self.power {
+                Some(p) => p,
+                None if path < DIRECT_SHARE => direct,
+                None => {
+                    // Reflected off the surface the slot's detector sees (its strongest
+                    // return), with the share f of the interferer's spot inside our
+                    // footprint; no surface, no scattered echo.
+                    let f = (path - DIRECT_SHARE) / (1.0 - DIRECT_SHARE);
+                    let surface = slots
+                        .occupants(slot)
+                        .map(|i| frame.power[i])
+                        .fold(f64::NAN, f64::max);
+                    self.interferer_power * f * surface
+                }
+            };
+            if power.is_nan() || power <= 0.0 {
+                continue;
+            }
+            if let Some(e) = frame.detect_echo(Echo { range, power }, detect) {
+                frame.propose_slot(slot, e);
+            }
         }
     }
 }
@@ -358,43 +543,70 @@ impl NoiseStage for Crosstalk {
                 }
             })
             .collect();
-        let power = match (self.power, self.model) {
-            (Some(p), _) => format!("power {p}"),
-            (None, Model::Benchmark) => format!(
-                "power {} x the return's (interferer's reflection)",
-                self.interferer_power
-            ),
-            (None, Model::Physical) => format!(
-                "power {} (direct pulse of an interferer {} x ours at {} m)",
-                self.direct_power(DEFAULT_KAPPA_M2),
-                self.interferer_power,
-                self.interferer_distance_m
-            ),
-        };
+        let sectors = sectors.join(", ");
+        let rate = self.rate() * 100.0;
+        let direct = self.direct_power(DEFAULT_KAPPA_M2);
         match self.model {
-            Model::Benchmark => format!(
-                "{} % of returns in {} get a false echo at R + N(0, {} m), {power}",
-                self.fraction * 100.0,
-                sectors.join(", "),
-                self.sigma_m,
-            ),
-            Model::Physical => format!(
-                "{} % of firing slots in {} get a false echo at U(min range, {} m), {power}",
-                self.fraction * 100.0,
-                sectors.join(", "),
-                self.max_range_m,
-            ),
+            Model::Interferer => {
+                let power = match self.power {
+                    Some(p) => format!("power {p}"),
+                    None => format!(
+                        "direct (10/11, power {direct}) or reflected off the slot's surface \
+                         (1/11, power U(0, {}) x the return's)",
+                        self.interferer_power
+                    ),
+                };
+                let source = match self.fraction {
+                    Some(_) => "set by `fraction`".to_string(),
+                    None => format!(
+                        "{} pulses/s x {:.3} us window x coupling {:.3e}",
+                        self.interferer_rate_hz,
+                        2.0 * self.max_range_m / C_M_S * 1e6,
+                        self.coupling
+                    ),
+                };
+                format!(
+                    "unsynchronised interferer ({} x our pulse, {} m away): {rate:.4} % of \
+                     firing slots in {sectors} ({source}) get a false echo at U(min range, \
+                     {} m), {power}",
+                    self.interferer_power, self.interferer_distance_m, self.max_range_m,
+                )
+            }
+            Model::Benchmark => {
+                let power = match self.power {
+                    Some(p) => format!("power {p}"),
+                    None => format!(
+                        "power {} x the return's (interferer's reflection)",
+                        self.interferer_power
+                    ),
+                };
+                format!(
+                    "{rate} % of returns in {sectors} get a false echo at R + N(0, {} m), \
+                     {power}",
+                    self.sigma_m,
+                )
+            }
+            Model::Physical => {
+                let power = match self.power {
+                    Some(p) => format!("power {p}"),
+                    None => format!(
+                        "power {direct} (direct pulse of an interferer {} x ours at {} m)",
+                        self.interferer_power, self.interferer_distance_m
+                    ),
+                };
+                format!(
+                    "{rate} % of firing slots in {sectors} get a false echo at U(min range, \
+                     {} m), {power}",
+                    self.max_range_m,
+                )
+            }
         }
     }
 
     fn settings(&self) -> Vec<(&'static str, Value)> {
-        let model = match self.model {
-            Model::Benchmark => "benchmark",
-            Model::Physical => "physical",
-        };
         let mut v = vec![
-            ("model", Value::String(model.into())),
-            ("fraction", float(self.fraction)),
+            ("model", Value::String(self.model.name().into())),
+            ("fraction", float(self.rate())),
             ("sigma_m", float(self.sigma_m)),
             ("max_range_m", float(self.max_range_m)),
             (
@@ -403,6 +615,8 @@ impl NoiseStage for Crosstalk {
             ),
             ("interferer_power", float(self.interferer_power)),
             ("interferer_distance_m", float(self.interferer_distance_m)),
+            ("interferer_rate_hz", float(self.interferer_rate_hz)),
+            ("coupling", float(self.coupling)),
         ];
         if let Some(p) = self.power {
             v.push(("power", float(p)));
@@ -411,7 +625,7 @@ impl NoiseStage for Crosstalk {
     }
 
     fn proposes_echoes(&self) -> bool {
-        self.fraction > 0.0 && self.power.unwrap_or(self.interferer_power) > 0.0
+        self.rate() > 0.0 && self.power.unwrap_or(self.interferer_power) > 0.0
     }
 
     fn apply(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
@@ -419,6 +633,7 @@ impl NoiseStage for Crosstalk {
             return;
         }
         match self.model {
+            Model::Interferer => self.apply_interferer(frame, rng),
             Model::Benchmark => self.apply_benchmark(frame, rng),
             Model::Physical => self.apply_physical(frame, rng),
         }
@@ -427,11 +642,15 @@ impl NoiseStage for Crosstalk {
 
 /// Reads the options of a `crosstalk` entry.
 pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
-    let model = match opts.choice("model", &["benchmark", "physical"])? {
+    let model = match opts.choice("model", &["interferer", "benchmark", "physical"])? {
+        Some("benchmark") => Model::Benchmark,
         Some("physical") => Model::Physical,
-        _ => Model::Benchmark,
+        _ => Model::Interferer,
     };
-    let fraction = number(opts, "fraction", 0.01, 0.0, 1.0)?;
+    let fraction = match opts.value("fraction") {
+        None => None,
+        Some(_) => Some(number(opts, "fraction", 0.01, 0.0, 1.0)?),
+    };
     let sigma_m = number(opts, "sigma_m", 3.0, 0.0, 1000.0)?;
     // The wire holds ranges up to 131.07 m (65535 x 2 mm).
     let max_range_m = number(opts, "max_range_m", 100.0, 1.0, 131.0)?;
@@ -442,12 +661,15 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
     };
     let interferer_power = number(opts, "interferer_power", 1.0, 0.0, 1e3)?;
     let interferer_distance_m = number(opts, "interferer_distance_m", 20.0, 0.1, 1e6)?;
-    if model == Model::Benchmark && fraction > 0.02 {
+    let interferer_rate_hz = number(opts, "interferer_rate_hz", HDL32E_PULSE_RATE_HZ, 0.0, 1e9)?;
+    let coupling = number(opts, "coupling", default_coupling(), 0.0, 1.0)?;
+    if model == Model::Benchmark && fraction.is_some_and(|f| f > 0.02) {
         opts.warn(
             "fraction",
             format!(
-                "{fraction} is above the 0.4-2 % of points the benchmarks (3D_Corruptions_AD, \
-                 Robo3D) use"
+                "{} is above the 0.4-2 % of points the benchmarks (3D_Corruptions_AD, \
+                 Robo3D) use",
+                fraction.unwrap_or_default()
             ),
         );
     }
@@ -460,6 +682,8 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
         power,
         interferer_power,
         interferer_distance_m,
+        interferer_rate_hz,
+        coupling,
     }))
 }
 
@@ -467,16 +691,18 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
 pub const KIND: StageKind = StageKind {
     name: NAME,
     factor: "15 other LiDARs (crosstalk)",
-    model: "A (benchmark): Binomial(n, p_x) of the n returns in the sectors get a false echo at R + N(0, s_x^2) along the beam; B (physical): Binomial(n, q_x) of the n firing slots in the sectors get one at U(min range, R_max); power P_x: A the interferer's reflection off the return's surface, r P; B its direct pulse, min(1, r kappa pi / (theta_w theta_h d^2)); competing by the slot rule",
-    source: "3D_Corruptions_AD lidar_crosstalk_noise (0.4-2 %, SD 3 m); Robo3D gen_crosstalk.py (0.6-1 %, SD 3 m); P_x: Lambertian lidar equation with the HDL-32E spot (user's manual appendix D, 4 x 2 in at 100 ft); model B engineering assumption (pdiagram-models.md 15)",
+    model: "I (interferer, default): an unsynchronised sensor's pulses reach each firing slot in the sectors with probability q_x = 1 - exp(-N_i (2 R_max / c) c_x), at R' ~ U(min range, R_max); power: direct (10/11 of them) min(1, r kappa pi / (theta_w theta_h d^2)), or reflected off the slot's surface (1/11) r f P, f ~ U(0, 1); A (benchmark): Binomial(n, p_x) of the n returns in the sectors get a false echo at R + N(0, s_x^2) along the beam with power r P; B (physical): Binomial(n, q_x) of the n firing slots get one at U(min range, R_max) with the direct power; every echo through the receiver's detection, then the slot rule",
+    source: "I: Martins, Neves, Drummond, Albuquerque, RECPAD 2019 and Martins' MSc thesis (Aveiro 2019): VLP-16 interfered by a Pandar40 at 1-12 m, worst case 1e-3 of the points (1e-6 to 1e-3 over all tests), direct about 10x scattered; c_x = 1e-3 / (720,000 /s x 0.667 us) = 2.08e-3; HDL-32E pulse rate 32 / 46.08 us and spot 4 x 2 in at 100 ft (user's manual); A: 3D_Corruptions_AD lidar_crosstalk_noise (0.4-2 %, SD 3 m), Robo3D gen_crosstalk.py (0.6-1 %, SD 3 m); B: engineering assumption (pdiagram-models.md 15)",
     options: &[
-        OptionSpec { name: "model", unit: "-", default: "\"benchmark\"", doc: "\"benchmark\" (model A, about the true range) or \"physical\" (model B, uniform ranges in any slot)" },
-        OptionSpec { name: "fraction", unit: "-", default: "0.01", doc: "A: fraction p_x of the returns in the sectors; B: probability q_x per firing slot" },
+        OptionSpec { name: "model", unit: "-", default: "\"interferer\"", doc: "\"interferer\" (model I, a modelled unsynchronised sensor), \"benchmark\" (model A, about the true range) or \"physical\" (model B, uniform ranges in any slot at a set rate)" },
+        OptionSpec { name: "fraction", unit: "-", default: "I: from the interferer (9.6e-4); A, B: 0.01", doc: "A: fraction p_x of the returns in the sectors; I, B: probability q_x per firing slot (I: overrides the coupling)" },
         OptionSpec { name: "sigma_m", unit: "m", default: "3", doc: "A: SD s_x of the false echo's range about the return's range" },
-        OptionSpec { name: "max_range_m", unit: "m", default: "100", doc: "B: largest false range R_max (at most 131 m, the wire's limit)" },
+        OptionSpec { name: "max_range_m", unit: "m", default: "100", doc: "I, B: largest false range R_max (at most 131 m, the wire's limit); I: also our listening window 2 R_max / c" },
         OptionSpec { name: "sectors_deg", unit: "deg", default: "[[0, 360]]", doc: "interferer sectors [[from, to], ...], clockwise, may wrap" },
         OptionSpec { name: "interferer_power", unit: "-", default: "1", doc: "interferer's pulse power over ours, r (1: another HDL-32E)" },
-        OptionSpec { name: "interferer_distance_m", unit: "m", default: "20", doc: "B: distance d of the interferer's emitter (direct pulse)" },
+        OptionSpec { name: "interferer_distance_m", unit: "m", default: "20", doc: "I, B: distance d of the interferer's emitter (direct power)" },
+        OptionSpec { name: "interferer_rate_hz", unit: "1/s", default: "694444 (HDL-32E)", doc: "I: the interferer's pulses a second, N_i" },
+        OptionSpec { name: "coupling", unit: "-", default: "2.08e-3", doc: "I: fraction c_x of the interferer's pulses that trigger a given detector of ours (from Martins et al. 2019's worst case, 1e-3 of the points)" },
         OptionSpec { name: "power", unit: "-", default: "model", doc: "fixed received power of every false echo (fraction of emitted power, 1 = saturation); overrides the interferer model" },
     ],
     build,
@@ -485,6 +711,8 @@ pub const KIND: StageKind = StageKind {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::frame::{Frame, Return, ReturnKind};
+    use crate::noise::{Fate, NoiseChain};
 
     #[test]
     fn sectors_wrap_and_the_full_turn_holds_everything() {
@@ -504,5 +732,193 @@ mod tests {
             full.to_value(),
             Value::Array(vec![float(0.0), float(360.0)])
         );
+    }
+
+    /// A strongest-mode turn of `firings` firings x 32 lasers, every slot occupied: ranges
+    /// 20..60 m, intensities 20..80 (powers 0.001 to 0.2: detectable, none saturated).
+    fn turn(index: u32, firings: u32) -> Frame {
+        let mut returns = Vec::new();
+        for f in 0..firings {
+            for l in 0..32u8 {
+                let k = (index * firings + f) * 32 + u32::from(l);
+                returns.push(Return {
+                    range: 20.0 + (k.wrapping_mul(2_654_435_761) % 4000) as f32 / 100.0,
+                    intensity: 20 + (k.wrapping_mul(40_503) % 61) as u8,
+                    laser: l,
+                    ring: l,
+                    azimuth: (f as f32 * 0.18) % 360.0,
+                    packet: f / 12,
+                    block: (f % 12) as u8,
+                    time: 100.0 + f64::from(f) * 46.08e-6 + f64::from(l) * 1.152e-6,
+                    kind: ReturnKind::Strongest,
+                    ..crate::hdl32e::decode::BLANK
+                });
+            }
+        }
+        Frame {
+            index,
+            partial: false,
+            returns,
+        }
+    }
+
+    fn chain(body: &str) -> NoiseChain {
+        let text = format!("seed = 5\n[[noise]]\ntype = \"crosstalk\"\n{body}\n");
+        let cfg = crate::config::Config::from_toml_str(
+            &text,
+            std::path::Path::new("test.toml"),
+            &[],
+            None,
+        )
+        .unwrap_or_else(|e| panic!("{e}\n{text}"))
+        .0;
+        NoiseChain::new(&cfg)
+    }
+
+    /// The stated default: an HDL-32E interferer, 694,444 pulses/s, in our 0.667 us
+    /// window, with the coupling of Martins et al.'s worst case (1e-3 of a VLP-16's points
+    /// under a Pandar40's 720,000 pulses/s): q_x = 1 - exp(-9.645e-4) per firing slot.
+    #[test]
+    fn the_default_rate_follows_from_the_interferer_and_the_measurement() {
+        let opts = Crosstalk {
+            model: Model::Interferer,
+            fraction: None,
+            sigma_m: 3.0,
+            max_range_m: 100.0,
+            sectors: vec![Sector::FULL],
+            power: None,
+            interferer_power: 1.0,
+            interferer_distance_m: 20.0,
+            interferer_rate_hz: HDL32E_PULSE_RATE_HZ,
+            coupling: default_coupling(),
+        };
+        let c = 1e-3 / (720_000.0 * 200.0 / 299_792_458.0);
+        assert!((default_coupling() / c - 1.0).abs() < 1e-12);
+        assert!((default_coupling() - 2.082e-3).abs() < 1e-6);
+        let lambda = 32.0 / 46.08e-6 * (200.0 / 299_792_458.0) * c;
+        assert!((opts.pulses_per_slot() / lambda - 1.0).abs() < 1e-12);
+        let q = 1.0 - (-lambda).exp();
+        assert!((opts.rate() / q - 1.0).abs() < 1e-12);
+        assert!((q - 9.64e-4).abs() < 1e-6, "{q}");
+        // The direct pulse of an equal interferer at 20 m saturates (kappa 100 m^2).
+        assert_eq!(opts.direct_power(100.0), 1.0);
+    }
+
+    /// Issue 50: with the defaults, crosstalk echoes are reported at the stated rate. Of
+    /// the n slots, Binomial(n, q_x) get an echo: the direct ones (10/11, power 1) beat
+    /// every return here, the scattered ones (r f P, f ~ U(0, 1)) only when the noisy
+    /// amplitude lifts them over the return. The old default (the reflection at r P,
+    /// tying with the return) reported none.
+    #[test]
+    fn defaults_report_crosstalk_echoes_at_the_stated_rate() {
+        let chain = chain("");
+        let q = 1.0 - (-(32.0 / 46.08e-6) * (200.0 / 299_792_458.0) * default_coupling()).exp();
+        let (mut n, mut won) = (0usize, 0usize);
+        for index in 0..4 {
+            let f = turn(index, 2000);
+            let out = chain.process(&f);
+            n += f.returns.len();
+            assert_eq!(out.len(), f.returns.len(), "every slot is occupied");
+            for i in 0..out.len() {
+                if out.fate[i].is_spurious() {
+                    assert_eq!(out.fate[i], Fate::Replaced);
+                    assert_eq!(out.cause[i], 0);
+                    assert!((0.0..=100.0).contains(&out.range[i]), "{}", out.range[i]);
+                    won += 1;
+                } else {
+                    assert_eq!(out.range[i], f.returns[i].range);
+                }
+            }
+        }
+        // 256,000 slots: about 247 echoes, 224 of them direct.
+        let (lo, hi) = (n as f64 * q * DIRECT_SHARE, n as f64 * q);
+        let sd = (n as f64 * q).sqrt();
+        assert!(
+            won as f64 >= lo - 4.0 * sd && won as f64 <= hi + 4.0 * sd,
+            "{won} echoes in {n} slots, expected {lo:.0}..{hi:.0} (sd {sd:.1})"
+        );
+        assert!(won > 100, "{won}");
+    }
+
+    /// An echo's power is its own: the direct pulse's (saturating) or the share f of the
+    /// interferer's spot reflected by the slot's surface, never the return's power.
+    #[test]
+    fn echo_power_is_the_interferer_s_not_the_return_s() {
+        let f = turn(0, 2000);
+        let base = chain("fraction = 0").process(&f);
+        let out = chain("").process(&f);
+        let mut won = 0;
+        for i in 0..out.len() {
+            if out.fate[i] == Fate::Replaced {
+                won += 1;
+                assert_ne!(out.power[i], base.power[i], "return {i} tied");
+                assert!(
+                    out.power[i] > base.power[i],
+                    "a weaker echo won in strongest mode"
+                );
+            }
+        }
+        assert!(won > 0, "no echo was reported");
+        // The scattered path on its own (every echo scattered: power 1 share is off when
+        // the interferer is too far for its direct pulse to be detected), in last mode:
+        // echoes win only when farther, with a power below the return's mean.
+        let mut last = turn(0, 2000);
+        for r in &mut last.returns {
+            r.kind = ReturnKind::Last;
+        }
+        let out = chain("fraction = 0.05\ninterferer_distance_m = 1e6").process(&last);
+        let base = chain("fraction = 0").process(&last);
+        let (mut farther, mut weaker) = (0, 0);
+        for i in 0..out.len() {
+            if out.fate[i] == Fate::Replaced {
+                farther += usize::from(out.range[i] > last.returns[i].range);
+                weaker += usize::from(out.power[i] < base.power[i]);
+                assert_ne!(out.power[i], base.power[i]);
+            }
+        }
+        assert!(farther > 0 && weaker > 0, "{farther} {weaker}");
+    }
+
+    /// Same seed, same frame: the same echoes; another seed: other ones.
+    #[test]
+    fn same_seed_same_echoes() {
+        let f = turn(1, 2000);
+        let a = chain("").process(&f);
+        let b = chain("").process(&f);
+        assert_eq!(a.fate, b.fate);
+        assert_eq!(a.range, b.range);
+        assert_eq!(a.power, b.power);
+        assert!(a.fate.iter().any(|x| x.is_spurious()));
+        let text = "seed = 6\n[[noise]]\ntype = \"crosstalk\"\n";
+        let cfg = crate::config::Config::from_toml_str(
+            text,
+            std::path::Path::new("test.toml"),
+            &[],
+            None,
+        )
+        .expect("config")
+        .0;
+        let c = NoiseChain::new(&cfg).process(&f);
+        assert_ne!(a.range, c.range);
+    }
+
+    /// Unknown options are errors; the interferer's options are read.
+    #[test]
+    fn options_are_checked() {
+        let load = |body: &str| {
+            let text = format!("seed = 5\n[[noise]]\ntype = \"crosstalk\"\n{body}\n");
+            crate::config::Config::from_toml_str(&text, std::path::Path::new("t.toml"), &[], None)
+        };
+        assert!(load("interferer_rate = 1").is_err(), "an unknown option");
+        assert!(load("coupling = 2").is_err());
+        assert!(load("model = \"nope\"").is_err());
+        for ok in [
+            "coupling = 0.01",
+            "interferer_rate_hz = 300000",
+            "model = \"benchmark\"\nfraction = 0.004",
+            "model = \"physical\"",
+        ] {
+            assert!(load(ok).is_ok(), "{ok}");
+        }
     }
 }

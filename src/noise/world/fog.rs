@@ -27,11 +27,21 @@
 //!   its tabulated integral by intensity * R0^2 * beta / beta_0 with an empirical beta_0.
 //!   The recorded hard targets already carry the sensor's own overlap (they are
 //!   measured); xi = 1 at the 100 m reference range of kappa, so kappa holds as is.
-//! - the fog echo is the maximum of P_s over R, reported c tau_H / 2 earlier (where a
-//!   hard target's pulse would put its range); it is *proposed* to the return's firing
-//!   slot ([`NoisyFrame::propose`]) and competes there once, after the chain, with the
-//!   target and other stages' echoes by the sensor's return logic (strongest mode: the
-//!   fog point replaces the target when max P_s > P_h, as in the paper).
+//! - the fog echo as the receiver reports it ([`Crossing`], issue 50): the waveform
+//!   P_s(R) is sampled in noise cells of one half-power pulse width; in each the signal
+//!   fluctuates with the receiver's noise (`noise::detection`) and with the Poisson
+//!   number of droplets in the cell's overlap volume; the reported echo is the first
+//!   cell whose noisy peak crosses the threshold (a probability per beam, drawn), at
+//!   that cell's apparent range less c tau_H / 2 (where a hard target's pulse would put
+//!   its range), with the peak's drawn amplitude as its power. It is *proposed* to the
+//!   beam's firing slot ([`NoisyFrame::propose`]) and competes there once, after the
+//!   chain, with the target and other stages' echoes by the sensor's return logic
+//!   (strongest mode: the fog point replaces the target when its peak is higher). Slots
+//!   with and without a return follow the same rule (`empty_slots`), the fog in front of
+//!   the sensor echoing whatever lies behind it. With `[detection] model = "threshold"`
+//!   the stage works as before issue 50: the noiseless maximum of P_s over R, reported
+//!   c tau_H / 2 earlier, proposed to every slot where it is detectable (every free
+//!   slot or none).
 //!
 //! Overlap (`overlap = "biaxial"`, the default): the HDL-32E has its emitter lens and
 //! its receiver lens side by side behind one window (32 laser/detector pairs share them),
@@ -47,59 +57,56 @@
 //!   "Laser spot size") gives a spot of about 4 in by 2 in at 100 ft, i.e. 3.3 x 1.7
 //!   mrad full angle; the lenses sit side by side horizontally, so the horizontal figure
 //!   is the one that matters (the exit size of the spot is neglected: an upper bound);
-//! - receiver field of view theta_r: not published. It must exceed theta_t for the
-//!   receiver to collect the whole spot at range (the rated 100 m); we take
-//!   1.5 theta_t = 5 mrad and bound it by 1.25-3 theta_t;
-//! - apertures and axis separation: not published. The housing is 85.3 mm across
-//!   (datasheet), so two lenses side by side are at most about 35 mm each; we take 25 mm
-//!   clear apertures (a_t = a_r = 12.5 mm; the beam assumed to fill its lens) and
-//!   d = 30 mm (5 mm between the clear apertures for mounts and the baffle between
-//!   emitter and receiver), bounded by apertures 20-30 mm and a gap of 2-10 mm.
+//! - pulse: tau_H = 4 ns ([`TAU_H_NS`]; Velodyne: pulses of "typically 4 nanoseconds");
+//!   Hahner et al. took 20 ns, which spread the echo over 6 m of range;
+//! - receiver field of view theta_r, apertures and axis separation: not published. The
+//!   field must exceed theta_t for the receiver to collect the whole spot at the rated
+//!   100 m: bounds 1.25-3 theta_t. The housing is 85.3 mm across (datasheet), so two
+//!   lenses side by side are at most about 35 mm each: bounds of 20-30 mm clear
+//!   apertures and a gap of 2-10 mm between them. Calibrated within these bounds
+//!   against a real HDL-32E in fog (RADIATE `fog_6_0`, `docs/fidelity.md`, "Fog: a real
+//!   HDL-32E"): its open sectors show no return at all within 3 m in any of 60 frames,
+//!   and its far tail (30-40 m over 20-30 m, 0.17) puts its visibility at about 55-90 m
+//!   in this model. The central estimates (25 mm apertures, 5 mrad field) put a fog
+//!   echo in 94 % of the free slots at V = 90 m, at 2.5-3.4 m, which the recording
+//!   rules out; the low corner (20 mm apertures, field 1.25 theta_t = 4.1 mrad, axes
+//!   30 mm apart) gives R1 = 2.7 m, R2 = 75 m, and a fog echo in about 0.7 % of the free
+//!   slots at V = 90 m, at 5-7 m, where the recording's ground returns would hide them.
 //!
-//! With these R1 = 1.2 m and R2 = 35.3 m; the echo of fog without a target peaks at an
-//! apparent range of about 7 m (reported 3.5-3.9 m, c tau_H / 2 earlier) with
-//! I = 0.034 /m (at V* = 491 m, below), against I = 0.70 /m at 1.7 m (at V* = 10 km)
-//! for Hahner's 0.9-1.0 m ramp (`overlap = "linear"`, kept as an option).
-//!
-//! Clear air: the peak echo power pi kappa (beta_r / V) I_max falls as 1/V, so echoes
-//! start below the visibility where it equals the threshold p_th (1e-3 in the default
-//! power model, kappa = 100 m^2): V* = 491 m with `droplets = "hahner"`, 1.79 km
-//! (advection) and 1.68 km (radiation) with Mie droplets
-//! ([`Fog::echo_onset_visibility_m`]), so no fog echo is reported at V >= 10 km
-//! (tests/fog_calibration.rs). Over the bounds of the unknown optics V* stays below
-//! 10 km with beta_r up to 0.092 (at most 6.4 km); with Mie droplets the most
-//! unfavourable corner (20 mm apertures 2 mm apart, receiver FOV 3 x the divergence)
-//! reaches 11.3 km. Hahner's ramp gives V* = 10.05 km with beta_r = 0.046: the ring at
-//! 1.7 m of issue 29 (28,377 echoes at 10 km) was the overlap.
+//! Clear air: the echo's mean peak falls as 1/V; with the receiver's noise the chance
+//! of a fog echo falls smoothly with it, to under one echo in 10,000 frames at
+//! V = 1 km and none at V >= 10 km (tests/fog_calibration.rs).
 //!
 //! The integral is computed here (Gauss-Legendre quadrature on the smooth pieces between
-//! R1, R2 and R0, the biaxial overlap in pieces of at most 0.75 m; maximum over R by a
-//! scan and golden-section search), not read from the paper's tables. It depends only on
-//! the options and R0, so it is tabulated once per stage (on first use) on a grid of R0
-//! (5 mm linear, 2 cm biaxial), linearly interpolated; beyond the untruncated peak
-//! (R0 >= argmax, a few metres) the truncation at R0 no longer touches the maximum and
-//! the echo is constant, so the grid ends there.
+//! R1, R2 and R0, the biaxial overlap in pieces of at most 0.75 m), not read from the
+//! paper's tables. It depends only on the options and R0, so the first-crossing tables
+//! are made once per stage and run (on first use) on a grid of R0 (a quarter cell),
+//! taking the grid point at or below R0 (a nearer target cuts at least as much fog).
+//! [`EchoTable`] keeps the noiseless peak (for reports and [`Fog::peak_power`]).
 //!
 //! Deviations, stated: the paper's table generator only scans apparent ranges R <= R0;
 //! we follow the formula (truncation of r at R0, any R), which differs only for targets
-//! closer than the peak (a few metres). Slots without a return (sky, targets out of
-//! range) get the untruncated fog echo too (option `empty_slots`), since the fog in front
-//! of the sensor echoes whatever lies behind it; the paper's code only rewrites points.
-//! The reported intensity of a kept target is not lowered here (the intensity rule of
-//! issue 29 is another change).
+//! closer than the peak. Slots without a return (sky, targets out of range) get fog
+//! echoes too, since the fog in front of the sensor echoes whatever lies behind it; the
+//! paper's code only rewrites points. The droplets' count uses one rms radius per
+//! droplet type (advection 14.9 um, also for `"hahner"`; radiation 5.0 um): with
+//! thousands of droplets in a cell its Poisson spread is a few percent of the signal,
+//! far below the receiver's noise, and is kept for thin fog and small cells.
 //!
-//! Draw pattern: one uniform per recorded return (whatever its fate) and per empty slot
-//! when `range_noise_m` > 0, none otherwise, so streams stay aligned across sweeps of V.
+//! Draw pattern: one uniform per recorded return (whatever its fate) and then one per
+//! vacant slot (`empty_slots`), in that order, plus a second one each when
+//! `range_noise_m` > 0, so streams stay aligned across sweeps of V.
 
 pub use super::fog_droplets::Droplets;
 use crate::config::reader::Section;
 use crate::error::Result;
+use crate::noise::detection::{normal_tail, normal_tail_inverse};
 use crate::noise::registry::OptionSpec;
 use crate::noise::sensor::{float, number, C_M_PER_S};
-use crate::noise::{Echo, Fate, NoiseStage, NoisyFrame, StageKind};
+use crate::noise::{DetectionRule, Echo, Fate, NoiseStage, NoisyFrame, StageKind};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 use toml::Value;
 
 /// The `type` name of this stage.
@@ -500,13 +507,239 @@ impl EchoTable {
     }
 }
 
+/// Half-power pulse width (ns) of the default: Velodyne's pulses last "typically 4
+/// nanoseconds" (Velodyne, "HDL-64E: concept", the sensors' shared principle of
+/// operation); Hahner et al. took 20 ns.
+pub const TAU_H_NS: f64 = 4.0;
+
+/// Effective droplet radius (m) for the count of droplets in the overlap volume: the
+/// rms radius of Shettle & Fenn's advection fog (modified gamma, alpha = 3, b = 0.3 /um:
+/// <r^2> = (alpha + 1)(alpha + 2) / b^2, 14.9 um), also taken for `droplets = "hahner"`;
+/// radiation fog (alpha = 6, b = 1.5 /um) 5.0 um.
+fn rms_droplet_radius_m(droplets: Droplets) -> f64 {
+    match droplets {
+        Droplets::Radiation => (7.0f64 * 8.0).sqrt() / 1.5 * 1e-6,
+        _ => (4.0f64 * 5.0).sqrt() / 0.3 * 1e-6,
+    }
+}
+
+/// What a [`Crossing`] depends on besides the stage: the echo's scale over the
+/// threshold, the minimum range and the detection rule's parameters (bits).
+type CrossingKey = [u64; 5];
+
+/// The fog echo as the receiver reports it: where the noisy waveform first crosses the
+/// threshold, tabulated over the target range R0.
+///
+/// The soft-target waveform P_s(R) = pi kappa beta I(R; R0) is sampled in cells of one
+/// half-power pulse width (c tau_H / 2 in range: the receiver's noise, filtered to the
+/// pulse, decorrelates over about that time). In cell j the signal x_j = P_s / T
+/// fluctuates with the receiver's noise (`noise::detection`: sigma_rx(x)^2 =
+/// 1/k^2 + g x) and with the number of droplets in the cell's overlap volume, which is
+/// Poisson: the echo is a sum over droplets, so its relative variance is 1 / N_eff with
+/// N_eff = n_d (int w)^2 / int w^2 / A_b (w(r) = s xi exp(-2 alpha r) / r^2 the pulse-
+/// and overlap-weighted contribution at r, A_b the beam's cross-section, n_d = alpha /
+/// (2 pi <r_d^2>) droplets a cubic metre). The cell crosses with probability
+/// p_j = Q((1 - x_j) / sqrt(sigma_rx^2 + x_j^2 / N_eff)) less the noise-only floor Q(k);
+/// the first crossing is in cell j with probability p_j prod_{i<j} (1 - p_i). One
+/// uniform u per beam picks it by inversion; its position within the cell and the
+/// peak's amplitude (the tail quantile of the cell's noise) follow from the same draw.
+/// The range reported is the cell's apparent range less c tau_H / 2 (where a hard
+/// target's pulse would put its range); cells reported nearer than the minimum range
+/// are blanked (the receiver ignores crossings there).
+#[derive(Debug)]
+pub struct Crossing {
+    /// Reported range of cell 0's centre (m) and the cell length (m).
+    first: f64,
+    cell: f64,
+    /// R0 of row 0, the grid step of R0 and the R0 from which the untruncated row (the
+    /// last) applies.
+    start: f64,
+    step: f64,
+    far_from: f64,
+    /// Per row: the cumulative first-crossing probability of cells 0..=j.
+    cum: Vec<Vec<f64>>,
+    /// Per row and cell: (signal x, its standard deviation, crossing probability).
+    cells: Vec<Vec<(f64, f64, f64)>>,
+}
+
+impl Crossing {
+    /// The table of `soft` for echo scale `x_scale` (x = x_scale I), detection `rule`,
+    /// droplet density `n_d` (1/m^3), beam radius at the sensor and growth `beam`
+    /// (m, m/m) and minimum range `min_range` (m).
+    pub fn new(
+        soft: &SoftTarget,
+        x_scale: f64,
+        rule: &DetectionRule,
+        n_d: f64,
+        beam: (f64, f64),
+        min_range: f64,
+    ) -> Crossing {
+        let l = soft.window_m();
+        let cell = l / 2.0;
+        let r1 = soft.overlap.start_m();
+        let app0 = r1 + cell / 2.0;
+        // The untruncated waveform, cell by cell, to where no later cell could cross
+        // with probability above 1e-12 (x tiny and falling, past the peak).
+        let faint = {
+            let mut x = 1.0;
+            while rule.p_echo(x) > 1e-12 && x > 1e-9 {
+                x *= 0.5;
+            }
+            x
+        };
+        let mut apps = Vec::new();
+        let mut peak: f64 = 0.0;
+        for j in 0..10_000 {
+            let app = app0 + cell * j as f64;
+            let x = x_scale * soft.integral(app, f64::INFINITY);
+            peak = peak.max(x);
+            apps.push(app);
+            if (x < faint && x < peak * 0.5) || app > 2000.0 {
+                break;
+            }
+        }
+        let far_from = *apps.last().unwrap_or(&r1) + l;
+        let step = (cell / 4.0).max(0.02);
+        let rows = ((far_from - r1) / step).ceil().max(0.0) as usize + 1;
+        let (a0, grow) = beam;
+        // Pulse- and overlap-weighted integrals over the cell's window [app - L, min(app, R0)]:
+        // (int w, int w^2 / A_b) for N_eff.
+        let moments = |app: f64, r0: f64| -> (f64, f64) {
+            let lo = (app - l).max(r1);
+            let hi = app.min(r0);
+            if hi <= lo {
+                return (0.0, 0.0);
+            }
+            const K: usize = 64;
+            let h = (hi - lo) / K as f64;
+            let (mut m1, mut m2) = (0.0, 0.0);
+            for k in 0..K {
+                let r = lo + h * (k as f64 + 0.5);
+                let sp = (std::f64::consts::PI * (app - r) / l).sin();
+                let w = sp * sp * (-2.0 * soft.alpha * r).exp() * soft.overlap(r) / (r * r);
+                let area = std::f64::consts::PI * (a0 + grow * r).powi(2);
+                m1 += w * h;
+                m2 += w * w / area.max(1e-12) * h;
+            }
+            (m1, m2)
+        };
+        let mut cum = Vec::with_capacity(rows + 1);
+        let mut cells = Vec::with_capacity(rows + 1);
+        let k = rule.threshold_snr;
+        let floor = normal_tail(k);
+        for row in 0..=rows {
+            let r0 = if row == rows {
+                f64::INFINITY
+            } else {
+                r1 + step * row as f64
+            };
+            let mut c = Vec::with_capacity(apps.len());
+            let mut f = Vec::with_capacity(apps.len());
+            let mut survive = 1.0;
+            let mut acc = 0.0;
+            for &app in &apps {
+                let x = x_scale * soft.integral(app, r0);
+                let blanked = app - cell < min_range || x <= 0.0;
+                let (m1, m2) = if blanked {
+                    (0.0, 0.0)
+                } else {
+                    moments(app, r0)
+                };
+                let rel_var = if m1 > 0.0 && n_d > 0.0 {
+                    m2 / (n_d * m1 * m1)
+                } else {
+                    0.0
+                };
+                let sigma = (rule.sigma(x).powi(2) + x * x * rel_var).sqrt();
+                let p = if blanked {
+                    0.0
+                } else {
+                    ((normal_tail((1.0 - x) / sigma) - floor) / (1.0 - floor)).clamp(0.0, 1.0)
+                };
+                acc += survive * p;
+                survive *= 1.0 - p;
+                c.push((x, sigma, p));
+                f.push(acc);
+            }
+            cells.push(c);
+            cum.push(f);
+        }
+        Crossing {
+            first: app0 - cell,
+            cell,
+            start: r1,
+            step,
+            far_from,
+            cum,
+            cells,
+        }
+    }
+
+    /// Probability that a beam whose target lies at `r0` (infinite: none) reports a fog
+    /// echo.
+    pub fn probability(&self, r0: f64) -> f64 {
+        self.cum[self.row(r0)].last().copied().unwrap_or(0.0)
+    }
+
+    fn row(&self, r0: f64) -> usize {
+        let last = self.cum.len() - 1;
+        // Also a NaN range: the untruncated row.
+        if r0.is_nan() || r0 >= self.far_from {
+            return last;
+        }
+        let u = (r0 - self.start) / self.step;
+        if u.is_nan() || u < 0.0 {
+            return 0;
+        }
+        // The grid point at or below R0 (a nearer target cuts at least as much fog).
+        (u as usize).min(last - 1)
+    }
+
+    /// The fog echo reported in a beam whose target lies at `r0` for its uniform `u`
+    /// (the power is the peak's amplitude, at or above the threshold `T` in units of
+    /// which x is: multiply by the threshold, [`Crossing::draw`] does).
+    #[inline]
+    fn draw_x(&self, r0: f64, u: f64) -> Option<(f64, f64)> {
+        let row = self.row(r0);
+        let cum = &self.cum[row];
+        let total = *cum.last()?;
+        if u.is_nan() || u >= total {
+            return None;
+        }
+        let j = cum.partition_point(|&f| f <= u).min(cum.len() - 1);
+        let below = if j == 0 { 0.0 } else { cum[j - 1] };
+        // u within cell j's share, as a uniform w in [0, 1).
+        let w = ((u - below) / (cum[j] - below)).clamp(0.0, 1.0 - f64::EPSILON);
+        let (x, sigma, p) = self.cells[row][j];
+        // The peak: the tail quantile w p of the cell's noise (at or above the threshold).
+        let z = normal_tail_inverse((w * p).max(f64::MIN_POSITIVE));
+        let amplitude = (x + sigma * z).max(1.0);
+        // The crossing's place in the cell: the finer digits of w.
+        let within = (w * 4096.0).fract();
+        let range = self.first + self.cell * (j as f64 + within);
+        Some((range, amplitude))
+    }
+
+    /// [`Crossing::draw_x`] as an echo, for threshold `t`.
+    #[inline]
+    pub fn draw_echo(&self, r0: f64, u: f64, t: f64) -> Option<Echo> {
+        self.draw_x(r0, u).map(|(range, a)| Echo {
+            range: range as f32,
+            power: a * t,
+        })
+    }
+}
+
 /// HDL-32E optics used by the default biaxial overlap (module comment: sources and
 /// bounds). Full beam divergence (rad): the manual's spot, about 4 in wide at 100 ft.
 pub const HDL32E_DIVERGENCE_MRAD: f64 = 3.3;
-/// Receiver field of view (full angle, mrad): not published; 1.5 x the divergence.
-pub const HDL32E_FOV_MRAD: f64 = 5.0;
-/// Transmitter and receiver clear apertures (diameter, mm): not published; estimated.
-pub const HDL32E_APERTURE_MM: f64 = 25.0;
+/// Receiver field of view (full angle, mrad): not published; 1.25 x the divergence, the
+/// low end of the bounds (1.25-3 x), calibrated against a real HDL-32E in fog (module
+/// comment).
+pub const HDL32E_FOV_MRAD: f64 = 4.1;
+/// Transmitter and receiver clear apertures (diameter, mm): not published; the low end
+/// of the bounds (20-30 mm), calibrated with the field of view.
+pub const HDL32E_APERTURE_MM: f64 = 20.0;
 /// Distance between the two optical axes (mm): not published; estimated.
 pub const HDL32E_SEPARATION_MM: f64 = 30.0;
 
@@ -545,6 +778,19 @@ pub struct Fog {
     /// Fog echoes also in slots without a return.
     pub empty_slots: bool,
     table: OnceLock<Arc<EchoTable>>,
+    /// The noise cells' first-crossing tables, per (echo scale over threshold, minimum
+    /// range, detection rule): frames of one run share one entry.
+    crossings: CrossingCache,
+}
+
+/// The tables of [`Fog::crossing`]; a clone starts empty (a clone may be changed).
+#[derive(Debug, Default)]
+struct CrossingCache(Mutex<Vec<(CrossingKey, Arc<Crossing>)>>);
+
+impl Clone for CrossingCache {
+    fn clone(&self) -> Self {
+        CrossingCache::default()
+    }
 }
 
 impl Fog {
@@ -566,6 +812,7 @@ impl Fog {
             range_noise_m,
             empty_slots,
             table: OnceLock::new(),
+            crossings: CrossingCache::default(),
         }
     }
 
@@ -669,6 +916,136 @@ impl Fog {
         (lo * hi).sqrt()
     }
 
+    /// The first-crossing table for `frame` (its threshold, minimum range and detection
+    /// rule) and power constant `kappa`, made once per run and shared.
+    pub fn crossing(&self, frame: &NoisyFrame, kappa: f64) -> Arc<Crossing> {
+        let t = frame.threshold;
+        let x_scale = self.echo_scale(kappa) / t;
+        // The threshold model: a noiseless receiver (sigma -> 0), so a cell crosses
+        // exactly when its mean does.
+        let rule = match &frame.detection {
+            Some(r) if r.is_probabilistic() => (**r).clone(),
+            _ => DetectionRule::new(&crate::config::DetectionConfig {
+                threshold_snr: 1e6,
+                shot_noise: 0.0,
+                ..crate::config::DetectionConfig::default()
+            }),
+        };
+        let key = [
+            x_scale.to_bits(),
+            frame.min_range.to_bits(),
+            rule.threshold_snr.to_bits(),
+            rule.shot_noise.to_bits(),
+            u64::from(rule.is_probabilistic()),
+        ];
+        let mut cache = self.crossings.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, c)) = cache.iter().find(|(k, _)| *k == key) {
+            return Arc::clone(c);
+        }
+        let alpha = self.alpha();
+        let r = rms_droplet_radius_m(self.droplets);
+        let n_d = alpha / (2.0 * std::f64::consts::PI * r * r);
+        let beam = match self.overlap {
+            Overlap::Biaxial(b) => (b.tx_radius_m, (b.divergence_rad / 2.0).tan()),
+            Overlap::Linear { .. } => {
+                let b = hdl32e_optics();
+                (b.tx_radius_m, (b.divergence_rad / 2.0).tan())
+            }
+        };
+        let c = Arc::new(Crossing::new(
+            &self.soft_target(),
+            x_scale,
+            &rule,
+            n_d,
+            beam,
+            frame.min_range,
+        ));
+        cache.push((key, Arc::clone(&c)));
+        c
+    }
+
+    /// The echoes with the threshold detection (`[detection] model = "threshold"`), as
+    /// before issue 50: the noiseless maximum of the waveform, proposed to every slot
+    /// where it is detectable (one draw per beam only with `range_noise_m`).
+    fn propose_noiseless(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
+        let kappa = frame
+            .power_model
+            .as_ref()
+            .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2);
+        let scale = self.echo_scale(kappa);
+        let table = self.table();
+        let n = self.range_noise_m;
+        let slots = frame.slots();
+        // One draw per recorded return (whatever its fate) and per empty slot, so the
+        // stream stays aligned when fates change.
+        let noisy = |rng: &mut ChaCha8Rng, range: f64, r0: f64| -> f64 {
+            if n > 0.0 {
+                let u: f64 = rng.random();
+                // U(R0 - n, R0 + n), kept positive for targets nearer than n.
+                let lo = (r0 - n).max(r0 * 0.5);
+                range * r0 / (lo + u * (r0 + n - lo))
+            } else {
+                range
+            }
+        };
+        // Most targets lie beyond the echo's peak, where the echo does not depend on R0:
+        // decide its detectability once.
+        let (far_r, far_i) = table.far();
+        let far = Echo {
+            range: far_r as f32,
+            power: scale * far_i,
+        };
+        let far_ok = frame.detectable(far.range, far.power);
+        let far_from = table.far_from;
+        // One echo a recorded return, as a column (`propose_each`).
+        let none = Echo::NONE;
+        let (threshold, min_range) = (frame.threshold, frame.min_range);
+        let m = frame.clean_len;
+        let each: Vec<Echo> = frame.range[..m]
+            .iter()
+            .zip(&frame.fate[..m])
+            .map(|(&r0, &fate)| {
+                let r0 = f64::from(r0);
+                let echo = if r0 >= far_from && n == 0.0 {
+                    if far_ok {
+                        far
+                    } else {
+                        none
+                    }
+                } else {
+                    let (r, integral) = table.lookup(r0);
+                    Echo {
+                        range: noisy(rng, r, r0) as f32,
+                        power: scale * integral,
+                    }
+                };
+                // Occlusion removes the beam; only detectable echoes can take part in the
+                // slot's competition (`NoisyFrame::detectable`).
+                let detectable = echo.power >= threshold && f64::from(echo.range) >= min_range;
+                if fate != Fate::Occluded && detectable {
+                    echo
+                } else {
+                    none
+                }
+            })
+            .collect();
+        frame.propose_each(each);
+        if self.empty_slots {
+            for slot in 0..slots.len() as u32 {
+                if !slots.is_vacant(slot) {
+                    continue;
+                }
+                let echo = Echo {
+                    range: noisy(rng, far_r, EMPTY_SLOT_RANGE_M) as f32,
+                    power: far.power,
+                };
+                if frame.detectable(echo.range, echo.power) {
+                    frame.propose_slot(slot, echo);
+                }
+            }
+        }
+    }
+
     fn echoes(&self) -> bool {
         self.beta() > 0.0
     }
@@ -748,79 +1125,58 @@ impl NoiseStage for Fog {
         if !self.echoes() {
             return;
         }
+        if !frame.probabilistic() {
+            self.propose_noiseless(frame, rng);
+            return;
+        }
         let kappa = frame
             .power_model
             .as_ref()
             .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2);
-        let scale = self.echo_scale(kappa);
-        let table = self.table();
+        let crossing = self.crossing(frame, kappa);
+        let t = frame.threshold;
         let n = self.range_noise_m;
         let slots = frame.slots();
-        // One draw per recorded return (whatever its fate) and per empty slot, so the
-        // stream stays aligned when fates change.
-        let noisy = |rng: &mut ChaCha8Rng, range: f64, r0: f64| -> f64 {
-            if n > 0.0 {
-                let u: f64 = rng.random();
-                // U(R0 - n, R0 + n), kept positive for targets nearer than n.
-                let lo = (r0 - n).max(r0 * 0.5);
-                range * r0 / (lo + u * (r0 + n - lo))
-            } else {
-                range
-            }
+        // Hahner's range noise: the echo's range times R0 / U(R0 - n, R0 + n).
+        let noisy = |v: f64, range: f64, r0: f64| -> f64 {
+            // U(R0 - n, R0 + n), kept positive for targets nearer than n.
+            let lo = (r0 - n).max(r0 * 0.5);
+            range * r0 / (lo + v * (r0 + n - lo))
         };
-        // Most targets lie beyond the echo's peak, where the echo does not depend on R0:
-        // decide its detectability once.
-        let (far_r, far_i) = table.far();
-        let far = Echo {
-            range: far_r as f32,
-            power: scale * far_i,
-        };
-        let far_ok = frame.detectable(far.range, far.power);
-        let far_from = table.far_from;
-        // One echo a recorded return, as a column (`propose_each`).
-        let none = Echo::NONE;
-        let (threshold, min_range) = (frame.threshold, frame.min_range);
+        // One uniform per recorded return (whatever its fate), then one per vacant slot,
+        // and a second one each when `range_noise_m` > 0: streams stay aligned across
+        // sweeps of V.
         let m = frame.clean_len;
-        let each: Vec<Echo> = frame.range[..m]
-            .iter()
-            .zip(&frame.fate[..m])
-            .map(|(&r0, &fate)| {
-                let r0 = f64::from(r0);
-                let echo = if r0 >= far_from && n == 0.0 {
-                    if far_ok {
-                        far
-                    } else {
-                        none
-                    }
-                } else {
-                    let (r, integral) = table.lookup(r0);
-                    Echo {
-                        range: noisy(rng, r, r0) as f32,
-                        power: scale * integral,
-                    }
-                };
-                // Occlusion removes the beam; only detectable echoes can take part in the
-                // slot's competition (`NoisyFrame::detectable`).
-                let detectable = echo.power >= threshold && f64::from(echo.range) >= min_range;
-                if fate != Fate::Occluded && detectable {
-                    echo
-                } else {
-                    none
+        let mut found: Vec<(usize, Echo)> = Vec::new();
+        for i in 0..m {
+            let u: f64 = rng.random();
+            let v: f64 = if n > 0.0 { rng.random() } else { 0.0 };
+            if frame.fate[i] == Fate::Occluded {
+                continue;
+            }
+            let r0 = f64::from(frame.range[i]);
+            if let Some(mut e) = crossing.draw_echo(r0, u, t) {
+                if n > 0.0 {
+                    e.range = noisy(v, f64::from(e.range), r0) as f32;
                 }
-            })
-            .collect();
-        frame.propose_each(each);
+                found.push((i, e));
+            }
+        }
+        for (i, e) in found {
+            frame.propose(i, e);
+        }
         if self.empty_slots {
             for slot in 0..slots.len() as u32 {
                 if !slots.is_vacant(slot) {
                     continue;
                 }
-                let echo = Echo {
-                    range: noisy(rng, far_r, EMPTY_SLOT_RANGE_M) as f32,
-                    power: far.power,
-                };
-                if frame.detectable(echo.range, echo.power) {
-                    frame.propose_slot(slot, echo);
+                let u: f64 = rng.random();
+                let v: f64 = if n > 0.0 { rng.random() } else { 0.0 };
+                if let Some(mut e) = crossing.draw_echo(f64::INFINITY, u, t) {
+                    if n > 0.0 {
+                        e.range = noisy(v, f64::from(e.range), EMPTY_SLOT_RANGE_M) as f32;
+                    }
+                    frame.propose_slot(slot, e);
                 }
             }
         }
@@ -863,7 +1219,7 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
         ));
     }
     let beta_r = number(opts, "beta_r", 0.046, 0.0, 10.0)?;
-    let tau_h_ns = number(opts, "tau_h_ns", 20.0, 0.1, 1000.0)?;
+    let tau_h_ns = number(opts, "tau_h_ns", TAU_H_NS, 0.1, 1000.0)?;
     let model = opts
         .choice("overlap", &["biaxial", "linear"])?
         .unwrap_or("biaxial");
@@ -942,13 +1298,13 @@ pub const KIND: StageKind = StageKind {
         OptionSpec { name: "visibility_m", unit: "m", default: "required", doc: "meteorological optical range V (inf: no fog)" },
         OptionSpec { name: "beta_r", unit: "1/sr", default: "0.046", doc: "backscatter beta = beta_r / V (paper range 0.023-0.092; 0: extinction only)" },
         OptionSpec { name: "droplets", unit: "-", default: "hahner", doc: "backscatter: \"hahner\" (beta = beta_r / V) or Mie for Shettle & Fenn \"advection\" / \"radiation\" fog (beta = alpha (beta/alpha)_Mie, lidar ratio about 18 sr)" },
-        OptionSpec { name: "tau_h_ns", unit: "ns", default: "20", doc: "half-power pulse width tau_H" },
+        OptionSpec { name: "tau_h_ns", unit: "ns", default: "4", doc: "half-power pulse width tau_H (Velodyne: pulses of typically 4 ns; Hahner et al. used 20)" },
         OptionSpec { name: "overlap", unit: "-", default: "biaxial", doc: "\"biaxial\" (geometric overlap, HDL-32E defaults: no fog echo at V >= 10 km) or \"linear\" (Hahner's R1..R2 ramp)" },
         OptionSpec { name: "axis_separation_mm", unit: "mm", default: "30", doc: "biaxial: distance between transmitter and receiver axes (estimated, 27-40)" },
-        OptionSpec { name: "tx_aperture_mm", unit: "mm", default: "25", doc: "biaxial: transmitted beam diameter at the exit (estimated, 20-30)" },
-        OptionSpec { name: "rx_aperture_mm", unit: "mm", default: "25", doc: "biaxial: receiver aperture diameter (estimated, 20-30)" },
+        OptionSpec { name: "tx_aperture_mm", unit: "mm", default: "20", doc: "biaxial: transmitted beam diameter at the exit (estimated, 20-30; calibrated)" },
+        OptionSpec { name: "rx_aperture_mm", unit: "mm", default: "20", doc: "biaxial: receiver aperture diameter (estimated, 20-30; calibrated)" },
         OptionSpec { name: "beam_divergence_mrad", unit: "mrad", default: "3.3", doc: "biaxial: full beam divergence (HDL-32E manual: 4 in at 100 ft)" },
-        OptionSpec { name: "rx_fov_mrad", unit: "mrad", default: "5", doc: "biaxial: receiver full field of view (estimated, 1.25-3 x divergence)" },
+        OptionSpec { name: "rx_fov_mrad", unit: "mrad", default: "4.1", doc: "biaxial: receiver full field of view (estimated, 1.25-3 x divergence; calibrated)" },
         OptionSpec { name: "overlap_start_m", unit: "m", default: "0.9", doc: "linear: R1, overlap starts (xi = 0 below)" },
         OptionSpec { name: "overlap_full_m", unit: "m", default: "1.0", doc: "linear: R2, overlap complete (xi = 1 above)" },
         OptionSpec { name: "range_noise_m", unit: "m", default: "0", doc: "n: fog echo range x R0 / U(R0 - n, R0 + n) (Hahner v1; 0 = none)" },
@@ -1063,7 +1419,8 @@ mod tests {
                 })
                 .sum::<f64>()
         };
-        for r_app in [2.0, 5.0, r_star, 9.0, 20.0] {
+        // Apparent ranges past the overlap's start (2.7 m with the defaults).
+        for r_app in [4.0, 5.0, r_star, 9.0, 20.0] {
             let (a, b) = (s.integral(r_app, f64::INFINITY), fine(r_app));
             assert!((a / b - 1.0).abs() < 1e-6, "{r_app}: {a} vs {b}");
         }

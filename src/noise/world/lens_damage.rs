@@ -291,7 +291,7 @@ impl NoiseStage for LensDamage {
                     frame.power[i] = power;
                     let inten = frame.moved.intensity.as_mut().expect("allocated");
                     inten[i] = match &model {
-                        Some(model) => model.intensity_of(power, range),
+                        Some(model) => model.echo_intensity(power, range),
                         None if p0 > 0.0 => scale_byte(inten[i], power / p0),
                         None => inten[i],
                     };

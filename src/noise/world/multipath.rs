@@ -316,7 +316,7 @@ impl NoiseStage for Multipath {
                         frame.power[t] = power;
                         let inten = frame.moved.intensity.as_mut().expect("allocated");
                         inten[t] = match &model {
-                            Some(model) => model.intensity_of(power, range),
+                            Some(model) => model.echo_intensity(power, range),
                             None if p0 > 0.0 => scale_byte(inten[t], power / p0),
                             None => inten[t],
                         };

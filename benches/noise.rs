@@ -176,9 +176,9 @@ fn bench_chain(c: &mut Criterion) {
         });
     }
     // Fog with backscatter (issue 12: fog with backscatter plus crosstalk at most 3 ms
-    // per 50k-return frame). Every return proposes a fog echo at V = 150 m (the echo is
-    // detectable in front of every target), so this includes the slot competition; the
-    // bare line below is the same power model and filters without the stage.
+    // per 50k-return frame). At V = 150 m every beam draws its fog echo (issue 50: the
+    // first noise cell that crosses) and a few are reported; the bare line below is the
+    // same power model and filters without the stage.
     let fog_text = "seed = 42\n[[noise]]\ntype = \"fog\"\nvisibility_m = 150.0\n";
     let (fog, _) = Config::from_toml_str(fog_text, std::path::Path::new("fog.toml"), &[], None)
         .expect("fog config");

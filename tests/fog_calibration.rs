@@ -471,3 +471,26 @@ fn a_sweep_of_visibility_keeps_each_beam_s_draw() {
         .count();
     assert_eq!(missing, 0, "beams with an echo at 120 m lost it at 70 m");
 }
+
+/// Issue 50: with the calibrated optics and the 4 ns pulse the fog's noiseless peak never
+/// reaches the threshold at any visibility (0.58 of it at most, near V = 27 m): under the
+/// threshold model fog only attenuates, and its echoes are the receiver's noise's.
+#[test]
+fn the_calibrated_noiseless_peak_never_reaches_the_threshold() {
+    let f = Fog::new(
+        1000.0,
+        0.046,
+        fog::TAU_H_NS,
+        fog::hdl32e_overlap(),
+        0.0,
+        true,
+    );
+    assert_eq!(f.echo_onset_visibility_m(100.0, 1e-3), 0.0);
+    let best = [10.0, 20.0, 25.0, 27.0, 30.0, 40.0, 60.0, 90.0]
+        .iter()
+        .map(|&v| {
+            Fog::new(v, 0.046, fog::TAU_H_NS, fog::hdl32e_overlap(), 0.0, true).peak_power(100.0)
+        })
+        .fold(0.0f64, f64::max);
+    assert!(best > 0.5e-3 && best < 0.65e-3, "{best}");
+}

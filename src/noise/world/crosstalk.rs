@@ -435,18 +435,27 @@ impl Crosstalk {
             .collect()
     }
 
-    /// Model B: false echoes at uniform ranges in firing slots, occupied or empty.
-    fn apply_physical(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
+    /// The frame's slots, the firings in a sector, the lasers a firing and the number of
+    /// slots in the sectors; `None` when there is none.
+    fn sector_slots(
+        &self,
+        frame: &mut NoisyFrame,
+    ) -> Option<(std::sync::Arc<Slots>, Vec<u32>, usize, usize)> {
         if frame.clean_len == 0 {
-            return;
+            return None;
         }
         let slots = frame.slots();
         let firings = self.firings(frame, &slots);
         let lasers = slots.lasers();
         let n = firings.len() * lasers;
-        if n == 0 {
+        (n > 0).then_some((slots, firings, lasers, n))
+    }
+
+    /// Model B: false echoes at uniform ranges in firing slots, occupied or empty.
+    fn apply_physical(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
+        let Some((slots, firings, lasers, n)) = self.sector_slots(frame) else {
             return;
-        }
+        };
         let count = self.count(n, rng);
         let mut chosen = rand::seq::index::sample(rng, n, count).into_vec();
         chosen.sort_unstable();
@@ -465,20 +474,13 @@ impl Crosstalk {
     /// Model I: the interferer's unsynchronised pulses, direct or scattered, in firing
     /// slots at rate q_x (module documentation).
     fn apply_interferer(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
-        if frame.clean_len == 0 {
-            return;
-        }
         let q = self.rate();
         if q.is_nan() || q <= 0.0 {
             return;
         }
-        let slots = frame.slots();
-        let firings = self.firings(frame, &slots);
-        let lasers = slots.lasers();
-        let n = firings.len() * lasers;
-        if n == 0 {
+        let Some((slots, firings, lasers, n)) = self.sector_slots(frame) else {
             return;
-        }
+        };
         let lo = frame.min_range.max(0.0);
         let direct = self.direct_power(Self::kappa(frame));
         // ln(1 - q) < 0; a gap is floor(ln U / ln(1 - q)), U in (0, 1]: Geometric(q).

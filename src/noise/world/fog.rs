@@ -41,7 +41,8 @@
 //!   the sensor echoing whatever lies behind it. With `[detection] model = "threshold"`
 //!   the stage works as before issue 50: the noiseless maximum of P_s over R, reported
 //!   c tau_H / 2 earlier, proposed to every slot where it is detectable (every free
-//!   slot or none).
+//!   slot or none). With the calibrated optics that maximum never reaches the threshold
+//!   (0.58 p_th at most, near V = 27 m): fog then only attenuates.
 //!
 //! Overlap (`overlap = "biaxial"`, the default): the HDL-32E has its emitter lens and
 //! its receiver lens side by side behind one window (32 laser/detector pairs share them),

@@ -187,7 +187,8 @@ def test_run_on_a_kitti_scan_gives_the_points_and_fates_of_a_64_laser_chain(cli,
     """`run --sensor hdl64e` takes a KITTI .bin as an HDL-64E S2 scan at 10 Hz with 0-1
     intensities: the points it writes back and their fates are those `apply` gives with
     sensor="hdl64e", bit for bit (fog, rain and snow draw from the seed's streams and
-    fill the empty slots of all 64 lasers with echoes; laser 40 is occluded)."""
+    put echoes in empty slots of all 64 lasers, fog's a chance per beam under the
+    receiver's noise; laser 40 is occluded)."""
     config = tmp_path / "weather-occlusion.toml"
     config.write_text(WEATHER.read_text() + OCCLUDE_40.replace("seed = 11\n", ""))
     pts, laser = beam_scan("hdl64e", 8000, seed=3)
@@ -221,6 +222,6 @@ def test_run_on_a_kitti_scan_gives_the_points_and_fates_of_a_64_laser_chain(cli,
     assert np.allclose(written[:, 3] * 255, kept["intensity"], atol=1e-3)
     # The case is the one meant: echoes on lasers past 31, and exactly laser 40 occluded.
     added = kept[kept["fate"] == ln.FATES.index("added")]
-    assert len(added) > 1000 and (added["laser"] > 31).any()
+    assert len(added) > 100 and (added["laser"] > 31).any()
     occluded = applied["fate"][:n] == ln.FATES.index("occluded")
     assert (occluded == (laser == 40)).all()

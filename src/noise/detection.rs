@@ -35,7 +35,8 @@
 //! the recording, not to the echo), with the peak amplitude the draw gives:
 //! z = Q^-1(u), A = x + sigma(x) z >= 1. That amplitude is the echo's power in the
 //! slot's competition (strongest return), so an echo and a return of equal mean power
-//! no longer tie.
+//! no longer tie. The recorded return competes with its mean power (its own peak is not
+//! drawn: the recording fixed it, and the stages only scale it).
 //!
 //! Draw pattern: the recorded returns' decisions use a stream of their own, keyed like a
 //! stage's by (seed, frame, [`DETECTION_TAG`]), one 32-bit draw per recorded return in

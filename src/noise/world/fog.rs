@@ -918,20 +918,18 @@ impl Fog {
     }
 
     /// The first-crossing table for `frame` (its threshold, minimum range and detection
-    /// rule) and power constant `kappa`, made once per run and shared.
+    /// rule, which must be the probabilistic one) and power constant `kappa`, made once
+    /// per run and shared.
     pub fn crossing(&self, frame: &NoisyFrame, kappa: f64) -> Arc<Crossing> {
         let t = frame.threshold;
         let x_scale = self.echo_scale(kappa) / t;
-        // The threshold model: a noiseless receiver (sigma -> 0), so a cell crosses
-        // exactly when its mean does.
-        let rule = match &frame.detection {
-            Some(r) if r.is_probabilistic() => (**r).clone(),
-            _ => DetectionRule::new(&crate::config::DetectionConfig {
-                threshold_snr: 1e6,
-                shot_noise: 0.0,
-                ..crate::config::DetectionConfig::default()
-            }),
-        };
+        // Only probabilistic frames come here (`apply`); a frame without a rule (built
+        // outside a chain) takes the default one.
+        let rule = frame.detection.clone().unwrap_or_else(|| {
+            Arc::new(DetectionRule::new(
+                &crate::config::DetectionConfig::default(),
+            ))
+        });
         let key = [
             x_scale.to_bits(),
             frame.min_range.to_bits(),

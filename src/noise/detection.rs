@@ -74,6 +74,9 @@ pub struct DetectionRule {
     table: Vec<f64>,
     /// P_d(0): the noise-only false alarm probability.
     floor: f64,
+    /// The lowest signal (threshold units) whose echo is reported with probability
+    /// [`FAINTEST_P`] or more.
+    faintest_x: f64,
 }
 
 /// Upper tail of the standard normal distribution, Q(z) = P(Z > z).
@@ -100,11 +103,18 @@ impl DetectionRule {
                 break;
             }
         }
+        let floor = table[0];
+        // P_d is increasing: the first table entry whose excess reaches the cut.
+        let faintest = table
+            .iter()
+            .position(|&p| (p - floor) / (1.0 - floor) >= FAINTEST_P)
+            .unwrap_or(0);
         DetectionRule {
             model: config.model,
             threshold_snr: k,
             shot_noise: g,
-            floor: table[0],
+            floor,
+            faintest_x: faintest as f64 * STEP,
             table,
         }
     }
@@ -212,18 +222,18 @@ impl NoisyFrame {
     /// echoes (particles), stated as a truncation of the model.
     pub fn faintest_echo(&self) -> f64 {
         match &self.detection {
-            Some(rule) if rule.is_probabilistic() => {
-                // P_d is increasing: the first table entry whose excess reaches the cut.
-                let j = rule
-                    .table
-                    .iter()
-                    .position(|&p| (p - rule.floor) / (1.0 - rule.floor) >= FAINTEST_P)
-                    .unwrap_or(0);
-                j as f64 * STEP * self.threshold
-            }
+            Some(rule) if rule.is_probabilistic() => rule.faintest_x * self.threshold,
             _ => self.threshold,
         }
     }
+}
+
+/// True when return `i` of fate `fate` is a recorded return the probabilistic rule
+/// decided (`i` below `decided`, [`NoisyFrame::decided_len`]) and still reports itself:
+/// it counts as detected whatever its power.
+#[inline]
+pub fn settled(i: usize, fate: Fate, decided: usize) -> bool {
+    (i < decided) & (fate == Fate::Kept)
 }
 
 /// Decides, before the slots' competition, which recorded returns the receiver still
@@ -273,7 +283,7 @@ pub fn decide_recorded(frame: &mut NoisyFrame, ideal: &[f64], t0: f64, rng: &mut
 pub fn apply_detection(frame: &mut NoisyFrame, detection: &DetectionConfig) {
     let (min_power, min_range) = (detection.min_power, detection.min_range_m);
     // Recorded returns decided by the probabilistic rule pass the power test.
-    let decided = if frame.decided { frame.clean_len } else { 0 };
+    let decided = frame.decided_len();
     // One branch per return, on whether the filters drop it (rare), not one on its fate:
     // after stages that drop returns at random (rain, a receiver's soft threshold) the
     // fate branch mispredicted often; stores only for drops (storing every fate and
@@ -287,9 +297,7 @@ pub fn apply_detection(frame: &mut NoisyFrame, detection: &DetectionConfig) {
         .zip(&frame.range)
         .enumerate()
     {
-        // A recorded return still in its place (not replaced by an echo) was decided.
-        let settled = (i < decided) & (*fate == Fate::Kept);
-        let below_power = (p < min_power) & !settled;
+        let below_power = (p < min_power) & !settled(i, *fate, decided);
         let drop = fate.is_alive() & (below_power | (f64::from(r) < min_range));
         let dropped = if below_power {
             Fate::BelowPower

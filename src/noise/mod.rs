@@ -631,10 +631,28 @@ impl NoisyFrame {
     #[inline]
     pub fn return_detectable(&self, i: usize) -> bool {
         let fate = self.fate[i];
-        let settled = self.decided & (i < self.clean_len) & (fate == Fate::Kept);
         fate.is_alive()
             & (f64::from(self.range[i]) >= self.min_range)
-            & (settled | (self.power[i] >= self.threshold))
+            & (detection::settled(i, fate, self.decided_len()) | (self.power[i] >= self.threshold))
+    }
+
+    /// How many returns (the first, recorded ones) [`detection::decide_recorded`] decided:
+    /// the recorded returns once it ran, none before.
+    #[inline]
+    pub fn decided_len(&self) -> usize {
+        if self.decided {
+            self.clean_len
+        } else {
+            0
+        }
+    }
+
+    /// kappa (m^2) of the frame's power model, or of the default one for frames built
+    /// without it.
+    pub fn kappa_m2(&self) -> f64 {
+        self.power_model
+            .as_ref()
+            .map_or(power::DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2)
     }
 
     /// The intensity rule (module documentation, "Intensity"): every kept return reports

@@ -18,6 +18,10 @@
 use crate::config::{DetectionConfig, IntensityMode, PowerConfig, PowerModel, SensorConfig};
 use serde::Serialize;
 
+/// kappa (m^2) of the default power model (a 10 % target at 100 m on the 1e-3
+/// threshold), for frames built without one.
+pub const DEFAULT_KAPPA_M2: f64 = 100.0;
+
 /// Every constant of the ideal-power model, for reports.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct PowerConstants {

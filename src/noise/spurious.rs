@@ -780,9 +780,6 @@ pub fn resolve(frame: &mut NoisyFrame) {
         if let Some(d) = &dense {
             let (threshold, min_range) = (frame.threshold, frame.min_range);
             let detectable = |r: f32, p: f64| p >= threshold && f64::from(r) >= min_range;
-            // Recorded returns the probabilistic rule decided pass the power test.
-            let decided = if frame.decided { frame.clean_len } else { 0 };
-            let settled = |i: usize, f: Fate| (i < decided) & (f == Fate::Kept);
             let (range, power, fate) = (&frame.range, &frame.power, &frame.fate);
             // Branch-free for the usual slot (whether an echo wins is a coin toss to the
             // branch predictor): every return is written, the count moves on a win.
@@ -794,15 +791,7 @@ pub fn resolve(frame: &mut NoisyFrame) {
                 let usual = *b == NONE && slots.occupants[slot as usize] == [i as u32, NONE];
                 if usual || !ok {
                     let f = fate[i];
-                    let alive = f.is_alive()
-                        & detectable(
-                            range[i],
-                            if settled(i, f) {
-                                f64::INFINITY
-                            } else {
-                                power[i]
-                            },
-                        );
+                    let alive = frame.return_detectable(i);
                     let better = if last {
                         e.range > range[i]
                     } else {

@@ -111,9 +111,6 @@ use toml::Value;
 /// The `type` name of this stage.
 pub const NAME: &str = "crosstalk";
 
-/// kappa of the default power model (m^2), for descriptions and frames without one.
-const DEFAULT_KAPPA_M2: f64 = 100.0;
-
 /// An azimuth sector: `width` degrees clockwise from `from` (the sensor's azimuth
 /// direction), possibly through 0; a width of 360 is the whole turn.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -381,14 +378,6 @@ impl Crosstalk {
         Binomial::new(n as u64, p).map_or(0, |b| b.sample(rng) as usize)
     }
 
-    /// The power model's kappa (m^2) of the frame, or the default.
-    fn kappa(frame: &NoisyFrame) -> f64 {
-        frame
-            .power_model
-            .as_ref()
-            .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2)
-    }
-
     /// Model A: false echoes about the ranges of eligible returns.
     fn apply_benchmark(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
         // The eligible returns: alive and in a sector (one pass, no draws).
@@ -460,7 +449,7 @@ impl Crosstalk {
         let mut chosen = rand::seq::index::sample(rng, n, count).into_vec();
         chosen.sort_unstable();
         let lo = frame.min_range.max(0.0);
-        let power = self.direct_power(Self::kappa(frame));
+        let power = self.direct_power(frame.kappa_m2());
         for k in chosen {
             let slot = slots.slot(firings[k / lasers] as usize, (k % lasers) as u8);
             let range = (lo + (self.max_range_m - lo) * uniform(rng)) as f32;
@@ -482,7 +471,7 @@ impl Crosstalk {
             return;
         };
         let lo = frame.min_range.max(0.0);
-        let direct = self.direct_power(Self::kappa(frame));
+        let direct = self.direct_power(frame.kappa_m2());
         // ln(1 - q) < 0; a gap is floor(ln U / ln(1 - q)), U in (0, 1]: Geometric(q).
         let ln_miss = (-q).ln_1p();
         let mut k = 0usize;
@@ -547,7 +536,7 @@ impl NoiseStage for Crosstalk {
             .collect();
         let sectors = sectors.join(", ");
         let rate = self.rate() * 100.0;
-        let direct = self.direct_power(DEFAULT_KAPPA_M2);
+        let direct = self.direct_power(crate::noise::power::DEFAULT_KAPPA_M2);
         match self.model {
             Model::Interferer => {
                 let power = match self.power {

@@ -113,9 +113,6 @@ use toml::Value;
 /// The `type` name of this stage.
 pub const NAME: &str = "fog";
 
-/// kappa (m^2) of the default power model, for frames built without one.
-const DEFAULT_KAPPA_M2: f64 = 100.0;
-
 /// Range (m) taken as the target range R0 of a slot without a return, for the range
 /// noise of its fog echo: the HDL-32E's rated range.
 pub const EMPTY_SLOT_RANGE_M: f64 = 100.0;
@@ -526,7 +523,7 @@ fn rms_droplet_radius_m(droplets: Droplets) -> f64 {
 
 /// What a [`Crossing`] depends on besides the stage: the echo's scale over the
 /// threshold, the minimum range and the detection rule's parameters (bits).
-type CrossingKey = [u64; 5];
+type CrossingKey = [u64; 4];
 
 /// The fog echo as the receiver reports it: where the noisy waveform first crosses the
 /// threshold, tabulated over the target range R0.
@@ -935,7 +932,6 @@ impl Fog {
             frame.min_range.to_bits(),
             rule.threshold_snr.to_bits(),
             rule.shot_noise.to_bits(),
-            u64::from(rule.is_probabilistic()),
         ];
         let mut cache = self.crossings.0.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((_, c)) = cache.iter().find(|(k, _)| *k == key) {
@@ -967,10 +963,7 @@ impl Fog {
     /// before issue 50: the noiseless maximum of the waveform, proposed to every slot
     /// where it is detectable (one draw per beam only with `range_noise_m`).
     fn propose_noiseless(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
-        let kappa = frame
-            .power_model
-            .as_ref()
-            .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2);
+        let kappa = frame.kappa_m2();
         let scale = self.echo_scale(kappa);
         let table = self.table();
         let n = self.range_noise_m;
@@ -1128,10 +1121,7 @@ impl NoiseStage for Fog {
             self.propose_noiseless(frame, rng);
             return;
         }
-        let kappa = frame
-            .power_model
-            .as_ref()
-            .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2);
+        let kappa = frame.kappa_m2();
         let crossing = self.crossing(frame, kappa);
         let t = frame.threshold;
         let n = self.range_noise_m;
@@ -1145,9 +1135,7 @@ impl NoiseStage for Fog {
         // One uniform per recorded return (whatever its fate), then one per vacant slot,
         // and a second one each when `range_noise_m` > 0: streams stay aligned across
         // sweeps of V.
-        let m = frame.clean_len;
-        let mut found: Vec<(usize, Echo)> = Vec::new();
-        for i in 0..m {
+        for i in 0..frame.clean_len {
             let u: f64 = rng.random();
             let v: f64 = if n > 0.0 { rng.random() } else { 0.0 };
             if frame.fate[i] == Fate::Occluded {
@@ -1158,11 +1146,8 @@ impl NoiseStage for Fog {
                 if n > 0.0 {
                     e.range = noisy(v, f64::from(e.range), r0) as f32;
                 }
-                found.push((i, e));
+                frame.propose(i, e);
             }
-        }
-        for (i, e) in found {
-            frame.propose(i, e);
         }
         if self.empty_slots {
             for slot in 0..slots.len() as u32 {

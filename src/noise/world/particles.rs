@@ -685,10 +685,7 @@ pub fn propose_population_echoes(
     if pop.is_empty() {
         return;
     }
-    let kappa = frame
-        .power_model
-        .as_ref()
-        .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2);
+    let kappa = frame.kappa_m2();
     // With probabilistic detection the particles are drawn down to the faintest echo
     // that can be reported, and each one's detection drawn.
     let prep = match frame.detection.clone().filter(|r| r.is_probabilistic()) {
@@ -731,9 +728,6 @@ pub fn propose_population_echoes(
         frame.propose_slot(slot, e);
     }
 }
-
-/// kappa (m^2) of the default power model, for frames built without one.
-pub const DEFAULT_KAPPA_M2: f64 = 100.0;
 
 #[cfg(test)]
 mod tests {

@@ -39,7 +39,7 @@
 //! shares its machinery with the rain backscatter (LISA). Wet ground is not modelled.
 
 use super::mie::Dsd;
-use super::particles::{Particles, Population, Reflectance, DEFAULT_KAPPA_M2};
+use super::particles::{Particles, Population, Reflectance};
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::registry::OptionSpec;
@@ -229,10 +229,7 @@ pub fn propose_particle_echoes(
     if particles.is_empty() {
         return;
     }
-    let kappa = frame
-        .power_model
-        .as_ref()
-        .map_or(DEFAULT_KAPPA_M2, |m| m.constants().kappa_m2);
+    let kappa = frame.kappa_m2();
     let (threshold, min_range) = (frame.threshold, frame.min_range);
     let cutoff = particles.cutoff_m(kappa, threshold);
     let slots = frame.slots();

@@ -37,15 +37,16 @@ pub struct Return {
     pub time: f64,
     /// Zero-based index of the capture record that carried the return.
     pub packet: u32,
-    /// Raw distance in the packet's 2 mm units.
+    /// Raw distance in the packet's distance units (2 mm on the HDL-32E and VLP-16, 4 mm
+    /// on the VLP-32C and VLS-128; the sensor model's `distance_resolution_m`).
     pub raw_distance: u16,
     /// Intensity byte as reported by the sensor.
     pub intensity: u8,
-    /// Laser id (firing order in the block, 0..31).
+    /// Laser id: the channel's index in the sensor model's laser table (0 to lasers - 1).
     pub laser: u8,
     /// Ring (lasers sorted by elevation, 0 = lowest).
     pub ring: u8,
-    /// Block (firing) index within the packet, 0..11.
+    /// Data block index within the packet (0 to 11).
     pub block: u8,
     /// Which return of the firing this is.
     pub kind: ReturnKind,
@@ -112,5 +113,58 @@ impl Frame {
     /// Time of the first return in the frame, in seconds past the hour.
     pub fn start_time(&self) -> f64 {
         self.returns.first().map_or(0.0, |r| r.time)
+    }
+}
+
+/// What happened to a return; the first cause in pipeline order wins.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+#[repr(u8)]
+pub enum Fate {
+    /// Survives the chain and the filters.
+    Kept = 0,
+    /// Removed by an occlusion stage (the beam was never emitted).
+    Occluded = 1,
+    /// Noisy power under the detection threshold.
+    BelowPower = 2,
+    /// Noisy range under the minimum range.
+    BelowMinRange = 3,
+    /// Replaced by a spurious echo that won its firing slot: the position and range are
+    /// the echo's, `clean` keeps the return that was recorded.
+    Replaced = 4,
+    /// Added by a stage in a firing slot that had no return (no clean origin).
+    Added = 5,
+}
+
+/// `cause` of returns whose fate no stage decided: kept returns, and returns dropped by
+/// the detection filters.
+pub const NO_CAUSE: u8 = u8::MAX;
+
+impl Fate {
+    /// The causes of removal, in pipeline order.
+    pub const DROPS: [Fate; 3] = [Fate::Occluded, Fate::BelowPower, Fate::BelowMinRange];
+
+    /// True while the sensor still reports the return (kept, or a spurious echo in its place).
+    #[inline]
+    pub fn is_alive(self) -> bool {
+        matches!(self, Fate::Kept | Fate::Replaced | Fate::Added)
+    }
+
+    /// True for returns that are echoes of no recorded return.
+    #[inline]
+    pub fn is_spurious(self) -> bool {
+        matches!(self, Fate::Replaced | Fate::Added)
+    }
+
+    /// Short snake_case name (as in reports).
+    pub fn name(self) -> &'static str {
+        match self {
+            Fate::Kept => "kept",
+            Fate::Occluded => "occluded",
+            Fate::BelowPower => "below_power",
+            Fate::BelowMinRange => "below_min_range",
+            Fate::Replaced => "replaced",
+            Fate::Added => "added",
+        }
     }
 }

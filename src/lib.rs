@@ -21,6 +21,7 @@ pub mod hdl32e;
 pub mod loader;
 pub mod memory;
 pub mod noise;
+pub(crate) mod numeric;
 pub mod options;
 pub mod par;
 pub mod pipeline;

@@ -498,7 +498,7 @@ impl Geometry {
     fn of(&mut self, chunk: &[CloudPoint], steps_per_deg: f64, unit_m: f64, scale: f64) {
         #[cfg(target_arch = "x86_64")]
         {
-            if crate::noise::transmission::avx512() {
+            if crate::numeric::avx512() {
                 // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
                 unsafe { self.of_avx512(chunk, steps_per_deg, unit_m, scale) };
                 return;
@@ -527,7 +527,7 @@ impl Geometry {
 
     /// [`Geometry::of`] compiled for AVX2: four points a vector instead of SSE2's two
     /// (the same bits: no fused multiply-adds either way). Its own function, because a
-    /// closure passed to `transmission::wide` was not inlined into it and ran as SSE2.
+    /// closure passed to `numeric::wide` was not inlined into it and ran as SSE2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn of_avx2(
@@ -562,9 +562,9 @@ impl Geometry {
             azimuth[k] = if a < 0.0 { a + 360.0 } else { a };
             steps[k] = azimuth[k] * steps_per_deg;
             elevation[k] = crate::cloud::atan::atan2(z, horizontal[k]).to_degrees();
-            raw[k] = crate::noise::round_clamped(range[k] / unit_m, u16::MAX);
+            raw[k] = crate::numeric::round_clamped(range[k] / unit_m, u16::MAX);
             let i = f64::from(p.intensity);
-            bytes[k] = crate::noise::round_clamped(i * scale, 255) as u8;
+            bytes[k] = crate::numeric::round_clamped(i * scale, 255) as u8;
             // Zero times a value is 0 unless the value is infinite or NaN.
             finite[k] = (x * 0.0 + y * 0.0) + (z * 0.0 + i * 0.0) == 0.0;
         }
@@ -951,7 +951,7 @@ mod tests {
                 unsafe { g.of_avx2(&chunk, steps, unit, scale) };
                 assert!(rows(&g) == want, "avx2");
             }
-            if crate::noise::transmission::avx512() {
+            if crate::numeric::avx512() {
                 let mut g = Box::<Geometry>::default();
                 // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
                 unsafe { g.of_avx512(&chunk, steps, unit, scale) };

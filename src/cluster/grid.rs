@@ -519,7 +519,7 @@ impl KeyGrid {
 fn packed_keys(points: &[[f32; 3]], grid: KeyGrid, ib: u32) -> Vec<u64> {
     #[cfg(target_arch = "x86_64")]
     {
-        if crate::noise::transmission::avx512() {
+        if crate::numeric::avx512() {
             // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
             return unsafe { packed_keys_avx512(points, grid, ib) };
         }
@@ -904,7 +904,7 @@ mod tests {
         assert_eq!(packed_keys(&points, grid, 14), plain, "picked");
         #[cfg(target_arch = "x86_64")]
         {
-            if crate::noise::transmission::avx512() {
+            if crate::numeric::avx512() {
                 // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
                 let wide = unsafe { packed_keys_avx512(&points, grid, 14) };
                 assert_eq!(wide, plain, "avx512");

@@ -61,7 +61,7 @@ pub struct Args {
     /// text). The bird's-eye figure is always PNG: its tens of thousands of points would
     /// make an SVG of tens of megabytes.
     #[arg(long, value_enum, value_name = "FORMAT", default_value = "png")]
-    pub figure_format: crate::writers::png::FigureFormat,
+    pub figure_format: crate::writers::figure::FigureFormat,
     /// Replace the results of another sweep (other captures, configuration, --vary keys,
     /// fewer values or seeds, frames, bands or figure) in the folder as a whole; cells of
     /// this sweep are kept. Not needed to grow a sweep by new --vary values or seeds: its

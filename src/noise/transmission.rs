@@ -9,6 +9,7 @@
 //! r^13 (truncation below 5e-18 relative), scaled by 2^k through the exponent bits.
 //! Within 2 ulp of the exact value (tested against libm over the whole range).
 
+use crate::numeric::wide;
 use std::f64::consts::LOG2_E;
 
 /// ln 2 split so that k * LN2_HI is exact for |k| < 2^20 (fdlibm's `ln2HI`).
@@ -69,57 +70,11 @@ pub fn attenuate(power: &mut [f64], range: &[f32], fate: &[super::Fate], two_alp
     });
 }
 
-/// Runs `f`, a loop over a frame's columns, compiled for AVX-512 or else AVX2 where the
-/// processor has it (eight or four doubles a vector instead of SSE2's two; detected at
-/// run time, because the crate is built for the x86-64 baseline). The results are the same bits: AVX2 brings
-/// wider vectors, not fused multiply-adds, and the compiler never fuses on its own.
-/// Only a small `f` is reliably inlined into the AVX2 function: the larger loops (the Mie
-/// rain pass, the intensity rule) have their own `#[target_feature]` twin instead, which
-/// measured 4 M instructions a frame less than going through this closure.
-#[inline(always)]
-pub fn wide<R>(f: impl FnOnce() -> R) -> R {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if avx512() {
-            // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
-            return unsafe { with_avx512(f) };
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the processor has AVX2 (checked on the line above).
-            return unsafe { with_avx2(f) };
-        }
-    }
-    f()
-}
-
-/// Whether the processor has AVX-512's foundation and its double and quadword
-/// instructions (eight doubles a vector; the conversions between doubles and 64-bit
-/// integers). The loops compiled for it give the same bits as with AVX2 or SSE2: wider
-/// vectors again, no fused multiply-adds (tests compare every variant).
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-pub(crate) fn avx512() -> bool {
-    std::arch::is_x86_feature_detected!("avx512f")
-        && std::arch::is_x86_feature_detected!("avx512dq")
-}
-
-/// `f` inlined into a function compiled with AVX-512 enabled.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512dq")]
-unsafe fn with_avx512<R>(f: impl FnOnce() -> R) -> R {
-    f()
-}
-
-/// `f` inlined into a function compiled with AVX2 enabled.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn with_avx2<R>(f: impl FnOnce() -> R) -> R {
-    f()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    #[cfg(target_arch = "x86_64")]
+    use crate::numeric::{avx512, with_avx2, with_avx512};
 
     /// Each build of a `wide` loop this processor runs gives the baseline loop's bits:
     /// the attenuation factors of ranges from 0 to past the underflow.

@@ -476,9 +476,9 @@ pub fn write_outputs(
     captures: &[String],
     pooled: &Pooled,
     protected: &[&std::path::Path],
-    format: crate::writers::png::FigureFormat,
+    format: crate::writers::figure::FigureFormat,
 ) -> crate::error::Result<Option<(Vec<std::path::PathBuf>, crate::writers::html::Section)>> {
-    use crate::writers::heatmap::{heatmap, HeatCell, Heatmap};
+    use crate::writers::figure::heatmap::{heatmap, HeatCell, Heatmap};
     use crate::writers::html::{Figure, Section};
     if !matches!(vary.kind, VaryKind::Stages { .. }) {
         return Ok(None);

@@ -5,8 +5,8 @@ use super::plan::{Vary, VaryKind};
 use super::run::{Panel, Row, Rows};
 use super::tables::{self, Group};
 use crate::error::{Error, Result};
+use crate::writers::figure::{self, BirdsEyePanel, FigureFormat, LinePlot, Series};
 use crate::writers::html::{Figure, Link, LinkGroup, Page, Section};
-use crate::writers::png::{self, BirdsEyePanel, FigureFormat, LinePlot, Series};
 use std::path::{Path, PathBuf};
 
 /// The bird's-eye figure to draw.
@@ -166,18 +166,18 @@ pub fn presentation(name: &str, label: &str) -> Presentation {
 /// Formats a count: whole numbers without decimals, other means with one.
 fn format_count(v: f64) -> String {
     if (v - v.round()).abs() < 1e-9 {
-        png::format_number(v.round(), 0)
+        figure::format_number(v.round(), 0)
     } else {
-        png::format_number(v, 1)
+        figure::format_number(v, 1)
     }
 }
 
 /// Formats a value of a metric of kind `kind`.
 pub fn format_value(kind: Kind, v: f64) -> String {
     match kind {
-        Kind::Share => png::format_number(v, 3),
+        Kind::Share => figure::format_number(v, 3),
         Kind::Count => format_count(v),
-        Kind::Metres(d) => png::format_number(v, d),
+        Kind::Metres(d) => figure::format_number(v, d),
     }
 }
 
@@ -752,7 +752,7 @@ fn plot_sections(
                 std::fs::create_dir_all(dir.join(&sub)).map_err(|e| Error::io(dir, e))?;
                 let rel = format!("{sub}/{}.{}", p.name, format.extension());
                 let path = dir.join(&rel);
-                png::line_plot(&p.plot, &path, protected, format)?;
+                figure::line_plot(&p.plot, &path, protected, format)?;
                 written.push(path);
                 titles.push((rel.clone(), p.plot.title.clone()));
                 let better = if p.read.contains("higher is better") {
@@ -978,7 +978,7 @@ pub fn write_outputs(
             f.capture, f.frame, f.seed
         );
         let path = dir.join(&rel);
-        png::birdseye(
+        figure::birdseye(
             &title,
             &panels,
             f.extent_m,

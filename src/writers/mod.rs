@@ -6,13 +6,12 @@
 
 pub mod atomic;
 pub mod csv;
-pub mod heatmap;
+pub mod figure;
 pub mod html;
 pub mod json;
 pub mod las;
 pub mod pcap;
 pub mod ply;
-pub mod png;
 pub mod scan;
 pub mod staging;
 

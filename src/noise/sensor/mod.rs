@@ -68,7 +68,7 @@ impl Pose {
     /// `Pose::tilt_after_yaw`, motion's per-firing rotation, is tested against.
     #[cfg(test)]
     pub fn from_small_rpy(roll: f64, pitch: f64, yaw: f64, t: [f64; 3]) -> Pose {
-        use crate::noise::small_sin_cos;
+        use crate::numeric::small_sin_cos;
         Pose::from_sin_cos(
             small_sin_cos(roll),
             small_sin_cos(pitch),
@@ -85,7 +85,7 @@ impl Pose {
     /// that is exactly zero (only with zero angles) at most in its sign. Per firing this
     /// was most of `motion`'s time.
     pub fn tilt_after_yaw(roll: f64, pitch: f64, yaw: f64) -> Pose {
-        use crate::noise::small_sin_cos;
+        use crate::numeric::small_sin_cos;
         let (sr, cr) = small_sin_cos(roll);
         let (sp, cp) = small_sin_cos(pitch);
         let (sy, cy) = small_sin_cos(yaw);
@@ -347,7 +347,7 @@ impl SineTrack {
         let d = x - self.x;
         if self.steps < Self::ANCHOR_EVERY && d.abs() <= Self::MAX_STEP {
             if d != 0.0 {
-                let (sd, cd) = crate::noise::small_sin_cos(d);
+                let (sd, cd) = crate::numeric::small_sin_cos(d);
                 let sin = self.sin * cd + self.cos * sd;
                 self.cos = self.cos * cd - self.sin * sd;
                 self.sin = sin;

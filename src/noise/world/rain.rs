@@ -480,7 +480,7 @@ impl Rain {
 /// Multiplies each alive return's power by exp(-`two_alpha` R) and moves its range by
 /// `delta(R, power after, power before, draw)`, in one pass the compiler vectorises (the
 /// same arithmetic, in the same order, as a return-by-return loop), with AVX-512 or AVX2
-/// where the processor has it (see [`crate::noise::transmission::wide`]).
+/// where the processor has it (see [`crate::numeric::wide`]).
 fn attenuate_and_move(
     columns: (&mut [f32], &mut [f64], &[Fate]),
     draws: &[f64],
@@ -489,7 +489,7 @@ fn attenuate_and_move(
 ) {
     #[cfg(target_arch = "x86_64")]
     {
-        if crate::noise::transmission::avx512() {
+        if crate::numeric::avx512() {
             // SAFETY: the processor has AVX-512 F and DQ (checked on the line above).
             unsafe { attenuate_and_move_avx512(columns, draws, two_alpha, delta) };
             return;
@@ -738,7 +738,7 @@ mod tests {
                     }),
                 ));
             }
-            if crate::noise::transmission::avx512() {
+            if crate::numeric::avx512() {
                 builds.push((
                     "avx512",
                     // SAFETY: the processor has AVX-512 F and DQ (checked above).

@@ -4,7 +4,7 @@
 //! Used for the interaction table of `sweep --interactions` (stage pairs x distance
 //! bands). Drawn with plotters' primitives rather than a chart: the axes are categories.
 
-use super::png::{draw_err, register_font, wrap_text, write_figure, FigureFormat, FAMILY};
+use super::{draw_err, register_font, wrap_text, write_figure, FigureFormat, FAMILY};
 use crate::error::{Error, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;

@@ -52,7 +52,7 @@ fn bench(c: &mut Criterion) {
                     None,
                     &[],
                     &[],
-                    lidar_noise::writers::png::FigureFormat::Png,
+                    lidar_noise::writers::figure::FigureFormat::Png,
                 )
                 .unwrap();
                 dir

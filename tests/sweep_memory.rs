@@ -100,7 +100,7 @@ fn sweep_peak(capture: PathBuf, labels: Option<PathBuf>, out: &Path) -> (usize, 
             None,
             &[],
             &[],
-            lidar_noise::writers::png::FigureFormat::Png,
+            lidar_noise::writers::figure::FigureFormat::Png,
         )
         .unwrap();
         let rows = outcome.rows.len();

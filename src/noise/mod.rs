@@ -65,6 +65,7 @@ pub mod spurious;
 mod stage;
 pub mod summary;
 pub mod transmission;
+mod wire;
 pub mod world;
 
 pub use crate::frame::{Fate, NO_CAUSE};
@@ -74,6 +75,7 @@ pub(crate) use noisy::room_for_added;
 pub use noisy::{Moved, NoisyFrame, TimeStretch};
 pub use reported::Reported;
 pub use stage::{stage_rng, stage_tags, NoiseStage, UNIT_FRAME};
+pub use wire::GeometryChange;
 
 pub use registry::{build_stage, StageKind, REGISTRY};
 pub use world::{occlusion, rain};

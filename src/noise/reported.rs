@@ -15,6 +15,23 @@ pub struct Reported<'a> {
 }
 
 impl Reported<'_> {
+    /// Number of returns: the recorded ones, then those the stages added.
+    pub fn len(&self) -> usize {
+        self.fate.len()
+    }
+
+    /// True for a frame without returns.
+    pub fn is_empty(&self) -> bool {
+        self.fate.is_empty()
+    }
+
+    /// Return `i` as the sensor reports it, or `None` where it reports nothing (the
+    /// return was dropped).
+    #[inline(always)]
+    pub fn alive(&self, i: usize) -> Option<Return> {
+        self.fate[i].is_alive().then(|| self.view.noisy_return(i))
+    }
+
     /// Return `i` as reported.
     #[inline(always)]
     pub fn of(&self, i: usize) -> Return {

@@ -45,11 +45,10 @@
 use crate::calibration::Calibration;
 use crate::capture::{ArcBytes, CaptureReader};
 use crate::error::Error;
-use crate::frame::{Return, ReturnKind};
 use crate::hdl32e::decode::DualSelect;
 use crate::hdl32e::encode::{raw_distance, BLOCKS_PER_PACKET, BLOCK_LEN};
 use crate::hdl32e::packet::{self, ReturnMode};
-use crate::noise::{stage_rng, NoiseChain, NoisyFrame};
+use crate::noise::{NoiseChain, NoisyFrame};
 use crate::sensor::SensorModel;
 use crate::writers::atomic::AtomicFile;
 use anyhow::{bail, Context, Result};
@@ -397,20 +396,18 @@ impl NoisyCapture {
     /// Frames touch disjoint slots, so the order in which workers call this does not
     /// change the bytes.
     pub fn encode_frame(&self, frame: &NoisyFrame) {
-        let intensity = frame.moved.intensity.as_deref();
+        let reported = frame.reported();
         let mut lost = 0u64;
-        let mut patches = Vec::with_capacity(frame.len());
-        let last = frame.clean[..frame.clean_len]
-            .iter()
-            .map(|r| r.packet)
-            .max();
-        for (i, r) in frame.clean.iter().enumerate() {
-            let block = usize::from(r.block);
+        let mut patches = Vec::with_capacity(reported.len());
+        // The last packet of the recorded returns (dropped ones included): its records
+        // are complete once this frame is.
+        let last = (0..frame.clean_len).map(|i| reported.of(i).packet).max();
+        for r in (0..reported.len()).filter_map(|i| reported.alive(i)) {
             let fits = match self.model {
                 Some(m) => usize::from(r.laser) < m.lasers,
-                None => block < BLOCKS_PER_PACKET,
+                None => usize::from(r.block) < BLOCKS_PER_PACKET,
             };
-            if !frame.fate[i].is_alive() || !fits {
+            if !fits {
                 continue;
             }
             let laser = if self.model.is_some() {
@@ -419,13 +416,13 @@ impl NoisyCapture {
                 r.laser & 31
             };
             let offset = self.offsets.get(usize::from(laser)).copied().unwrap_or(0.0);
-            match raw_distance(frame.range[i], offset, self.resolution) {
+            match raw_distance(r.range, offset, self.resolution) {
                 Some(raw) => patches.push(Patch {
                     record: r.packet,
                     block: r.block,
                     laser,
                     raw,
-                    intensity: intensity.map_or(r.intensity, |v| v[i]),
+                    intensity: r.intensity,
                 }),
                 None => lost += 1,
             }
@@ -542,59 +539,22 @@ pub fn check_capture(source: &str, mode: ReturnMode, dual: DualSelect) -> Result
     Ok(())
 }
 
-/// Refuses a noise chain with a stage that changes what a data packet cannot carry.
-///
-/// A packet holds per return only a distance and an intensity; azimuths are per firing
-/// and shared by the 32 lasers, elevations are the calibration's, times are the packet's
-/// timestamp. Each stage is applied alone to a probe rotation (180 firings of 32 returns
-/// at 10 m); a stage that then reports an azimuth, elevation, pose or time change is
-/// named in the error. Probing rather than listing types keeps this right when a stage
-/// is configured at zero magnitude (no change, accepted) or new stages are added.
+/// Refuses a noise chain with a stage that changes what a data packet cannot carry
+/// (see [`NoiseChain::geometry_changes`]): per return a packet holds only a distance and
+/// an intensity.
 pub fn check_encodable(chain: &NoiseChain, seed: u64) -> Result<()> {
-    let probe = probe_returns();
-    let mut refused = Vec::new();
-    for (i, stage) in chain.stages().iter().enumerate() {
-        let mut frame = NoisyFrame::new(0, probe.clone(), chain.ideal_power());
-        frame.threshold = 0.0;
-        let mut rng = stage_rng(seed, 0, i as u32);
-        stage.apply(&mut frame, &mut rng);
-        let m = &frame.moved;
-        let mut what = Vec::new();
-        if m.azimuth_deg
-            .as_ref()
-            .is_some_and(|v| v.iter().any(|&a| a != 0.0))
-        {
-            what.push("azimuth");
-        }
-        if m.elevation_deg
-            .as_ref()
-            .is_some_and(|v| v.iter().any(|&a| a != 0.0))
-        {
-            what.push("elevation");
-        }
-        if m.pose.as_ref().is_some_and(|poses| {
-            probe.iter().enumerate().any(|(i, r)| {
-                poses.of(i).apply([r.x, r.y, r.z], r.time - poses.t_ref) != [r.x, r.y, r.z]
-            })
-        }) {
-            what.push("position (pose)");
-        }
-        if (m.time.is_some() || !m.time_stretch.is_empty())
-            && probe
-                .iter()
-                .enumerate()
-                .any(|(i, r)| m.reported_time(i, r.time) != r.time)
-        {
-            what.push("firing time");
-        }
-        if !what.is_empty() {
-            refused.push(format!(
-                "noise[{i}] ({}) changes the {}",
-                stage.kind(),
-                what.join(", ")
-            ));
-        }
-    }
+    let refused: Vec<String> = chain
+        .geometry_changes(seed)
+        .iter()
+        .map(|c| {
+            format!(
+                "noise[{}] ({}) changes the {}",
+                c.stage,
+                c.kind,
+                c.what.join(", ")
+            )
+        })
+        .collect();
     if !refused.is_empty() {
         bail!(
             "--pcap-out cannot write this configuration: {}; a data packet holds only a \
@@ -605,35 +565,4 @@ pub fn check_encodable(chain: &NoiseChain, seed: u64) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// A synthetic rotation in the default calibration's geometry, for [`check_encodable`].
-fn probe_returns() -> Vec<Return> {
-    let cal = Calibration::builtin();
-    let rings = cal.rings();
-    let mut out = Vec::with_capacity(180 * 32);
-    for f in 0..180u32 {
-        let az = f as f32 * 2.0;
-        for (j, l) in cal.lasers.iter().enumerate() {
-            let range = 10.0f32;
-            let (w, a) = (l.elevation_deg.to_radians() as f32, az.to_radians());
-            out.push(Return {
-                x: range * w.cos() * a.cos(),
-                y: -range * w.cos() * a.sin(),
-                z: range * w.sin(),
-                range,
-                azimuth: az,
-                elevation: l.elevation_deg as f32,
-                time: 1.0 + f64::from(f) * 46.08e-6 + j as f64 * 1.152e-6,
-                packet: f / 12,
-                raw_distance: 5000,
-                intensity: 40,
-                laser: j as u8,
-                ring: rings[j],
-                block: (f % 12) as u8,
-                kind: ReturnKind::Strongest,
-            });
-        }
-    }
-    out
 }

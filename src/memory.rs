@@ -5,10 +5,10 @@
 /// Why: with huge pages every first touch of heap memory faults in and clears 2 MB.
 /// Where the kernel takes huge pages from memory it has handed back to the host (a VM
 /// with free page reporting, as on the machine this tool is measured on), each such
-/// fault also waits for the host: `run` on the shared capture, started after two idle
-/// seconds, took 122-137 ms (median) instead of 72-78 ms with 4 KB pages. Started back
-/// to back, huge pages were faster by up to 6 %; the opt-out trades that for run times
-/// that do not depend on the host's memory (manual, "Benchmarks"). mimalloc is built
+/// fault also waits for the host, and a run started after an idle pause took far longer
+/// than with 4 KB pages. Back to back, huge pages were a little faster; the opt-out
+/// trades that for run times that do not depend on the host's memory (figures in the
+/// manual, "Benchmark history", "Huge pages"). mimalloc is built
 /// without its own request for them (its `no_thp` feature: it used to `madvise` its
 /// whole arena); this covers kernels whose policy gives them to every process.
 pub fn no_transparent_huge_pages() {
@@ -82,23 +82,21 @@ pub fn worker_warmup_bytes() -> usize {
 /// else to do; dropped, it hands its pages back to the thread's heap, whose next
 /// allocations find them mapped.
 ///
-/// Why: a worker's heap grows to about 10 MB over the shared capture's frames, and every
-/// first touch of a page costs a fault (about 1.25 us here, in the worker's time); the
-/// workers wait about 4 ms at start-up for their first frames while the calling thread
-/// starts and decodes. Faulted in then, in slices of [`HeapWarmer::SLICE`] bytes with
-/// `MADV_POPULATE_WRITE` (about 0.8 us a page), they cost the run little time: `run` on
-/// the shared capture, 2 threads, 41 interleaved runs each, median 66.9 -> 66.3 ms and
-/// 68.4 -> 67.9 ms with 12 MB (8 MB: 66.6, 15 MB: 66.7), page faults about 7,000 ->
-/// 2,800-5,300 (manual, "Benchmark history": "Warm worker heaps"). The block stays below mimalloc's largest
-/// in-segment block (16 MiB): a larger one would be mapped apart and unmapped when freed.
+/// Why: a worker's heap grows to about 10 MB over a capture's frames, and every first
+/// touch of a page costs a fault in the worker's time, while at start-up the workers wait
+/// for their first frames as the calling thread decodes. Faulted in then, in slices of
+/// [`HeapWarmer::SLICE`] bytes with `MADV_POPULATE_WRITE`, the pages cost the run next to
+/// nothing (figures in the manual, "Benchmark history", "Warm worker heaps"). The block
+/// stays below mimalloc's largest in-segment block (16 MiB): a larger one would be mapped
+/// apart and unmapped when freed.
 pub struct HeapWarmer {
     block: Vec<u8>,
     done: usize,
 }
 
 impl HeapWarmer {
-    /// Bytes faulted in per [`HeapWarmer::step`]: about 0.2 ms here, the longest a ready
-    /// frame waits for a warming worker.
+    /// Bytes faulted in per [`HeapWarmer::step`]: the longest a ready frame waits for a
+    /// warming worker is one slice's faults.
     pub const SLICE: usize = 1 << 20;
 
     /// A warmer of `bytes` (`None` for 0, and where pages cannot be populated).

@@ -48,8 +48,8 @@ fn bin_of(abs_nm: u64) -> usize {
 ///
 /// Why without branches: rain's range noise grows with range, so consecutive changes
 /// land in different decades at random and `bin_of`'s branches mispredicted; the three
-/// decades' bins are all computed and the right one picked by masks (the summaries of
-/// the shared capture's 17 frames through the paper chain: 5.5 ms instead of 8.0).
+/// decades' bins are all computed and the right one picked by masks (about a third less
+/// time for the paper chain's summaries).
 #[inline]
 fn bin_of_small(abs_nm: u32) -> usize {
     let in1 = 0u32.wrapping_sub(u32::from(abs_nm >= 100_000_000));

@@ -435,8 +435,8 @@ impl Rain {
     /// Attenuation and range noise of the recorded returns (either model's extinction):
     /// the draws first (the stream is sequential), then one branch-free pass the compiler
     /// vectorises (the same arithmetic, in the same order, as a return-by-return loop;
-    /// goodin's own loop, a return at a time with a draw among the arithmetic, made the
-    /// paper chain's bench 1.55 ms where this pass makes it 1.09).
+    /// goodin's own loop, a return at a time with a draw among the arithmetic, did not
+    /// vectorise and was a third slower on the paper chain's bench).
     fn attenuate_and_draw(&self, frame: &mut NoisyFrame, rng: &mut ChaCha8Rng) {
         let (two_alpha, p_th) = (2.0 * self.alpha, frame.threshold);
         DRAWS.with_borrow_mut(|draws| {

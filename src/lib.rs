@@ -7,10 +7,8 @@
 
 pub mod calibration;
 pub mod capture;
-pub mod cli;
 pub mod cloud;
 pub mod cluster;
-pub mod commands;
 pub mod compare;
 pub mod config;
 pub mod engine;
@@ -21,11 +19,13 @@ pub mod hdl32e;
 pub mod loader;
 pub mod memory;
 pub mod noise;
-pub mod options;
+pub mod observe;
 pub mod par;
 pub mod pipeline;
 pub(crate) mod radix;
+pub mod range;
 pub mod sensor;
+pub mod shard;
 pub mod signals;
 pub mod sweep;
 pub mod synth;

@@ -1232,7 +1232,10 @@ fn sweep(
         Ok(SweepRequest {
             config,
             sets,
-            varies: varies.iter().map(|v| Vary::parse(v)).collect::<Result<_, _>>()?,
+            varies: varies
+                .iter()
+                .map(|v| Vary::parse(v))
+                .collect::<Result<_, _>>()?,
             seeds: seeds.as_deref().map(parse_seeds).transpose()?,
             frames: match &frames {
                 Some(text) => lidar_noise::range::parse_range("--frames", text)?,

@@ -4,9 +4,10 @@
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use lidar_noise::hdl32e::frames::DecoderOptions;
+use lidar_noise::observe::Silent;
 use lidar_noise::sweep::outputs::write_outputs;
 use lidar_noise::sweep::plan::{BaseConfig, Vary};
-use lidar_noise::sweep::run::{run, CaptureInput, Silent, SweepSettings};
+use lidar_noise::sweep::run::{run, CaptureInput, SweepSettings};
 use std::path::PathBuf;
 
 fn bench(c: &mut Criterion) {

@@ -2,6 +2,10 @@
 
 use crate::commands;
 use clap::{CommandFactory, Parser, Subcommand};
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use lidar_noise::error::message_of;
+use lidar_noise::observe::{Counter, Observer};
+use std::sync::Mutex;
 
 /// Exit code for success.
 pub const EXIT_OK: i32 = 0;
@@ -110,6 +114,139 @@ impl Global {
     }
 }
 
+/// Warnings and status lines on stderr, no progress (for commands that draw none).
+impl Observer for Global {
+    fn warn(&self, message: &str) {
+        Global::warn(self, message);
+    }
+    fn note(&self, message: &str) {
+        if !self.quiet {
+            eprintln!("{message}");
+        }
+    }
+}
+
+/// The command line's [`Observer`]: warnings and status lines on stderr, progress bars
+/// on stderr when it is a terminal; nothing but errors when quiet.
+pub struct Console {
+    global: Global,
+    /// Progress is drawn (not quiet, stderr a terminal).
+    visible: bool,
+    multi: MultiProgress,
+    /// The bar of each counter started, in the order started.
+    bars: Mutex<Vec<(Counter, ProgressBar)>>,
+}
+
+impl Console {
+    /// A console for the settings of `global`.
+    pub fn new(global: Global) -> Console {
+        use std::io::IsTerminal;
+        let visible = !global.quiet && std::io::stderr().is_terminal();
+        Console {
+            global,
+            visible,
+            multi: MultiProgress::with_draw_target(if visible {
+                ProgressDrawTarget::stderr()
+            } else {
+                ProgressDrawTarget::hidden()
+            }),
+            bars: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// The bar of `counter`, if started.
+    fn bar(&self, counter: Counter) -> Option<ProgressBar> {
+        let bars = self.bars.lock().unwrap_or_else(|e| e.into_inner());
+        bars.iter()
+            .find(|(c, _)| *c == counter)
+            .map(|(_, b)| b.clone())
+    }
+}
+
+impl Observer for Console {
+    fn warn(&self, message: &str) {
+        self.multi.suspend(|| self.global.warn(message));
+    }
+    fn note(&self, message: &str) {
+        if !self.global.quiet {
+            self.multi.suspend(|| eprintln!("{message}"));
+        }
+    }
+    fn shows_progress(&self) -> bool {
+        self.visible
+    }
+    fn start(&self, counter: Counter, total: Option<u64>) {
+        if !self.visible {
+            return;
+        }
+        let unit = counter.unit();
+        let (bar, template) = match total {
+            Some(n) => (
+                ProgressBar::new(n),
+                format!(
+                    "{{bar:30}} {{pos}}/{{len}} {unit} {{elapsed}} elapsed, {{eta}} left {{msg}}"
+                ),
+            ),
+            None => (
+                ProgressBar::new_spinner(),
+                format!("{{spinner}} {{pos}} {unit} {{elapsed}} {{msg}}"),
+            ),
+        };
+        if let Ok(style) = ProgressStyle::with_template(&template) {
+            bar.set_style(style);
+        }
+        let mut bars = self.bars.lock().unwrap_or_else(|e| e.into_inner());
+        match bars.iter_mut().find(|(c, _)| *c == counter) {
+            // Started again (a sweep's frames, capture by capture): in its place.
+            Some((_, old)) => {
+                let bar = self.multi.insert_after(old, bar);
+                old.finish_and_clear();
+                self.multi.remove(old);
+                *old = bar;
+                old.enable_steady_tick(std::time::Duration::from_millis(200));
+            }
+            None => {
+                let bar = self.multi.add(bar);
+                bar.enable_steady_tick(std::time::Duration::from_millis(200));
+                bars.push((counter, bar));
+            }
+        }
+    }
+    fn set_total(&self, counter: Counter, total: u64) {
+        if let Some(bar) = self.bar(counter) {
+            bar.set_length(total);
+        }
+    }
+    fn label(&self, counter: Counter, label: &str) {
+        if let Some(bar) = self.bar(counter) {
+            bar.set_message(label.to_string());
+        }
+    }
+    fn advance(&self, counter: Counter, n: u64) {
+        if let Some(bar) = self.bar(counter) {
+            bar.inc(n);
+        }
+    }
+    fn finish(&self, counter: Counter) {
+        let mut bars = self.bars.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(i) = bars.iter().position(|(c, _)| *c == counter) {
+            let (_, bar) = bars.remove(i);
+            bar.finish_and_clear();
+            self.multi.remove(&bar);
+        }
+    }
+}
+
+impl Drop for Console {
+    /// Bars of a call that failed go before its error is printed.
+    fn drop(&mut self) {
+        let bars = self.bars.get_mut().unwrap_or_else(|e| e.into_inner());
+        for (_, bar) in bars.drain(..) {
+            bar.finish_and_clear();
+        }
+    }
+}
+
 /// Runs the command line and returns the process exit code.
 pub fn main() -> i32 {
     let cli = match Cli::try_parse() {
@@ -120,10 +257,10 @@ pub fn main() -> i32 {
             return code;
         }
     };
-    crate::signals::install();
+    lidar_noise::signals::install();
     let global = Global { quiet: cli.quiet };
     if let Some(n) = cli.threads {
-        crate::options::set_worker_threads(usize::from(n));
+        lidar_noise::par::set_worker_threads(usize::from(n));
         if let Err(e) = rayon::ThreadPoolBuilder::new()
             .num_threads(usize::from(n))
             .build_global()
@@ -158,7 +295,7 @@ pub fn main() -> i32 {
         Err(e) if is_broken_pipe(&e) => EXIT_OK,
         Err(e)
             if e.chain().any(|c| {
-                c.downcast_ref::<crate::writers::staging::Refused>()
+                c.downcast_ref::<lidar_noise::writers::staging::Refused>()
                     .is_some()
             }) =>
         {
@@ -178,21 +315,4 @@ pub(crate) fn is_broken_pipe(e: &anyhow::Error) -> bool {
         c.downcast_ref::<std::io::Error>()
             .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
     })
-}
-
-/// The error and its causes joined by ": ", leaving out a cause whose text the message
-/// already ends with (our errors print their source themselves, so `{:#}` said it twice).
-pub fn message_of(e: &anyhow::Error) -> String {
-    let mut text = String::new();
-    for cause in e.chain() {
-        let part = cause.to_string();
-        if text.ends_with(&part) {
-            continue;
-        }
-        if !text.is_empty() {
-            text.push_str(": ");
-        }
-        text.push_str(&part);
-    }
-    text
 }

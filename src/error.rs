@@ -92,6 +92,24 @@ pub fn read_text_bounded(path: &std::path::Path) -> Result<String> {
     })
 }
 
+/// The error and its causes joined by ": ", leaving out a cause whose text the message
+/// already ends with (our errors print their source themselves, so `{:#}` said it twice):
+/// how the command line and Python show an error.
+pub fn message_of(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let part = cause.to_string();
+        if text.ends_with(&part) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&part);
+    }
+    text
+}
+
 /// The first ten of `items` joined by commas, then ", and N more" for the rest: how an
 /// error names a long list of missing parts.
 pub(crate) fn first_ten(items: &[String]) -> String {

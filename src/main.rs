@@ -1,3 +1,9 @@
+//! The `lidar-noise` command line: parses arguments with clap and calls the library.
+
+mod cli;
+mod commands;
+mod options;
+
 /// mimalloc: reuses freed pages across frames instead of returning them to the kernel.
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
@@ -27,5 +33,5 @@ fn main() {
     lidar_noise::memory::no_transparent_huge_pages();
     // mimalloc hands a worker's freed warm-up block back to that worker (see the function).
     lidar_noise::memory::warm_worker_heaps(12 << 20);
-    std::process::exit(lidar_noise::cli::main());
+    std::process::exit(cli::main());
 }

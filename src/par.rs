@@ -21,3 +21,28 @@ where
         (a(), b())
     }
 }
+
+/// Worker threads set by [`set_worker_threads`], if any.
+static THREADS: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+
+/// Sets the number of worker threads [`worker_threads`] gives (`--threads N`); the first
+/// call wins.
+pub fn set_worker_threads(n: usize) {
+    let _ = THREADS.set(n.max(1));
+}
+
+/// Worker threads to use: as set by [`set_worker_threads`], else `RAYON_NUM_THREADS`
+/// (when a positive number), else one per core, as rayon decides. Unlike
+/// `rayon::current_num_threads` it does not start rayon's global pool, whose idle threads
+/// would spin beside the streaming workers of `run` and `convert` (a pool of their own,
+/// of this size).
+pub fn worker_threads() -> usize {
+    if let Some(&n) = THREADS.get() {
+        return n;
+    }
+    std::env::var("RAYON_NUM_THREADS")
+        .ok()
+        .and_then(|v| v.trim().parse::<usize>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}

@@ -290,29 +290,28 @@ fn shipped_configs_validate() {
 
 #[test]
 fn validate_command_accepts_good_and_rejects_bad() {
-    use lidar_noise::commands::validate::{run, Args};
-    const QUIET: lidar_noise::cli::Global = lidar_noise::cli::Global { quiet: true };
     let dir = tempfile::tempdir().unwrap();
     let good = dir.path().join("good.toml");
     std::fs::write(&good, GOOD).unwrap();
-    let args = |p: &Path, set: &[&str]| Args {
-        config: Some(p.to_path_buf()),
-        config_file: None,
-        set: set.iter().map(|s| s.to_string()).collect(),
-        seed: None,
-        print: false,
+    // `lidar-noise --quiet validate CONFIG --set ...`: its error message, or None.
+    let validate = |p: &Path, set: &[&str]| -> Option<String> {
+        let mut cmd = assert_cmd::Command::cargo_bin("lidar-noise").unwrap();
+        cmd.args(["--quiet", "validate"]).arg(p);
+        for s in set {
+            cmd.args(["--set", s]);
+        }
+        let out = cmd.output().unwrap();
+        (!out.status.success()).then(|| String::from_utf8_lossy(&out.stderr).into_owned())
     };
-    run(args(&good, &[]), QUIET).unwrap();
-    let e = run(args(&good, &["noise[0].lasers=[199]"]), QUIET)
-        .unwrap_err()
-        .to_string();
+    assert_eq!(validate(&good, &[]), None);
+    let e = validate(&good, &["noise[0].lasers=[199]"]).expect("refused");
     assert!(e.contains("--set noise[0].lasers=[199]"), "{e}");
     let bad = dir.path().join("bad.toml");
     std::fs::write(&bad, GOOD.replace("rate_mm_h = 7.0", "rate_mm_h = -7")).unwrap();
-    let e = run(args(&bad, &[]), QUIET).unwrap_err().to_string();
+    let e = validate(&bad, &[]).expect("refused");
     assert!(e.contains("bad.toml") && e.contains("line 14"), "{e}");
     let missing = dir.path().join("nope.toml");
-    assert!(run(args(&missing, &[]), QUIET).is_err());
+    assert!(validate(&missing, &[]).is_some());
 }
 
 /// An unknown stage key is named with the stage's own options (all of them, not only the

@@ -6,7 +6,7 @@
 
 mod common;
 
-use lidar_noise::commands::frames_total;
+use lidar_noise::engine::inputs::frames_total;
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use std::path::Path;
 

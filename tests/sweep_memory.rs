@@ -12,9 +12,10 @@
 //! no other test allocates meanwhile.
 
 use lidar_noise::hdl32e::frames::DecoderOptions;
+use lidar_noise::observe::Silent;
 use lidar_noise::sweep::outputs::write_outputs;
 use lidar_noise::sweep::plan::{BaseConfig, Vary};
-use lidar_noise::sweep::run::{run, CaptureInput, Silent, SweepSettings};
+use lidar_noise::sweep::run::{run, CaptureInput, SweepSettings};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};

@@ -5,33 +5,32 @@
 mod common;
 
 use lidar_noise::hdl32e::frames::DecoderOptions;
+use lidar_noise::observe::{Counter, Observer};
 use lidar_noise::sweep::plan::{BaseConfig, Vary};
-use lidar_noise::sweep::run::{run, CaptureInput, Observer, SweepSettings};
+use lidar_noise::sweep::run::{run, CaptureInput, SweepSettings};
 use std::sync::Mutex;
 
 #[derive(Debug, PartialEq)]
 enum Event {
-    Capture(u64),
-    FramesTotal(u64),
-    FrameDone,
-    CellDone,
+    Start(Counter, Option<u64>),
+    Total(Counter, u64),
+    Advance(Counter),
 }
 
 #[derive(Default)]
 struct Recorder(Mutex<Vec<Event>>);
 
 impl Observer for Recorder {
-    fn capture(&self, _name: &str, cells: u64) {
-        self.0.lock().unwrap().push(Event::Capture(cells));
+    fn start(&self, counter: Counter, total: Option<u64>) {
+        self.0.lock().unwrap().push(Event::Start(counter, total));
     }
-    fn frames_total(&self, n: u64) {
-        self.0.lock().unwrap().push(Event::FramesTotal(n));
+    fn set_total(&self, counter: Counter, total: u64) {
+        self.0.lock().unwrap().push(Event::Total(counter, total));
     }
-    fn frame_done(&self) {
-        self.0.lock().unwrap().push(Event::FrameDone);
-    }
-    fn cell_done(&self) {
-        self.0.lock().unwrap().push(Event::CellDone);
+    fn advance(&self, counter: Counter, n: u64) {
+        for _ in 0..n {
+            self.0.lock().unwrap().push(Event::Advance(counter));
+        }
     }
 }
 
@@ -57,19 +56,35 @@ fn frames_total_is_known_before_the_first_frame() {
     let rec = Recorder::default();
     run(&settings, &captures, &rec).unwrap();
     let events = rec.0.into_inner().unwrap();
-    assert_eq!(events[0], Event::Capture(6), "{events:?}");
-    let Event::FramesTotal(n) = events[1] else {
-        panic!("the frames' total comes second, before any work: {events:?}");
-    };
-    let total = |e: Event| events.iter().filter(|x| **x == e).count() as u64;
-    assert_eq!(total(Event::FrameDone), n * 6, "frames run = total x cells");
-    assert_eq!(total(Event::CellDone), 6);
-    // Given once: the bar's length does not move under the user's eyes.
     assert_eq!(
-        events
-            .iter()
-            .filter(|e| matches!(e, Event::FramesTotal(_)))
-            .count(),
-        1
+        events[0],
+        Event::Start(Counter::Cells, Some(6)),
+        "{events:?}"
     );
+    let first_frame = events
+        .iter()
+        .position(|e| *e == Event::Advance(Counter::Frames))
+        .expect("frames run");
+    let totals: Vec<u64> = events
+        .iter()
+        .filter_map(|e| match e {
+            Event::Total(Counter::Frames, n) => Some(*n),
+            _ => None,
+        })
+        .collect();
+    // Given once, before any work: the bar's length does not move under the user's eyes.
+    assert_eq!(totals.len(), 1, "{events:?}");
+    let given = events
+        .iter()
+        .position(|e| matches!(e, Event::Total(Counter::Frames, _)))
+        .unwrap();
+    assert!(
+        given < first_frame,
+        "the frames' total comes before any work: {events:?}"
+    );
+    let count = |e: Event| events.iter().filter(|x| **x == e).count() as u64;
+    // The total covers every pending cell: frames run = total.
+    assert_eq!(count(Event::Advance(Counter::Frames)), totals[0]);
+    assert_eq!(totals[0] % 6, 0, "frames per cell x cells");
+    assert_eq!(count(Event::Advance(Counter::Cells)), 6);
 }

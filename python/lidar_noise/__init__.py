@@ -590,8 +590,8 @@ def sweep(
     output: Optional[Union[str, "os.PathLike[str]"]] = None,
     as_dataframe: Optional[bool] = None,
 ) -> Any:
-    """Runs ``lidar-noise sweep`` (its own parser, plan and runner) and returns its tidy
-    table (sweep.csv: one row per capture, frame, cell and seed) as a list of dicts, or a
+    """Runs what ``lidar-noise sweep`` runs (the library's plan and runner) and returns
+    its tidy table (sweep.csv: one row per capture, frame, cell and seed) as a list of dicts, or a
     pandas DataFrame when pandas is importable (``as_dataframe=False`` forces the list).
 
     ``vary`` maps keys to values (``{"rain.rate_mm_h": [0, 3, 7]}`` is ``--vary
@@ -603,22 +603,24 @@ def sweep(
 
     if isinstance(captures, (str, os.PathLike)):
         captures = [captures]
-    args = [str(Path(c)) for c in captures]
-    if config is not None:
-        args += ["-c", str(Path(config))]
+    paths = [str(Path(c)) for c in captures]
+    varies = []
     for key, values in (vary or {}).items():
         if isinstance(values, (str, bytes)) or not isinstance(values, Sequence):
             values = [values]
-        args += ["--vary", f"{key}=" + ",".join(str(v) for v in values)]
-    for key, value in (sets or {}).items():
-        args += ["--set", f"{key}={value}"]
-    if seeds is not None:
-        args += ["--seeds", str(seeds)]
-    if frames is not None:
-        args += ["--frames", str(frames)]
+        varies.append(f"{key}=" + ",".join(str(v) for v in values))
+    overrides = [f"{key}={value}" for key, value in (sets or {}).items()]
     with tempfile.TemporaryDirectory(prefix="lidar-noise-sweep-") as tmp:
         folder = Path(output) if output is not None else Path(tmp) / "sweep"
-        _core.sweep_command(args + ["-o", str(folder)])
+        _core.sweep(
+            paths,
+            str(folder),
+            config=str(Path(config)) if config is not None else None,
+            varies=varies,
+            sets=overrides,
+            seeds=str(seeds) if seeds is not None else None,
+            frames=str(frames) if frames is not None else None,
+        )
         table = folder / "sweep.csv"
         if as_dataframe is not False:
             try:

@@ -1209,25 +1209,45 @@ fn write_ply(path: PathBuf, cols: &Bound<'_, PyDict>, frame: u32) -> PyResult<()
     lidar_noise::writers::atomic::write_atomically(&path, &[], |out| ply.write(out)).map_err(py_err)
 }
 
-/// Runs `lidar-noise sweep ARGS` (the command's own parser, plan and runner, quiet) and
-/// returns its message on failure: the sweep's tidy table is then in the output folder
-/// the arguments name. The GIL is released while it runs.
+/// Runs the library's sweep (what `lidar-noise sweep` runs, silently) of `captures` into
+/// `output`, where its tidy table then is: `varies` are `KEY=V1,V2,...`, `sets`
+/// `KEY=VALUE`, `seeds` and `frames` as the command's options. ValueError for bad options,
+/// OSError for files. The GIL is released while it runs.
 #[pyfunction]
-fn sweep_command(py: Python<'_>, args: Vec<String>) -> PyResult<()> {
-    use clap::Parser;
-    use lidar_noise::cli::{Cli, Command, Global};
-    let argv = ["lidar-noise", "--quiet", "sweep"]
-        .into_iter()
-        .map(String::from)
-        .chain(args);
-    let cli = Cli::try_parse_from(argv)
-        .map_err(|e| PyValueError::new_err(format!("sweep: {}", e.to_string().trim_end())))?;
-    let Command::Sweep(args) = cli.command else {
-        return Err(PyValueError::new_err("sweep: not a sweep"));
-    };
-    py.detach(|| lidar_noise::commands::sweep::run(args, Global { quiet: true }))
+#[pyo3(signature = (captures, output, config=None, varies=Vec::new(), sets=Vec::new(), seeds=None, frames=None))]
+#[allow(clippy::too_many_arguments)]
+fn sweep(
+    py: Python<'_>,
+    captures: Vec<PathBuf>,
+    output: PathBuf,
+    config: Option<PathBuf>,
+    varies: Vec<String>,
+    sets: Vec<String>,
+    seeds: Option<String>,
+    frames: Option<String>,
+) -> PyResult<()> {
+    use lidar_noise::sweep::folder::SweepRequest;
+    use lidar_noise::sweep::plan::{parse_seeds, Vary};
+    let request = (|| -> Result<SweepRequest, Error> {
+        Ok(SweepRequest {
+            config,
+            sets,
+            varies: varies
+                .iter()
+                .map(|v| Vary::parse(v))
+                .collect::<Result<_, _>>()?,
+            seeds: seeds.as_deref().map(parse_seeds).transpose()?,
+            frames: match &frames {
+                Some(text) => lidar_noise::range::parse_range("--frames", text)?,
+                None => lidar_noise::range::ALL_FRAMES,
+            },
+            ..SweepRequest::new(captures, output)
+        })
+    })()
+    .map_err(py_err)?;
+    py.detach(|| lidar_noise::sweep::folder::sweep(&request, &lidar_noise::observe::Silent))
         .map_err(|e| {
-            let message = lidar_noise::cli::message_of(&e);
+            let message = lidar_noise::error::message_of(&e);
             let io = e.chain().any(|c| {
                 matches!(c.downcast_ref::<Error>(), Some(Error::Io { .. }))
                     || c.downcast_ref::<std::io::Error>().is_some()
@@ -1249,7 +1269,7 @@ fn _lidar_noise(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_capture, m)?)?;
     m.add_function(wrap_pyfunction!(read_cloud, m)?)?;
     m.add_function(wrap_pyfunction!(write_ply, m)?)?;
-    m.add_function(wrap_pyfunction!(sweep_command, m)?)?;
+    m.add_function(wrap_pyfunction!(sweep, m)?)?;
     m.add("VERSION", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -1,7 +1,7 @@
 //! `lidar-noise compare`: two result folders field by field, for CI regression checks.
 
 use crate::cli::{Global, EXIT_ERROR, EXIT_OK, EXIT_USAGE};
-use crate::compare::{compare_dirs, Tolerances};
+use lidar_noise::compare::{compare_dirs, Tolerances};
 use std::path::PathBuf;
 
 /// Arguments of `compare`.
@@ -39,9 +39,9 @@ pub fn run(args: Args, global: Global) -> i32 {
     };
     if let Some(path) = &args.junit {
         let xml = report.junit();
-        if let Err(e) =
-            crate::writers::atomic::write_atomically(path, &[], |out| out.write_all(xml.as_bytes()))
-        {
+        if let Err(e) = lidar_noise::writers::atomic::write_atomically(path, &[], |out| {
+            out.write_all(xml.as_bytes())
+        }) {
             return usage(e.to_string());
         }
     }

@@ -1,14 +1,16 @@
 //! `lidar-noise convert`: one point cloud per frame, no noise.
 
-use crate::cli::Global;
-use crate::frame::{Frame, FrameSource};
-use crate::hdl32e::frames::DecoderOptions;
-use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
-use crate::sensor::frames::CaptureFrames;
-use crate::writers::ply::PlyFrame;
-use crate::writers::staging::{self, OutputFolder, Staged};
-use crate::writers::{write_file, FrameOutput};
+use crate::cli::{Console, Global};
+use crate::options::{DecoderArgs, FrameOutputArgs};
 use anyhow::Result;
+use lidar_noise::frame::{Frame, FrameSource};
+use lidar_noise::hdl32e::frames::DecoderOptions;
+use lidar_noise::observe::{Counter, Observer};
+use lidar_noise::range::parse_range;
+use lidar_noise::sensor::frames::CaptureFrames;
+use lidar_noise::writers::ply::PlyFrame;
+use lidar_noise::writers::staging::{self, OutputFolder, Staged};
+use lidar_noise::writers::{write_file, FrameOutput};
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
@@ -37,18 +39,13 @@ pub struct Args {
     pub decoder: DecoderArgs,
 }
 
-/// File name of a frame's PLY (`frame_NNNNN.ply`); other formats:
-/// [`FrameOutput::file_name`].
-pub fn frame_file_name(index: u32) -> String {
-    FrameOutput::default().file_name(index)
-}
-
 /// Decodes each capture and writes the selected frames.
 ///
 /// Frames are written into staging folders beside their targets and moved into place only
 /// when every capture is written: a failed or interrupted convert leaves no frame behind.
 pub fn run(args: Args, global: Global) -> Result<()> {
     super::check_stdin_once(&args.captures)?;
+    let console = Console::new(global);
     let options = args.decoder.to_options()?;
     let output = args.output_format.to_output()?;
     let range = match &args.frames {
@@ -108,8 +105,15 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             .stage(stage_name)
             .map_err(anyhow::Error::from)
             .and_then(|s| {
-                let written =
-                    convert_one(capture, &target, s.path(), &options, output, &range, global)?;
+                let written = convert_one(
+                    capture,
+                    &target,
+                    s.path(),
+                    &options,
+                    output,
+                    &range,
+                    &console,
+                )?;
                 let files = staging::result_files(s.path());
                 staging::write_manifest(s.path(), "convert", &settings, files)?;
                 Ok((s, written))
@@ -172,7 +176,7 @@ fn convert_settings(args: &Args, capture: &Path, output: FrameOutput) -> serde_j
 
 /// True for the frame files `convert` writes (for folders without a manifest).
 fn is_convert_output(name: &str) -> bool {
-    crate::engine::reports::numbered(name, "frame_", &[".ply", ".las", ".laz"])
+    lidar_noise::engine::reports::numbered(name, "frame_", &[".ply", ".las", ".laz"])
 }
 
 /// Writes the frames of `capture` in `range` into `dir` (the staging folder of `target`);
@@ -184,21 +188,21 @@ fn convert_one(
     options: &DecoderOptions,
     output: FrameOutput,
     range: &RangeInclusive<u32>,
-    global: Global,
+    observer: &dyn Observer,
 ) -> Result<u32> {
-    let mut frames = crate::engine::inputs::open_any_capture(capture, options)?;
+    let mut frames = lidar_noise::engine::inputs::open_any_capture(capture, options)?;
     let reader: &mut dyn FrameSource = match &mut frames {
         CaptureFrames::Hdl32e(r) => &mut **r,
         CaptureFrames::Model(r) => &mut **r,
     };
     let source = super::capture_label(capture);
-    let progress = super::frames_progress(global, capture, options, range);
+    lidar_noise::engine::inputs::start_frames(observer, Some(capture), options, range);
     let mut written = 0u32;
     // Decoding on this thread, PLY encoding and writing on the workers, overlapped
     // (see `engine::stream_frames`); the frame's buffer comes back for the decoder to reuse.
     let work = |frame: Frame| -> Result<Frame> {
         let name = output.file_name(frame.index);
-        crate::writers::atomic::refuse_inputs(&target.join(&name), &[capture])?;
+        lidar_noise::writers::atomic::refuse_inputs(&target.join(&name), &[capture])?;
         let path = dir.join(name);
         let ply = PlyFrame::new(&frame.returns, &source, frame.index, frame.start_time());
         write_file(&*output.document(ply), &path, &[capture])?;
@@ -206,30 +210,30 @@ fn convert_one(
     };
     // No heap warm-up: a frame's decoding and PLY need little heap, and warming 12 MB a
     // worker made `convert` of the shared capture slower (16.0 -> 17.9 ms).
-    crate::engine::stream_frames(reader, range, 0, work, |frame, reader| {
+    lidar_noise::engine::stream_frames(reader, range, 0, work, |frame, reader| {
         written += 1;
-        progress.inc(1);
+        observer.advance(Counter::Frames, 1);
         reader.recycle(frame);
         Ok(())
     })?;
-    progress.finish_and_clear();
+    observer.finish(Counter::Frames);
     // Named as `run` names it: the path as given, `<stdin>` for `-`.
     let shown = super::capture_shown(capture);
     match &mut frames {
         CaptureFrames::Hdl32e(reader) => {
             let summary = reader.summary();
-            super::warn_truncation(global, Path::new(&shown), &summary);
-            super::warn_capture(global, Path::new(&shown), &summary, false);
+            super::warn_truncation(observer, Path::new(&shown), &summary);
+            super::warn_capture(observer, Path::new(&shown), &summary, false);
             if written == 0 {
                 // Same message as `run`'s: the capture's full frames counted to its end.
-                return Err(crate::engine::reports::no_frame_error(
+                return Err(lidar_noise::engine::reports::no_frame_error(
                     &shown, range, reader,
                 ));
             }
         }
         CaptureFrames::Model(reader) => {
             if written == 0 {
-                return Err(crate::engine::reports::no_model_frame_error(
+                return Err(lidar_noise::engine::reports::no_model_frame_error(
                     &shown, range, reader,
                 ));
             }

@@ -2,11 +2,11 @@
 //! sensor, told by its packets' structure as `run` tells it).
 
 use crate::cli::Global;
-use crate::frame::FrameSource;
-use crate::hdl32e::frames::CaptureSummary;
 use crate::options::DecoderArgs;
-use crate::sensor::frames::{CaptureFrames, ModelCaptureSummary};
 use anyhow::Result;
+use lidar_noise::frame::FrameSource;
+use lidar_noise::hdl32e::frames::CaptureSummary;
+use lidar_noise::sensor::frames::{CaptureFrames, ModelCaptureSummary};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -31,7 +31,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     for path in &args.captures {
-        let mut reader = match crate::engine::inputs::open_any_capture(path, &options)? {
+        let mut reader = match lidar_noise::engine::inputs::open_any_capture(path, &options)? {
             CaptureFrames::Hdl32e(r) => r,
             CaptureFrames::Model(mut r) => {
                 r.count_rest(&(0..=u32::MAX))?;
@@ -43,7 +43,7 @@ pub fn run(args: Args, global: Global) -> Result<()> {
             frame?;
         }
         let summary = reader.summary();
-        super::warn_truncation(global, path, &summary);
+        super::warn_truncation(&global, path, &summary);
         if let Some(hint) = super::raw_intensity_hint(&summary) {
             global.warn(&format!("{}: {hint}", path.display()));
         }
@@ -179,7 +179,7 @@ fn write_text(out: &mut impl Write, path: &std::path::Path, s: &CaptureSummary) 
             "  duplicates    {} data packet{} dropped (exact copies of one of the {} before)",
             s.duplicate_packets,
             if s.duplicate_packets == 1 { "" } else { "s" },
-            crate::hdl32e::frames::DUPLICATE_WINDOW
+            lidar_noise::hdl32e::frames::DUPLICATE_WINDOW
         )?;
     }
     if s.short_frames > 0 {

@@ -10,10 +10,9 @@ pub mod synth;
 pub mod validate;
 
 // The helpers every command shares live with the engine that runs the inputs.
-pub use crate::engine::inputs::{
-    capture_label, capture_shown, check_stdin_once, frames_progress, frames_total, is_stdin,
-    join_ids, output_names, progress, raw_intensity_hint, warn_capture, warn_truncation, STDIN,
-    STDIN_NAME,
+pub use lidar_noise::engine::inputs::{
+    capture_label, capture_shown, check_stdin_once, join_ids, output_names, raw_intensity_hint,
+    warn_capture, warn_truncation,
 };
 
 /// Writes `text` to standard output, flushed; a failure (a full disk, a closed pipe) is an

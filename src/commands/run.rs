@@ -1,15 +1,14 @@
 //! `lidar-noise run`: parses its arguments into the engine's plain options and calls
-//! [`crate::engine::run`], which streams every input through the pipeline.
+//! [`lidar_noise::engine::run`], which streams every input through the pipeline.
 
 use crate::cli::Global;
-use crate::config::Config;
-use crate::engine::{Plan, RunRequest};
-use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
-use crate::pipeline::Pipeline;
+use crate::options::{DecoderArgs, FrameOutputArgs};
 use anyhow::Result;
+use lidar_noise::config::Config;
+use lidar_noise::engine::{Plan, RunRequest};
+use lidar_noise::pipeline::Pipeline;
+use lidar_noise::range::parse_range;
 use std::path::PathBuf;
-
-pub use crate::engine::inputs::{DEFAULT_CAPTURE, DEFAULT_CAPTURE_NAME};
 
 /// Output folder when `-o` is not given.
 pub const DEFAULT_OUTPUT: &str = "lidar-noise-out";
@@ -75,8 +74,8 @@ pub struct Args {
     /// Run only the captures that fall to shard K of N (K from 0, round-robin over the
     /// captures in the order given; over a dataset folder's scans sorted by name), e.g.
     /// --shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT.
-    #[arg(long, value_name = "K/N", value_parser = crate::options::Shard::parse)]
-    pub shard: Option<crate::options::Shard>,
+    #[arg(long, value_name = "K/N", value_parser = lidar_noise::shard::Shard::parse)]
+    pub shard: Option<lidar_noise::shard::Shard>,
     /// Split each capture into chunks of M frames, so that the units shards deal are
     /// (capture, chunk) rather than captures: for long captures and more nodes than
     /// captures. Each unit writes its frames' files and a part; `--merge` (or the same run
@@ -142,5 +141,5 @@ pub fn run(args: Args, global: Global) -> Result<()> {
         rotation_hz: args.rotation_hz,
         labels: args.labels,
     };
-    crate::engine::run(&plan, &request, global)
+    lidar_noise::engine::run(&plan, &request, &crate::cli::Console::new(global))
 }

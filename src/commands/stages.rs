@@ -1,7 +1,7 @@
 //! `lidar-noise stages`: every noise stage type with its options, generated from the
 //! registry (each stage declares its option specs), so the list cannot drift from code.
 
-use crate::noise::REGISTRY;
+use lidar_noise::noise::REGISTRY;
 
 /// Arguments of `lidar-noise stages`.
 #[derive(Debug, Clone, clap::Args)]

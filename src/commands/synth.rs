@@ -1,10 +1,10 @@
 //! `lidar-noise synth`: writes a synthetic capture (HDL-32E by default, any described
 //! sensor with `--sensor NAME`) with ground-truth labels.
 
-use crate::synth::scene::random_scene;
-use crate::synth::{labels, objects_json, write_capture, Scene, SynthOptions};
-use crate::writers::atomic::temp_file_for;
 use anyhow::{bail, Context};
+use lidar_noise::synth::scene::random_scene;
+use lidar_noise::synth::{labels, objects_json, write_capture, Scene, SynthOptions};
+use lidar_noise::writers::atomic::temp_file_for;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
@@ -65,12 +65,14 @@ pub fn run(args: SynthArgs, global: crate::cli::Global) -> anyhow::Result<()> {
         scene.seed = seed;
     }
     let sensor = match &args.sensor {
-        Some(name) => crate::sensor::by_name(name).map_err(|e| anyhow::anyhow!("--sensor: {e}"))?,
-        None => &crate::sensor::HDL32E,
+        Some(name) => {
+            lidar_noise::sensor::by_name(name).map_err(|e| anyhow::anyhow!("--sensor: {e}"))?
+        }
+        None => &lidar_noise::sensor::HDL32E,
     };
     let (lo, hi) = sensor.rotation_hz;
     let hz = scene.sensor.rotation_hz;
-    if sensor.name != crate::sensor::HDL32E.name && !(lo..=hi).contains(&hz) {
+    if sensor.name != lidar_noise::sensor::HDL32E.name && !(lo..=hi).contains(&hz) {
         bail!(
             "--sensor {}: the scene turns the sensor at {hz} Hz, the {} turns at {lo} to {hi} Hz \
              (set [sensor] rotation_hz in a scene file)",

@@ -1,6 +1,6 @@
 //! `lidar-noise validate`: checks an experiment configuration and lists its stages.
 
-use crate::config::Config;
+use lidar_noise::config::Config;
 use std::path::PathBuf;
 
 /// Arguments of `lidar-noise validate`.

@@ -25,15 +25,16 @@
 //! folder holding another run's results is refused (delete it or choose another folder).
 
 use super::{Plan, RunRequest};
-use crate::cli::Global;
 use crate::hdl32e::frames::FrameReader;
 use crate::hdl32e::index::FrameScan;
 use crate::noise::summary::{
     DropCounts, DropsByLaser, NoiseSummary, RangeChange, RangeChangeState, SpuriousCounts,
 };
+use crate::observe::Observer;
 use crate::pipeline::report::Totals;
 use crate::pipeline::StageCounts;
 use crate::sensor::frames::{CaptureFrames, CaptureSeek};
+use crate::shard::{self, Batch};
 use crate::writers::staging::{self, OutputFolder, Refused};
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
@@ -41,7 +42,8 @@ use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// First bytes of a part file; the checksum of the rest follows.
+/// First bytes of a part file; the checksum of the rest follows (see
+/// [`shard::write_checked`]).
 const PART_MAGIC: &str = "lidar-noise run part xxh3 ";
 
 /// A capture of the run.
@@ -92,7 +94,7 @@ impl Job {
             None => e,
         })?;
         let keep = decoder.keep_partial;
-        let (ranges, seeks, n) = crate::sweep::chunks::chunks_of(found, &plan.frames, keep, m)?;
+        let (ranges, seeks, n) = shard::chunks_of(found, &plan.frames, keep, m)?;
         let job = Job {
             source,
             name,
@@ -187,62 +189,21 @@ struct Part {
 
 /// File name of part `j` with chunks of `m` frames.
 fn part_name(m: u32, j: usize) -> String {
-    format!(".run.chunk{m}-{j:05}.json")
+    shard::part_name("run", m, j)
 }
 
 /// Chunk size of a part file name (None for other names).
 fn part_chunk_size(name: &str) -> Option<u32> {
-    let rest = name.strip_prefix(".run.chunk")?.strip_suffix(".json")?;
-    let (m, j) = rest.split_once('-')?;
-    (j.len() >= 5 && j.bytes().all(|b| b.is_ascii_digit())).then_some(())?;
-    m.parse().ok()
+    shard::run_part_chunk_size(name)
 }
 
 fn write_part(path: &Path, part: &Part, inputs: &[&Path]) -> Result<()> {
-    let body = serde_json::to_vec(part)?;
-    let sum = xxhash_rust::xxh3::xxh3_64(&body);
-    crate::writers::atomic::write_atomically(path, inputs, |out| {
-        out.write_all(format!("{PART_MAGIC}{sum:016x}\n").as_bytes())?;
-        out.write_all(&body)
-    })?;
-    Ok(())
+    Ok(shard::write_checked(path, PART_MAGIC, part, inputs)?)
 }
 
 /// Reads a part: None when absent, Err(why) when it cannot be trusted.
 fn read_part(path: &Path) -> Option<std::result::Result<Part, String>> {
-    let bytes = std::fs::read(path).ok()?;
-    Some((|| {
-        let nl = bytes
-            .iter()
-            .position(|&b| b == b'\n')
-            .ok_or("not a part file")?;
-        let head = std::str::from_utf8(&bytes[..nl]).map_err(|_| "not a part file")?;
-        let sum = head.strip_prefix(PART_MAGIC).ok_or("not a part file")?;
-        let body = &bytes[nl + 1..];
-        if format!("{:016x}", xxhash_rust::xxh3::xxh3_64(body)) != sum {
-            return Err(
-                "the part is incomplete or was changed after it was written \
-                        (checksum mismatch)"
-                    .to_string(),
-            );
-        }
-        serde_json::from_slice(body).map_err(|e| format!("unreadable part: {e}"))
-    })())
-}
-
-/// Refuses a run whose `--chunk-frames` differs from a part found in `dir`.
-fn check_parts(dir: &Path, m: u32) -> Result<()> {
-    if let Some((name, found)) =
-        crate::sweep::chunks::other_chunk_size(dir, Some(m), part_chunk_size)
-    {
-        bail!(
-            "{}: a part of a run computed with --chunk-frames {found}, and this run has \
-             --chunk-frames {m}: give --chunk-frames {found} to every shard and the \
-             merge of this run (or delete the parts to start over)",
-            dir.join(&name).display()
-        );
-    }
-    Ok(())
+    shard::read_checked(path, PART_MAGIC)
 }
 
 /// Checks a capture folder a shard or merge writes into: no other run's results, no
@@ -254,7 +215,7 @@ fn check_folder(
     inputs: &[&Path],
 ) -> Result<()> {
     super::reports::check_target(target, inputs)?;
-    check_parts(target, m)?;
+    shard::check_parts(target, Some(m), Batch::Run)?;
     if let Some(manifest) = staging::read_manifest(target) {
         if manifest.command != "run" || manifest.settings != *settings {
             return Err(anyhow::Error::new(Refused(format!(
@@ -290,7 +251,7 @@ pub(crate) fn run(
     plan: &Plan,
     m: u32,
     inputs: &[&Path],
-    global: Global,
+    observer: &dyn Observer,
 ) -> Result<()> {
     if plan.pcap_out {
         bail!(
@@ -336,7 +297,7 @@ pub(crate) fn run(
                 "{}: no frame to process in {}; pick others with --frames or add \
                  --keep-partial",
                 job.shown(),
-                crate::options::frames_phrase(&plan.frames)
+                crate::range::frames_phrase(&plan.frames)
             );
         }
         jobs.push(job);
@@ -348,7 +309,7 @@ pub(crate) fn run(
     } else {
         OutputFolder::lock(&request.output)?
     };
-    let result = units(request, plan, m, &jobs, &plans, total, inputs, global);
+    let result = units(request, plan, m, &jobs, &plans, total, inputs, observer);
     if result.is_ok() {
         // The checks passed and the merge is done: what killed runs of this tool left.
         folder.remove_leftovers(&super::reports::is_run_path);
@@ -370,7 +331,7 @@ fn units(
     plans: &[Chunks],
     total: usize,
     inputs: &[&Path],
-    global: Global,
+    observer: &dyn Observer,
 ) -> Result<()> {
     let mut settings = Vec::new();
     for job in jobs {
@@ -395,8 +356,7 @@ fn units(
                 }
                 std::fs::create_dir_all(&dir).map_err(|e| crate::error::Error::io(&dir, e))?;
                 let path = dir.join(part_name(m, j));
-                let want =
-                    crate::sweep::chunks::part_settings(settings, m, j, n, &chunks.ranges[j]);
+                let want = shard::part_settings(settings, m, j, n, &chunks.ranges[j]);
                 // A part already there for these settings is kept (shards may run twice).
                 if let Some(Ok(p)) = read_part(&path) {
                     if p.settings == want && p.files.iter().all(|f| dir.join(f).is_file()) {
@@ -411,18 +371,16 @@ fn units(
             offset += n;
         }
         if let Some(shard) = request.shard {
-            if !global.quiet {
-                eprintln!(
-                    "run --shard {shard}: {owned} of {total} capture chunks fall to this shard \
-                     ({computed} computed, {} already done); a shard writes no reports: run \
-                     `lidar-noise run ... --chunk-frames {m} --merge` once every shard is done",
-                    owned - computed
-                );
-            }
+            observer.note(&format!(
+                "run --shard {shard}: {owned} of {total} capture chunks fall to this shard \
+                 ({computed} computed, {} already done); a shard writes no reports: run \
+                 `lidar-noise run ... --chunk-frames {m} --merge` once every shard is done",
+                owned - computed
+            ));
             return Ok(());
         }
     }
-    merge(request, m, jobs, plans, &settings, inputs, global)
+    merge(request, m, jobs, plans, &settings, inputs, observer)
 }
 
 /// Processes one chunk: its frames' files into `dir`, its report pieces into the part.
@@ -507,7 +465,7 @@ fn merge(
     plans: &[Chunks],
     settings: &[serde_json::Value],
     inputs: &[&Path],
-    global: Global,
+    observer: &dyn Observer,
 ) -> Result<()> {
     // Every part of every capture is checked before anything is written.
     let mut missing = Vec::new();
@@ -519,12 +477,12 @@ fn merge(
         }
         for j in 0..n {
             let path = dir.join(part_name(m, j));
-            let want = crate::sweep::chunks::part_settings(settings, m, j, n, &chunks.ranges[j]);
+            let want = shard::part_settings(settings, m, j, n, &chunks.ranges[j]);
             match read_part(&path) {
                 Some(Ok(p)) if p.settings == want && p.frames <= m as usize => {
                     // A frame file deleted since: the unit is to be computed again.
                     if let Some(f) = p.files.iter().find(|f| !dir.join(f).is_file()) {
-                        global.warn(&format!(
+                        observer.warn(&format!(
                             "{}: {} it wrote is gone",
                             path.display(),
                             dir.join(f).display()
@@ -533,7 +491,7 @@ fn merge(
                     }
                 }
                 Some(Err(why)) => {
-                    global.warn(&format!("{}: {why}", path.display()));
+                    observer.warn(&format!("{}: {why}", path.display()));
                     missing.push(path.display().to_string());
                 }
                 _ => missing.push(path.display().to_string()),
@@ -559,16 +517,14 @@ fn merge(
             continue;
         }
         lines.push(join_capture(
-            request, job, &dir, &names, settings, inputs, global,
+            request, job, &dir, &names, settings, inputs, observer,
         )?);
     }
-    if !global.quiet {
-        for (line, job) in lines.iter().zip(jobs) {
-            eprintln!(
-                "{line}; results in {}",
-                request.output.join(&job.name).display()
-            );
-        }
+    for (line, job) in lines.iter().zip(jobs) {
+        observer.note(&format!(
+            "{line}; results in {}",
+            request.output.join(&job.name).display()
+        ));
     }
     Ok(())
 }
@@ -582,7 +538,7 @@ fn join_capture(
     names: &[String],
     settings: &serde_json::Value,
     inputs: &[&Path],
-    global: Global,
+    observer: &dyn Observer,
 ) -> Result<String> {
     // Parts are read one at a time (memory bounded by a chunk), first for the totals and
     // the files, then for each report.
@@ -641,9 +597,9 @@ fn join_capture(
     let source_summary = match &reader {
         CaptureFrames::Hdl32e(r) => {
             capture_summary = r.summary();
-            super::inputs::warn_truncation(global, Path::new(&job.shown()), &capture_summary);
+            super::inputs::warn_truncation(observer, Path::new(&job.shown()), &capture_summary);
             super::inputs::warn_capture(
-                global,
+                observer,
                 Path::new(&job.shown()),
                 &capture_summary,
                 plan.config.sensor.intensity == crate::config::IntensityMode::Reflectivity,
@@ -705,24 +661,4 @@ fn join_capture(
         frames,
         &summary.totals,
     ))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn part_names_round_trip_their_chunk_size() {
-        let n = part_name(40, 7);
-        assert_eq!(n, ".run.chunk40-00007.json");
-        assert_eq!(part_chunk_size(&n), Some(40));
-        for other in [
-            "summary.json",
-            ".run.chunk4-1.json",
-            ".run.chunkA-00001.json",
-            "frame_00001.ply",
-        ] {
-            assert_eq!(part_chunk_size(other), None, "{other}");
-        }
-    }
 }

@@ -20,9 +20,9 @@
 //! first failed file in sorted order.
 
 use super::{cloud_options, Plan, RunRequest};
-use crate::cli::Global;
 use crate::cloud::frames::read_frame;
 use crate::cloud::Format;
+use crate::observe::{Counter, Observer};
 use anyhow::{bail, Result};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -222,7 +222,7 @@ fn settings(plan: &Plan, request: &RunRequest, data: &Dataset) -> Result<serde_j
 }
 
 /// Runs every scan of the dataset folder `dir` that falls to this shard.
-pub fn run(plan: &Plan, request: &RunRequest, dir: &Path, global: Global) -> Result<()> {
+pub fn run(plan: &Plan, request: &RunRequest, dir: &Path, observer: &dyn Observer) -> Result<()> {
     check_options(plan, request)?;
     let data = Dataset::find(dir)?;
     // The noise chain for the dataset's sensor, checked before anything is written.
@@ -279,7 +279,7 @@ pub fn run(plan: &Plan, request: &RunRequest, dir: &Path, global: Global) -> Res
     let owned: Vec<usize> = (0..total)
         .filter(|&i| request.shard.is_none_or(|s| s.owns(i)))
         .collect();
-    let progress = files_progress(global, owned.len() as u64);
+    observer.start(Counter::Scans, Some(owned.len() as u64));
     let skipped = AtomicUsize::new(0);
     let one = |i: usize| -> Result<Option<FileDone>> {
         let path = &data.scans[i];
@@ -296,17 +296,17 @@ pub fn run(plan: &Plan, request: &RunRequest, dir: &Path, global: Global) -> Res
             && truth_out.as_ref().is_none_or(|t| t.is_file())
         {
             skipped.fetch_add(1, Ordering::Relaxed);
-            progress.inc(1);
+            observer.advance(Counter::Scans, 1);
             return Ok(None);
         }
         let mut own = inputs.clone();
         own[inputs.len() - 1] = path;
         let outs = (scan_out.as_path(), fate_out.as_path(), truth_out.as_deref());
         let done = run_file(plan, request, &data, i, outs, &own);
-        progress.inc(1);
+        observer.advance(Counter::Scans, 1);
         done.map(Some)
     };
-    let workers = crate::options::worker_threads();
+    let workers = crate::par::worker_threads();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(workers)
         .build()
@@ -314,7 +314,7 @@ pub fn run(plan: &Plan, request: &RunRequest, dir: &Path, global: Global) -> Res
     // One file per task, in order of index: results come back in the files' order.
     let results: Vec<Result<Option<FileDone>>> =
         pool.install(|| owned.par_iter().with_max_len(1).map(|&i| one(i)).collect());
-    progress.finish_and_clear();
+    observer.finish(Counter::Scans);
     let failed = results.iter().filter(|r| r.is_err()).count();
     let (mut points, mut kept, mut computed) = (0usize, 0usize, 0usize);
     let mut first_error = None;
@@ -338,21 +338,19 @@ pub fn run(plan: &Plan, request: &RunRequest, dir: &Path, global: Global) -> Res
             if owned.len() == 1 { "" } else { "s" }
         );
     }
-    if !global.quiet {
-        let shard = request.shard.map_or_else(String::new, |s| {
-            format!(" (shard {s}: {} of {total})", owned.len())
-        });
-        eprintln!(
-            "{}: {} {} scan{}{shard}, {computed} computed ({kept} points written from {points}), {} \
-             already done; results in {}",
-            dir.display(),
-            total,
-            data.layout.name(),
-            if total == 1 { "" } else { "s" },
-            skipped.load(Ordering::Relaxed),
-            out_dir.display()
-        );
-    }
+    let shard = request.shard.map_or_else(String::new, |s| {
+        format!(" (shard {s}: {} of {total})", owned.len())
+    });
+    observer.note(&format!(
+        "{}: {} {} scan{}{shard}, {computed} computed ({kept} points written from {points}), {} \
+         already done; results in {}",
+        dir.display(),
+        total,
+        data.layout.name(),
+        if total == 1 { "" } else { "s" },
+        skipped.load(Ordering::Relaxed),
+        out_dir.display()
+    ));
     Ok(())
 }
 
@@ -408,21 +406,4 @@ fn run_file(
     }
     written?;
     Ok(FileDone { points, kept })
-}
-
-/// A progress bar over the dataset's files on stderr, hidden when quiet or when stderr is
-/// not a terminal.
-fn files_progress(global: Global, total: u64) -> indicatif::ProgressBar {
-    use std::io::IsTerminal;
-    if global.quiet || !std::io::stderr().is_terminal() {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(total);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{bar:30} {pos}/{len} scans {elapsed} elapsed, {eta} left",
-    ) {
-        bar.set_style(style);
-    }
-    bar.enable_steady_tick(std::time::Duration::from_millis(200));
-    bar
 }

@@ -2,8 +2,8 @@
 //! capture, how outputs and messages name them, the warnings about what a capture held,
 //! and the progress shown while frames are processed.
 
-use crate::cli::Global;
 use crate::hdl32e::frames::CaptureSummary;
+use crate::observe::{Counter, Observer};
 use std::path::Path;
 
 /// The capture the main command runs on when none is given.
@@ -12,9 +12,9 @@ pub const DEFAULT_CAPTURE: &[u8] = include_bytes!("../../fixtures/crossroad.pcap
 pub const DEFAULT_CAPTURE_NAME: &str = "crossroad (built-in fixtures/crossroad.pcap)";
 
 /// Warns about a capture cut mid-record.
-pub fn warn_truncation(global: Global, path: &Path, summary: &CaptureSummary) {
+pub fn warn_truncation(observer: &dyn Observer, path: &Path, summary: &CaptureSummary) {
     if let Some(offset) = summary.capture.truncated_at {
-        global.warn(&format!(
+        observer.warn(&format!(
             "{}: the capture ends inside a record at byte offset {offset}; \
              every whole packet before it was decoded",
             path.display()
@@ -25,10 +25,15 @@ pub fn warn_truncation(global: Global, path: &Path, summary: &CaptureSummary) {
 /// Warns about what the decoder skipped and about suspicious data: malformed packets,
 /// lasers that never returned, and (when `check_intensity`) an intensity distribution
 /// that looks like old firmware's raw levels read as calibrated reflectivity.
-pub fn warn_capture(global: Global, path: &Path, s: &CaptureSummary, check_intensity: bool) {
+pub fn warn_capture(
+    observer: &dyn Observer,
+    path: &Path,
+    s: &CaptureSummary,
+    check_intensity: bool,
+) {
     let skipped = s.capture.malformed + s.bad_data_packets;
     if skipped > 0 {
-        global.warn(&format!(
+        observer.warn(&format!(
             "{}: skipped {} malformed packet{} ({} with malformed headers, {} data packets \
              with an invalid return mode byte)",
             path.display(),
@@ -39,7 +44,7 @@ pub fn warn_capture(global: Global, path: &Path, s: &CaptureSummary, check_inten
         ));
     }
     if s.duplicate_packets > 0 {
-        global.warn(&format!(
+        observer.warn(&format!(
             "{}: dropped {} duplicate data packet{} (exact copies, same timestamp and bytes, \
              of one of the {} data packets before; the capture was recorded or merged twice?): \
              frames are decoded from the first copies only",
@@ -50,7 +55,7 @@ pub fn warn_capture(global: Global, path: &Path, s: &CaptureSummary, check_inten
         ));
     }
     if s.clock_backward_steps > 0 {
-        global.warn(&format!(
+        observer.warn(&format!(
             "{}: the sensor clock runs backwards {} time{} between data packets: the capture \
              holds reordered or duplicated packets (or the sensor's clock was reset), so \
              frames may repeat or mix returns; sort and deduplicate the packets (e.g. by \
@@ -61,7 +66,7 @@ pub fn warn_capture(global: Global, path: &Path, s: &CaptureSummary, check_inten
         ));
     }
     if s.short_frames > 0 {
-        global.warn(&format!(
+        observer.warn(&format!(
             "{}: {} frame{} between the first and the last cover less than nine tenths of a \
              turn: the azimuths jump back within the capture (interleaved or reordered \
              packets, or two sensors in one capture), and every jump cuts a frame; sort the \
@@ -73,7 +78,7 @@ pub fn warn_capture(global: Global, path: &Path, s: &CaptureSummary, check_inten
     }
     let dead = s.dead_lasers();
     if !dead.is_empty() {
-        global.warn(&format!(
+        observer.warn(&format!(
             "{}: dead laser{} (no return over the whole capture): {}",
             path.display(),
             if dead.len() == 1 { "" } else { "s" },
@@ -82,7 +87,7 @@ pub fn warn_capture(global: Global, path: &Path, s: &CaptureSummary, check_inten
     }
     if check_intensity {
         if let Some(hint) = raw_intensity_hint(s) {
-            global.warn(&format!("{}: {hint}", path.display()));
+            observer.warn(&format!("{}: {hint}", path.display()));
         }
     }
 }
@@ -104,22 +109,6 @@ pub fn join_ids(ids: &[u8]) -> String {
     ids.iter().map(u8::to_string).collect::<Vec<_>>().join(", ")
 }
 
-/// A progress spinner on stderr, hidden when quiet or when stderr is not a terminal.
-pub fn progress(global: Global, unit: &'static str) -> indicatif::ProgressBar {
-    use std::io::IsTerminal;
-    if global.quiet || !std::io::stderr().is_terminal() {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new_spinner();
-    if let Ok(style) = indicatif::ProgressStyle::with_template(&format!(
-        "{{spinner}} {{pos}} {unit} {{elapsed}} {{msg}}"
-    )) {
-        bar.set_style(style);
-    }
-    bar.enable_steady_tick(std::time::Duration::from_millis(200));
-    bar
-}
-
 /// Frames of `capture` in `range` that `run` and `convert` process, counted from the
 /// frame index without decoding returns (as `sweep` counts its frames): the total of
 /// their progress bars. None for standard input and other files that are not regular
@@ -133,35 +122,23 @@ pub fn frames_total(
         return None;
     }
     let scan = crate::hdl32e::index::FrameScan::open(capture, options).ok()?;
-    let (_, _, n) =
-        crate::sweep::chunks::chunk_plan(scan, range, options.keep_partial, u32::MAX).ok()?;
+    let (_, _, n) = crate::shard::chunk_plan(scan, range, options.keep_partial, u32::MAX).ok()?;
     Some(n as u64)
 }
 
-/// The progress of the frames of `capture` in `range` on stderr: a bar with the total
-/// and the time left when [`frames_total`] knows it, else a spinner; hidden (and nothing
-/// counted) when quiet or when stderr is not a terminal.
-pub fn frames_progress(
-    global: Global,
-    capture: &Path,
+/// Starts the observer's count of the frames of `capture` (None: the built-in one) in
+/// `range`, with [`frames_total`] as its total when progress is shown.
+pub fn start_frames(
+    observer: &dyn Observer,
+    capture: Option<&Path>,
     options: &crate::hdl32e::frames::DecoderOptions,
     range: &std::ops::RangeInclusive<u32>,
-) -> indicatif::ProgressBar {
-    use std::io::IsTerminal;
-    if global.quiet || !std::io::stderr().is_terminal() {
-        return indicatif::ProgressBar::hidden();
-    }
-    let Some(total) = frames_total(capture, options, range) else {
-        return progress(global, "frames");
+) {
+    let total = match capture {
+        Some(path) if observer.shows_progress() => frames_total(path, options, range),
+        _ => None,
     };
-    let bar = indicatif::ProgressBar::new(total);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{bar:30} {pos}/{len} frames {elapsed} elapsed, {eta} left {msg}",
-    ) {
-        bar.set_style(style);
-    }
-    bar.enable_steady_tick(std::time::Duration::from_millis(200));
-    bar
+    observer.start(Counter::Frames, total);
 }
 
 /// The capture path that stands for standard input.

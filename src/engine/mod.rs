@@ -15,14 +15,14 @@ pub mod reports;
 pub mod spool;
 pub mod stream;
 
-use crate::cli::Global;
 use crate::cloud::frames::{CloudOptions, CloudReader};
 use crate::config::Config;
 use crate::frame::Frame;
 use crate::hdl32e::frames::{DecoderOptions, FrameReader};
-use crate::options::Shard;
+use crate::observe::{Counter, Observer};
 use crate::pipeline::Pipeline;
 use crate::sensor::frames::ModelFrameReader;
+use crate::shard::Shard;
 use crate::writers::scan::ScanPoint;
 use crate::writers::staging::{self, OutputFolder};
 use crate::writers::FrameOutput;
@@ -130,8 +130,9 @@ pub struct RunRequest {
 }
 
 /// Runs the pipeline on every input of `request` with the settings of `plan`, writing
-/// into `request.output`; prints a line per capture unless `global.quiet`.
-pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
+/// into `request.output`; reports a line per capture, warnings and progress to
+/// `observer`.
+pub fn run(plan: &Plan, request: &RunRequest, observer: &dyn Observer) -> Result<()> {
     if let Some(dir) = request.captures.iter().find(|p| p.is_dir()) {
         if request.captures.len() > 1 {
             anyhow::bail!(
@@ -139,7 +140,7 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
                 dir.display()
             );
         }
-        return dataset::run(plan, request, dir, global);
+        return dataset::run(plan, request, dir, observer);
     }
     inputs::check_stdin_once(&request.captures)?;
     if plan.pcap_out {
@@ -189,7 +190,7 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
     }
     if let Some(m) = request.chunk_frames {
         // Chunked runs take captures of any described sensor, each with its plan.
-        return chunks::run(request, plan, m, &inputs, global);
+        return chunks::run(request, plan, m, &inputs, observer);
     }
     // Every input and target is checked before anything is written.
     // Each job with the plan for its sensor (the noise chain's firing slots hold its
@@ -244,13 +245,11 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
             .filter(|(i, _)| shard.owns(*i))
             .map(|(_, j)| j)
             .collect();
-        if !global.quiet {
-            eprintln!(
-                "run --shard {shard}: {} of {total} capture{} fall to this shard",
-                jobs.len(),
-                if total == 1 { "" } else { "s" }
-            );
-        }
+        observer.note(&format!(
+            "run --shard {shard}: {} of {total} capture{} fall to this shard",
+            jobs.len(),
+            if total == 1 { "" } else { "s" }
+        ));
         if jobs.is_empty() {
             return Ok(());
         }
@@ -319,7 +318,7 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
             (&source, capture),
             stage.path(),
             &inputs,
-            global,
+            observer,
         )
         .and_then(|report| {
             let files = staging::result_files(stage.path());
@@ -342,10 +341,8 @@ pub fn run(plan: &Plan, request: &RunRequest, global: Global) -> Result<()> {
     }
     let targets: Vec<PathBuf> = staged.iter().map(|s| s.target().to_path_buf()).collect();
     staging::commit(staged)?;
-    if !global.quiet {
-        for (line, dir) in reports.iter().zip(&targets) {
-            eprintln!("{line}; results in {}", dir.display());
-        }
+    for (line, dir) in reports.iter().zip(&targets) {
+        observer.note(&format!("{line}; results in {}", dir.display()));
     }
     Ok(())
 }
@@ -448,13 +445,10 @@ fn run_source(
     (source, capture): (&str, Option<&Path>),
     dir: &Path,
     inputs: &[&Path],
-    global: Global,
+    observer: &dyn Observer,
 ) -> Result<String> {
-    let progress = match capture {
-        Some(path) => inputs::frames_progress(global, path, &plan.decoder, &plan.frames),
-        None => inputs::progress(global, "frames"),
-    };
-    progress.set_message(source.to_string());
+    inputs::start_frames(observer, capture, &plan.decoder, &plan.frames);
+    observer.label(Counter::Frames, source);
     // Per-frame reports are streamed to spool files and joined at the end, so memory
     // does not grow with the capture's length.
     let mut spool = ReportSpool::new(dir, &cluster_document(source), inputs)?;
@@ -512,7 +506,7 @@ fn run_source(
             p.frame_done(entry.report.index)?;
         }
         spool.add(entry)?;
-        progress.inc(1);
+        observer.advance(Counter::Frames, 1);
         Ok(())
     };
     let warmup = crate::memory::worker_warmup_bytes();
@@ -545,7 +539,7 @@ fn run_source(
             )?;
         }
     }
-    progress.finish_and_clear();
+    observer.finish(Counter::Frames);
     // Messages name the capture by the path as given, as `convert`'s do; the outputs name
     // it by `source`, its file name, so that they do not depend on the working folder.
     let shown = capture.map_or_else(|| source.to_string(), inputs::capture_shown);
@@ -553,9 +547,9 @@ fn run_source(
     let source_summary = match &mut reader {
         Source::Capture(r) => {
             capture_summary = r.summary();
-            inputs::warn_truncation(global, Path::new(&shown), &capture_summary);
+            inputs::warn_truncation(observer, Path::new(&shown), &capture_summary);
             inputs::warn_capture(
-                global,
+                observer,
                 Path::new(&shown),
                 &capture_summary,
                 plan.config.sensor.intensity == crate::config::IntensityMode::Reflectivity,
@@ -575,7 +569,7 @@ fn run_source(
             if spool.frames == 0 {
                 anyhow::bail!(
                     "{shown}: no frame to process in {}: a point-cloud scan is one frame, 0",
-                    crate::options::frames_phrase(&plan.frames)
+                    crate::range::frames_phrase(&plan.frames)
                 );
             }
             SourceSummary::Cloud(r.summary())
@@ -587,7 +581,7 @@ fn run_source(
         let name = p.file_name();
         let lost = p.finish()?;
         if lost > 0 {
-            global.warn(&format!(
+            observer.warn(&format!(
                 "{shown}: {lost} kept returns lie outside the range a packet can hold \
                  (0 to 131.07 m) and are written as no return in {name}"
             ));

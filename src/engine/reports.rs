@@ -225,7 +225,7 @@ pub fn no_model_frame_error(
     anyhow::anyhow!(
         "{source}: no frame to process in {} of this {} capture ({} full and {} partial \
          sweeps; --keep-partial keeps the partial ones)",
-        crate::options::frames_phrase(frames),
+        crate::range::frames_phrase(frames),
         reader.model().name,
         reader.summary().full_frames,
         reader.summary().partial_frames
@@ -257,7 +257,7 @@ pub fn no_frame_error(
     anyhow::anyhow!(
         "{source}: no frame to process in {}: {partial_note}the capture has {} \
          full frame{} ({}); pick others with --frames or add --keep-partial",
-        crate::options::frames_phrase(frames),
+        crate::range::frames_phrase(frames),
         full,
         if full == 1 { "" } else { "s" },
         if full == 0 {

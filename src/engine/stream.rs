@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use std::ops::RangeInclusive;
 
 /// Runs `work` on every frame in `frames` as a bounded pipeline: the calling thread
-/// decodes frames and hands them to `options::worker_threads()` workers, and hands
+/// decodes frames and hands them to `par::worker_threads()` workers, and hands
 /// each result to `done` (with the reader, to recycle buffers) in frame order as soon as
 /// every earlier frame's is in. Decoding, processing (with each frame's own files) and the
 /// ordered report append overlap, with no barrier between groups of frames: a slow frame
@@ -31,7 +31,7 @@ pub fn stream_frames<T: Send, R: FrameSource + ?Sized>(
     use std::panic::AssertUnwindSafe;
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::sync::{mpsc, Mutex};
-    let workers = crate::options::worker_threads();
+    let workers = crate::par::worker_threads();
     // A worker that finishes needs one decoded frame ready, and one more lets a frame
     // finish before an earlier one without idling a worker; frames decoded further ahead
     // only hold memory (3.3 MB each), whose first-touched pages cost CPU time: on the

@@ -3,8 +3,9 @@
 //!
 //! - [`plan`]: cells from `--vary` and `--seeds`, and each cell's configuration;
 //! - [`metrics`]: pure metric functions (the object matching rule is documented there);
+//! - [`folder`]: a sweep into an output folder as one call (lock, manifest, outputs);
 //! - [`run`]: parallel, resumable execution writing one result file per cell;
-//! - [`chunks`]: frame ranges of long captures as units of sharded sweeps;
+//! - [`progress`]: the counts an observer sees while cells are computed;
 //! - [`stream`]: cell files and the tidy JSON written and read a frame at a time;
 //! - [`tables`]: tidy CSV/JSON and the aggregate CSV;
 //! - [`outputs`]: every final file (tables, plots, bird's-eye figure, `index.html`).
@@ -13,11 +14,12 @@
 //! type + occurrence (see [`crate::noise`]), so cells differing only in a rain rate or in
 //! the presence of the occlusion reuse the same draws.
 
-pub mod chunks;
+pub mod folder;
 pub mod interactions;
 pub mod metrics;
 pub mod outputs;
 pub mod plan;
+pub(crate) mod progress;
 pub mod run;
 pub mod stream;
 pub mod tables;

@@ -8,18 +8,20 @@
 //! that produced them; a later run loads a cell whose file records the same settings
 //! instead of computing it again. The tables are always rebuilt from the cell files.
 
-use super::chunks;
 use super::metrics::{self, ClassMetrics, FrameMetrics, MatchRule, ReturnState, Tally};
 use super::plan::{BaseConfig, Cell, Vary};
+use super::progress::Progress;
 use crate::config::Config;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::frame::FrameSource;
 use crate::hdl32e::frames::DecoderOptions;
+use crate::observe::Observer;
 use crate::pipeline::{FrameResult, Pipeline};
 use crate::sensor::frames::CaptureFrames;
 use crate::sensor::frames::CaptureSeek;
 use crate::sensor::SensorModel;
+use crate::shard::{self, Batch, Shard};
 use crate::synth::labels::{check_frame, read_labels_file, LabelRow, LabelRows};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -58,28 +60,10 @@ pub struct SweepSettings {
     pub output: PathBuf,
     /// Distance band edges in metres, ascending (see [`metrics::band_index`]).
     pub bands: Vec<f64>,
-    /// Frames per chunk (`--chunk-frames`): units become (cell, chunk), see [`chunks`].
+    /// Frames per chunk (`--chunk-frames`): units become (cell, chunk), see
+    /// [`crate::shard`].
     pub chunk_frames: Option<u32>,
 }
-
-/// Receives progress events (from several threads).
-pub trait Observer: Sync {
-    /// A capture starts with `cells` cells to compute.
-    fn capture(&self, _name: &str, _cells: u64) {}
-    /// The number of frames each pending cell of this capture runs is now known (before
-    /// any of them starts, except with chunks, where after the first).
-    fn frames_total(&self, _n: u64) {}
-    /// One frame of one cell is done.
-    fn frame_done(&self) {}
-    /// One cell is done (computed or loaded).
-    fn cell_done(&self) {}
-    /// Something the user should know (a cell file that did not verify).
-    fn warn(&self, _message: &str) {}
-}
-
-/// An observer that ignores everything.
-pub struct Silent;
-impl Observer for Silent {}
 
 /// One row of the tidy table: a frame of a cell of a capture.
 #[derive(Clone, Debug, PartialEq)]
@@ -304,9 +288,9 @@ impl LabelCursor<'_> {
 pub enum Mode {
     /// Every cell not done yet; every row is read back.
     All,
-    /// Only the cells (or cell parts, see [`chunks`]) that fall to this shard (see
-    /// [`chunks::unit_index`]); no rows.
-    Shard(crate::options::Shard),
+    /// Only the cells (or cell parts, see [`crate::shard`]) that fall to this shard (see
+    /// [`crate::shard::unit_index`]); no rows.
+    Shard(Shard),
     /// No cell is computed: every cell must be done (else an error lists the missing).
     Merge,
 }
@@ -317,7 +301,8 @@ pub fn shard_index(capture: usize, cell: usize, cells_per_capture: usize) -> usi
     capture * cells_per_capture + cell
 }
 
-/// Runs (or resumes) the sweep and returns every row; `protected` are input paths.
+/// Runs (or resumes) the sweep and returns every row; progress and warnings go to
+/// `observer`.
 pub fn run(
     s: &SweepSettings,
     captures: &[CaptureInput],
@@ -333,6 +318,24 @@ pub fn run_mode(
     observer: &dyn Observer,
     mode: Mode,
 ) -> Result<Outcome> {
+    let total = super::plan::cells(&s.varies, &s.seeds).len() * captures.len();
+    let own = match mode {
+        Mode::Shard(shard) => (0..total).filter(|&i| shard.owns(i)).count(),
+        Mode::All | Mode::Merge => total,
+    };
+    let progress = Progress::start(observer, s.chunk_frames.is_some(), own as u64);
+    let outcome = compute(s, captures, &progress, mode);
+    progress.finish();
+    outcome
+}
+
+/// [`run_mode`] reporting to `observer`.
+fn compute(
+    s: &SweepSettings,
+    captures: &[CaptureInput],
+    observer: &Progress,
+    mode: Mode,
+) -> Result<Outcome> {
     let mut outcome = Outcome::default();
     let canonical = canonical_cells(s);
     let mut missing = Vec::new();
@@ -341,7 +344,7 @@ pub fn run_mode(
     for capture in captures {
         let dir = s.output.join("cells").join(&capture.name);
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-        chunks::check_parts(&dir, s.chunk_frames)?;
+        shard::check_parts(&dir, s.chunk_frames, Batch::Sweep)?;
         let protected = protected_paths(capture);
         let protected: Vec<&Path> = protected.iter().map(PathBuf::as_path).collect();
         // With --chunk-frames, the frames are counted first (decoding only) so that the
@@ -351,7 +354,7 @@ pub fn run_mode(
         let mut seeks = Vec::new();
         let (sensor, ranges) = match s.chunk_frames {
             Some(m) => {
-                let (sensor, (ranges, at, n)) = chunks::chunk_ranges(s, &capture.path, m)?;
+                let (sensor, (ranges, at, n)) = chunk_ranges(s, &capture.path, m)?;
                 expected_frames = Some(n);
                 seeks = at;
                 (sensor, Some(ranges))
@@ -372,7 +375,7 @@ pub fn run_mode(
         for (cell_index, cell) in all_cells.into_iter().enumerate() {
             let owned: Vec<usize> = (0..n_chunks)
                 .filter(|&j| {
-                    let i = chunks::unit_index(offset, cell_index, j, n_chunks);
+                    let i = shard::unit_index(offset, cell_index, j, n_chunks);
                     outcome.total += 1;
                     match mode {
                         Mode::Shard(shard) => shard.owns(i),
@@ -455,10 +458,10 @@ pub fn run_mode(
                 });
                 continue;
             };
-            let parts = chunks::part_paths(&dir, &file_name, m, n_chunks);
+            let parts = shard::part_paths(&dir, &file_name, m, n_chunks);
             let mut complete = true;
             for (j, part) in parts.iter().enumerate() {
-                let part_settings = chunks::part_settings(&settings, m, j, n_chunks, &ranges[j]);
+                let part_settings = shard::part_settings(&settings, m, j, n_chunks, &ranges[j]);
                 let want = (ranges[j].clone(), part_settings);
                 let done = match read_cell(part) {
                     Some(Ok(f)) if f.settings == want.1 => {
@@ -707,13 +710,32 @@ pub fn hash_file(path: &Path) -> Result<String> {
     Ok(format!("{:016x}", hasher.digest()))
 }
 
+/// The capture's sensor, the chunks of `M` frames of it within `s.frames` and where each
+/// starts (see [`shard::capture_chunks`]), and the number of frames; errors when the
+/// capture has no frame in range.
+fn chunk_ranges(
+    s: &SweepSettings,
+    path: &Path,
+    frames_per_chunk: u32,
+) -> Result<(&'static SensorModel, shard::ChunkRanges)> {
+    let (sensor, found) = shard::capture_chunks(path, &s.decoder, &s.frames, frames_per_chunk)?;
+    if found.2 == 0 {
+        return Err(Error::Invalid(format!(
+            "{}: no frame to process in {} (partial sweeps need --keep-partial)",
+            path.display(),
+            crate::range::frames_phrase(&s.frames)
+        )));
+    }
+    Ok((sensor, found))
+}
+
 /// Frames of the capture in the sweep's range: the number every cell file must hold
 /// (counted from the frame index, without decoding returns).
 fn count_frames(s: &SweepSettings, capture: &CaptureInput) -> Result<usize> {
     match crate::sensor::frames::open_capture(&capture.path, &s.decoder)? {
         CaptureFrames::Hdl32e(_) => {
             let scan = crate::hdl32e::index::FrameScan::open(&capture.path, &s.decoder)?;
-            Ok(chunks::chunk_plan(scan, &s.frames, s.decoder.keep_partial, u32::MAX)?.2)
+            Ok(shard::chunk_plan(scan, &s.frames, s.decoder.keep_partial, u32::MAX)?.2)
         }
         // Another sensor's capture has no frame index: its frames are decoded and counted.
         CaptureFrames::Model(mut r) => r.count_rest(&s.frames),
@@ -1080,7 +1102,7 @@ fn compute_chunk(
     cells: &[Pending],
     labels: Option<&Labels>,
     protected: &[&Path],
-    observer: &dyn Observer,
+    observer: &Progress,
     first: &mut bool,
 ) -> Result<()> {
     let mut keys: Vec<&str> = Vec::new();
@@ -1172,7 +1194,7 @@ fn compute_chunk(
         return Err(Error::Invalid(format!(
             "{}: no frame to process in {} (partial sweeps need --keep-partial)",
             capture.path.display(),
-            crate::options::frames_phrase(&s.frames)
+            crate::range::frames_phrase(&s.frames)
         )));
     }
     if *first {

@@ -664,7 +664,7 @@ pub struct Manifest {
 }
 
 /// A refused output folder: it holds another run's results (without `--force`) or files
-/// this tool did not write. The command exits with [`crate::cli::EXIT_REFUSED`].
+/// this tool did not write. The command line exits with code 3 for it (`EXIT_REFUSED`).
 #[derive(Debug)]
 pub struct Refused(pub String);
 

@@ -40,7 +40,7 @@ fn bench(c: &mut Criterion) {
                     decoder: DecoderOptions::default(),
                     frames: 0..=u32::MAX,
                     output: dir.path().to_path_buf(),
-                    bands: lidar_noise::sweep::metrics::DEFAULT_BANDS.to_vec(),
+                    bands: lidar_noise::score::metrics::DEFAULT_BANDS.to_vec(),
                     chunk_frames: None,
                 };
                 let outcome = run(&settings, &captures, &Silent).unwrap();

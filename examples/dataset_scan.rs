@@ -13,10 +13,10 @@
 
 use lidar_noise::cloud::guess::{guess_sensor, sensor_by_name};
 use lidar_noise::cloud::returns::{to_returns, ReturnsOptions};
-use lidar_noise::cloud::truth::{labels_beside, read_truth, score, LabelsBeside};
 use lidar_noise::cloud::{read_file, Format, ReadOptions};
 use lidar_noise::frame::Frame;
 use lidar_noise::pipeline::Pipeline;
+use lidar_noise::score::truth::{labels_beside, read_truth, score, LabelsBeside};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -200,7 +200,7 @@ fn one(scan: &Path, sensor: Option<&str>, labels: Option<&Path>) -> Result<(), S
         &truth,
         &placed.order,
         config.cluster.min_points,
-        &lidar_noise::sweep::metrics::DEFAULT_BANDS,
+        &lidar_noise::score::metrics::DEFAULT_BANDS,
         &found.shown(),
     );
     println!("labels: {}", s.labels);

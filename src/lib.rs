@@ -28,6 +28,7 @@ pub mod par;
 pub mod pipeline;
 pub(crate) mod radix;
 pub mod range;
+pub mod score;
 pub mod sensor;
 pub mod shard;
 pub mod signals;

@@ -5,10 +5,10 @@
 
 use lidar_noise::cloud::boxes::{box_truth, parse_calib, parse_label2, read_calib, read_label2};
 use lidar_noise::cloud::returns::{to_returns, ReturnsOptions};
-use lidar_noise::cloud::truth::{labels_beside, read_truth, score, LabelsBeside};
 use lidar_noise::cloud::{read_file, CloudPoint, ReadOptions};
 use lidar_noise::frame::Frame;
 use lidar_noise::pipeline::Pipeline;
+use lidar_noise::score::truth::{labels_beside, read_truth, score, LabelsBeside};
 use lidar_noise::sensor::HDL64E_S2;
 use std::path::Path;
 

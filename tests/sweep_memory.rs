@@ -77,7 +77,7 @@ fn sweep_peak(capture: PathBuf, labels: Option<PathBuf>, out: &Path) -> (usize, 
         decoder: DecoderOptions::default(),
         frames: 0..=u32::MAX,
         output: out.to_path_buf(),
-        bands: lidar_noise::sweep::metrics::DEFAULT_BANDS.to_vec(),
+        bands: lidar_noise::score::metrics::DEFAULT_BANDS.to_vec(),
         chunk_frames: None,
     };
     let captures = vec![CaptureInput {

@@ -1,6 +1,6 @@
 //! Object matching metrics on hand-made partitions (cluster id per clean return).
 
-use lidar_noise::sweep::metrics::{
+use lidar_noise::score::metrics::{
     band_index, band_metrics, match_objects, object_outcomes, precision_recall, MatchRule,
     ObjectResult, Outcome, ReturnState, Tally,
 };
@@ -330,7 +330,7 @@ fn band_edges_are_lower_inclusive_upper_exclusive() {
 }
 
 fn row(seed: u64, frame: u32, objects: u64, detected: u64, kept: u64) -> Row {
-    let mut m = lidar_noise::sweep::metrics::FrameMetrics {
+    let mut m = lidar_noise::score::metrics::FrameMetrics {
         frame,
         objects,
         detected,

@@ -45,7 +45,7 @@ fn frames_total_is_known_before_the_first_frame() {
         decoder: DecoderOptions::default(),
         frames: 0..=2,
         output: dir.path().to_path_buf(),
-        bands: lidar_noise::sweep::metrics::DEFAULT_BANDS.to_vec(),
+        bands: lidar_noise::score::metrics::DEFAULT_BANDS.to_vec(),
         chunk_frames: None,
     };
     let captures = vec![CaptureInput {

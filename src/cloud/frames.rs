@@ -5,14 +5,14 @@
 //! The file is read and checked when the reader is opened, so a bad file is refused before
 //! anything is written; the points are then dropped and read again when the frame is
 //! needed, so a run over many files holds one scan at a time, not all of them. Labels
-//! (given, or found beside the scan: [`super::truth::labels_beside`]) are read and checked
+//! (given, or found beside the scan: [`crate::score::truth::labels_beside`]) are read and checked
 //! against the scan when it is opened too, and kept as its ground truth.
 
 use super::returns::{to_returns, ReturnsOptions, TimeField};
-use super::truth::{labels_beside, read_truth, CloudTruth, LabelsBeside};
 use super::{read_file, CloudPoint, Format, IntensityScale, ReadOptions};
 use crate::error::{Error, Result};
 use crate::frame::{Frame, FrameSource};
+use crate::score::truth::{labels_beside, read_truth, CloudTruth, LabelsBeside};
 use crate::sensor::SensorModel;
 use serde::Serialize;
 use std::ops::RangeInclusive;

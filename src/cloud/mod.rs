@@ -28,7 +28,6 @@ pub mod labels;
 pub mod nuscenes;
 pub mod pcd;
 pub mod returns;
-pub mod truth;
 
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};

@@ -288,7 +288,7 @@ pub fn run(plan: &Plan, request: &RunRequest, dir: &Path, observer: &dyn Observe
         let fate_out = out_dir.join(format!("{stem}.fate.csv"));
         // A labelled scan's scores: written before the scan, so a scan file on disk means
         // all of its outputs are.
-        let truth_out = crate::cloud::truth::labels_beside(path)
+        let truth_out = crate::score::truth::labels_beside(path)
             .map(|_| out_dir.join(format!("{stem}.truth.json")));
         if resume
             && scan_out.is_file()
@@ -380,7 +380,7 @@ fn run_file(
     let kept = rows.len();
     let written = (|| -> Result<()> {
         if let (Some(t), Some(out)) = (&truth, truth_out) {
-            let bands = &crate::sweep::metrics::DEFAULT_BANDS;
+            let bands = &crate::score::metrics::DEFAULT_BANDS;
             let score = t.score(&result, plan.config.cluster.min_points, bands);
             crate::writers::atomic::write_atomically(out, inputs, |w| {
                 serde_json::to_writer_pretty(&mut *w, &score).map_err(std::io::Error::other)

@@ -480,7 +480,7 @@ fn run_source(
     let work = |f: Frame| -> Result<(SpoolEntry, Vec<crate::frame::Return>, ScanRows)> {
         let result = plan.pipeline.process(f)?;
         if let Some(t) = &truth {
-            let bands = &crate::sweep::metrics::DEFAULT_BANDS;
+            let bands = &crate::score::metrics::DEFAULT_BANDS;
             *scored.lock().expect("no panic holds it") =
                 Some(t.score(&result, plan.config.cluster.min_points, bands));
         }

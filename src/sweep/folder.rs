@@ -77,7 +77,7 @@ impl SweepRequest {
             output,
             frames: crate::range::ALL_FRAMES,
             figure_frame: None,
-            bands: super::metrics::DEFAULT_BANDS.to_vec(),
+            bands: crate::score::metrics::DEFAULT_BANDS.to_vec(),
             figure_extent: 40.0,
             figure_format: FigureFormat::Png,
             force: false,

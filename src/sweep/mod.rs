@@ -2,7 +2,7 @@
 //! captures and compared frame by frame with the clean baseline.
 //!
 //! - [`plan`]: cells from `--vary` and `--seeds`, and each cell's configuration;
-//! - [`metrics`]: pure metric functions (the object matching rule is documented there);
+//! - [`crate::score::metrics`]: the metric functions (the object matching rule is documented there);
 //! - [`folder`]: a sweep into an output folder as one call (lock, manifest, outputs);
 //! - [`run`]: parallel, resumable execution writing one result file per cell;
 //! - [`progress`]: the counts an observer sees while cells are computed;
@@ -16,7 +16,6 @@
 
 pub mod folder;
 pub mod interactions;
-pub mod metrics;
 pub mod outputs;
 pub mod plan;
 pub(crate) mod progress;

@@ -8,7 +8,6 @@
 //! that produced them; a later run loads a cell whose file records the same settings
 //! instead of computing it again. The tables are always rebuilt from the cell files.
 
-use super::metrics::{self, ClassMetrics, FrameMetrics, MatchRule, ReturnState, Tally};
 use super::plan::{BaseConfig, Cell, Vary};
 use super::progress::Progress;
 use crate::config::Config;
@@ -18,6 +17,7 @@ use crate::frame::FrameSource;
 use crate::hdl32e::frames::DecoderOptions;
 use crate::observe::Observer;
 use crate::pipeline::{FrameResult, Pipeline};
+use crate::score::metrics::{self, ClassMetrics, FrameMetrics, MatchRule, ReturnState, Tally};
 use crate::sensor::frames::CaptureFrames;
 use crate::sensor::frames::CaptureSeek;
 use crate::sensor::SensorModel;

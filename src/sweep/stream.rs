@@ -11,7 +11,7 @@
 //! cell file from a reader, handing each frame to a callback, and checks its checksum
 //! in a second streamed pass.
 
-use super::metrics::FrameMetrics;
+use crate::score::metrics::FrameMetrics;
 use serde::de::{self, DeserializeSeed, MapAccess, SeqAccess, Visitor};
 use serde::Serialize;
 use std::io::{BufReader, Read, Seek, SeekFrom, Write};

@@ -25,8 +25,8 @@
 //! interval: the bounds are left empty. [`aggregate_columns_csv`] writes what every
 //! column of the aggregate table holds, method included.
 
-use super::metrics::{BandMetrics, FrameMetrics};
 use super::run::Row;
+use crate::score::metrics::{BandMetrics, FrameMetrics};
 use serde::Serialize;
 
 /// How a column is read from a row.

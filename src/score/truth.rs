@@ -1,18 +1,18 @@
 //! Dataset ground truth against what the pipeline found in a scan (issue 31, "Ground truth
 //! from datasets"): ground precision and recall and per-object detection by distance band,
-//! scored with the same functions (`sweep::metrics`) the sweep uses for synthesized
+//! scored with the same functions (`score::metrics`) the sweep uses for synthesized
 //! captures with their labels, so the figures of a real labelled scan and of a fixture mean
 //! the same thing.
 //!
 //! The labels are in the file's point order; the pipeline's returns are in firing order:
-//! [`super::returns::CloudReturns::order`] (kept by `CloudReader::order`) maps one to the
+//! [`crate::cloud::returns::CloudReturns::order`] (kept by `CloudReader::order`) maps one to the
 //! other. Where the labels are found: [`labels_beside`].
 
-use super::labels::{read_labels_file, GroundTruth};
+use crate::cloud::labels::{read_labels_file, GroundTruth};
 use crate::error::Result;
 use crate::noise::Fate;
 use crate::pipeline::FrameResult;
-use crate::sweep::metrics::{self, BandMetrics, ClassMetrics, ReturnState, Tally};
+use crate::score::metrics::{self, BandMetrics, ClassMetrics, ReturnState, Tally};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -174,13 +174,16 @@ pub fn labels_beside(scan: &Path) -> Option<LabelsBeside> {
 }
 
 /// The ground truth of a scan of `points` (its points, for boxes) from `labels`.
-pub fn read_truth(labels: &LabelsBeside, points: &[super::CloudPoint]) -> Result<GroundTruth> {
+pub fn read_truth(
+    labels: &LabelsBeside,
+    points: &[crate::cloud::CloudPoint],
+) -> Result<GroundTruth> {
     match labels {
         LabelsBeside::PerPoint(path) => Ok(read_labels_file(path, None, points.len())?.truth()),
         LabelsBeside::Boxes { label, calib } => {
-            let boxes = super::boxes::read_label2(label)?;
-            let calib = super::boxes::read_calib(calib)?;
-            Ok(super::boxes::box_truth(points, &boxes, &calib))
+            let boxes = crate::cloud::boxes::read_label2(label)?;
+            let calib = crate::cloud::boxes::read_calib(calib)?;
+            Ok(crate::cloud::boxes::box_truth(points, &boxes, &calib))
         }
     }
 }

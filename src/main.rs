@@ -14,9 +14,9 @@ const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
 
 /// Keeps freed pages for a second before mimalloc returns them to the kernel, instead of
 /// its 10 ms. Why: a dataset scan takes longer than 10 ms, so every scan's buffers (a
-/// few MB) went back to the kernel between scans and faulted in again on the next one:
-/// 190,000 page faults and a tenth of the time of a 100-scan KITTI sequence
-/// (`MIMALLOC_PURGE_DELAY=1000`: 14,000, and 4.0 s instead of 4.4 s on one core). Memory
+/// few MB) went back to the kernel between scans and faulted in again on the next one,
+/// a tenth of a KITTI sequence's time in page faults (figures in the manual's benchmark
+/// history). Memory
 /// still goes back once the process has not needed it for a second. A user's own
 /// `MIMALLOC_PURGE_DELAY` is left to win.
 fn slow_purge() {

@@ -209,7 +209,7 @@ fn convert_one(
         Ok(frame)
     };
     // No heap warm-up: a frame's decoding and PLY need little heap, and warming 12 MB a
-    // worker made `convert` of the shared capture slower (16.0 -> 17.9 ms).
+    // worker made `convert` slower, not faster.
     lidar_noise::engine::stream_frames(reader, range, 0, work, |frame, reader| {
         written += 1;
         observer.advance(Counter::Frames, 1);

@@ -17,8 +17,7 @@ const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
 /// few MB) went back to the kernel between scans and faulted in again on the next one,
 /// a tenth of a KITTI sequence's time in page faults (figures in the manual's benchmark
 /// history). Memory still goes back once the process has not needed it for a second. A
-/// user's own
-/// `MIMALLOC_PURGE_DELAY` is left to win.
+/// user's own `MIMALLOC_PURGE_DELAY` is left to win.
 fn slow_purge() {
     if std::env::var_os("MIMALLOC_PURGE_DELAY").is_none() {
         // SAFETY: sets one of mimalloc's option values; called before any thread starts

@@ -2,7 +2,7 @@
 //! `--set` stage shorthand, `convert` with several captures, examples in every `--help`,
 //! `--threads`, `-` for standard input, shell completions and the man page.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use lidar_noise::compare::{compare_file, Status, Tolerances};

@@ -1,6 +1,6 @@
 //! The `run`, `info`, `convert` and `validate` commands as a shell script sees them.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use std::collections::BTreeMap;

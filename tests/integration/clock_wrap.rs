@@ -1,7 +1,7 @@
 //! The sensor's microsecond clock restarts every hour; decoding must carry time across the
 //! wrap wherever in the hour the capture starts (issue 10, defect 1).
 
-mod common;
+use crate::common;
 
 use lidar_noise::capture::writer::PcapWriter;
 use lidar_noise::capture::CaptureReader;

@@ -8,7 +8,7 @@
 //! draw the same random streams; the files go through the same writer and readers `run`
 //! uses, and the scan is placed on a grid of the frame's own rate (`run --rotation-hz`).
 
-mod common;
+use crate::common;
 
 use lidar_noise::cloud::returns::{to_returns, ReturnsOptions};
 use lidar_noise::cloud::{read_bytes, Format, ReadOptions};

@@ -4,7 +4,7 @@
 //! intensity ring, the nuScenes `.pcd.bin` layout), so the capture's own run is the
 //! reference.
 
-mod common;
+use crate::common;
 
 use common::{bin2, crossroad, refused_scan};
 use lidar_noise::frame::Frame;

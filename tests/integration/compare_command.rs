@@ -1,7 +1,7 @@
 //! `lidar-noise compare`: exit codes, the named field, tolerances, JUnit XML, missing and
 //! extra files, and identical reports for the same capture run from another folder.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use std::path::Path;

@@ -4,7 +4,7 @@
 //! within the HDL-32E datasheet when added to a recorded capture. Every expected value is
 //! computed here from the stated formula, independently of the code under test.
 
-mod common;
+use crate::common;
 
 use common::{run, stage};
 

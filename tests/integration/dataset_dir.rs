@@ -3,7 +3,7 @@
 //! themselves are non-commercial: nothing of them is kept in the repository), walked in
 //! parallel, sharded, resumed, and refused with the file named when a scan is bad.
 
-mod common;
+use crate::common;
 
 use common::{bin2, files, fixtures, kitti_bytes};
 use lidar_noise::frame::Frame;

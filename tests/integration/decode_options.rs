@@ -1,7 +1,7 @@
 //! Decoder settings and capture variants: ports, return modes, cut angle, calibration,
 //! and `convert` output read back through ply-rs.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use lidar_noise::calibration::Calibration;

@@ -1,6 +1,6 @@
 //! Container variants, damaged captures and impostor sensors.
 
-mod common;
+use crate::common;
 
 use lidar_noise::frame::Frame;
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};

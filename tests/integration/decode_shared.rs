@@ -1,6 +1,6 @@
 //! Decoder against the real HDL-32E capture in ../shared/data.
 
-mod common;
+use crate::common;
 
 use lidar_noise::frame::Return;
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};

@@ -3,7 +3,7 @@
 //! fixtures and on the shared capture, more echoes as the visibility falls, and the
 //! visibility at which echoes start against an independent quadrature of the echo.
 
-mod common;
+use crate::common;
 
 use lidar_noise::frame::Frame;
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};

@@ -20,7 +20,7 @@
 //! for N seconds instead of a count, with the seed printed; its findings are saved under
 //! `target/fuzz-findings/` to be added to `fuzz/findings/`.
 
-mod common;
+use crate::common;
 
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use std::panic::{catch_unwind, AssertUnwindSafe};

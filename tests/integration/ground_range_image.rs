@@ -1,7 +1,7 @@
 //! Range-image ground segmentation against ray-cast HDL-32E frames with exact labels.
 
-mod common;
-mod ground_scene;
+use crate::common;
+use crate::common::ground_scene;
 
 use ground_scene::{make_return, precision_recall, precision_recall_where, Scene};
 use lidar_noise::ground::{range_image, segment, GroundMethod, GroundOptions};

@@ -1,6 +1,6 @@
 //! RANSAC ground plane and the "none" method against ray-cast HDL-32E frames.
 
-mod ground_scene;
+use crate::common::ground_scene;
 
 use ground_scene::{make_return, precision_recall, Scene};
 use lidar_noise::ground::{segment, GroundMethod, GroundOptions};

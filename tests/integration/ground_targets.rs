@@ -6,7 +6,7 @@
 //! from the seeds the method's settings were chosen on (`ground_eval::TUNING_SEEDS`), so
 //! the test measures scenes the settings never saw and gives the same answer every run.
 
-mod ground_eval;
+use crate::common::ground_eval;
 
 use ground_eval::{config, labelled_frames, measure, CONFIGS, FRAMES, TEST_SEEDS, TUNING_SEEDS};
 use lidar_noise::ground::{GroundMethod, GroundOptions};

@@ -5,7 +5,7 @@
 //! power; at zero strength nothing changes. Expected bytes are computed here from the
 //! ideal-power formula P = kappa rho / R^2, not read from the code under test.
 
-mod common;
+use crate::common;
 
 use common::{run, stage};
 

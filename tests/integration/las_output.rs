@@ -1,7 +1,7 @@
 //! `--format las|laz`: the files read back with the `las` crate hold every field of the
 //! PLY written by the same run, value for value.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use std::collections::HashMap;

@@ -7,7 +7,7 @@
 //! `--pcap-out` writes each sensor's packets back: every kept return in its own slot;
 //! `convert`, `sweep` and standard input take these captures too.
 
-mod common;
+use crate::common;
 
 use common::{bin2, refused_scan};
 use lidar_noise::capture::CaptureReader;

@@ -4,7 +4,7 @@
 //! plain run, and a chunked or sharded sweep those of one plain sweep. Captures
 //! synthesized here (`synth`'s library), one per packet family.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use lidar_noise::frame::FrameSource;

@@ -1,7 +1,7 @@
 //! Tests of the noise chain against the formulas of docs/noise-models.md, computed here
 //! independently of the code under test.
 
-mod common;
+use crate::common;
 
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};

@@ -3,7 +3,7 @@
 //! capture's folder whole; files lidar-noise did not write are never deleted, even with
 //! --force.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::Output;

@@ -4,7 +4,7 @@
 //! lists, a sweep replaces its results whole at the end, a failed sweep leaves nothing
 //! partial, and inputs inside the output folder are never overwritten.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::Output;

@@ -1,6 +1,6 @@
 //! The whole pipeline on the crossroad fixture, whose ground truth is known.
 
-mod common;
+use crate::common;
 
 use lidar_noise::config::Config;
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};

@@ -4,7 +4,7 @@
 //! the bars draw in a terminal (the totals, never the times: nothing here depends on
 //! the machine's speed).
 
-mod common;
+use crate::common;
 
 use lidar_noise::commands::frames_total;
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};

@@ -1,7 +1,7 @@
 //! Provenance: outputs record the effective configuration with `--set` and `--seed`, and
 //! `validate --print` writes a configuration that reruns to the same results.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use lidar_noise::compare::{compare_dirs, Tolerances};

@@ -1,7 +1,7 @@
 //! Issue 10: nothing wrong, nothing stale, nothing partial, clear messages, closed pipes.
 //! Each test reproduces one reported defect (they failed before the fixes).
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};

@@ -4,7 +4,7 @@
 //! manifest and lock file included), whatever the order of the shards or how often they
 //! ran; missing parts are listed, another chunk size is refused.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use std::collections::{BTreeMap, BTreeSet};

@@ -4,7 +4,7 @@
 //! sensor are refused before anything is written. Frames are built from points on each
 //! model's beams (its own elevation table, a ring field), through `cloud::returns`.
 
-mod common;
+use crate::common;
 
 use common::{bin2, config, refused_scan, stage};
 use lidar_noise::cloud::returns::{to_returns, ReturnsOptions};

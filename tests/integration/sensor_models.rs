@@ -7,7 +7,7 @@
 //! identification (also with a lying product byte), and, as an ignored test run by
 //! scripts/sensor_models_check.py, against velodyne_decoder on synthesized captures.
 
-mod common;
+use crate::common;
 
 use lidar_noise::capture::CaptureReader;
 use lidar_noise::frame::Return;

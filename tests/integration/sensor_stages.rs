@@ -1,7 +1,7 @@
 //! Tests of the sensor noise stages (p-diagram part 1) against the formulas of
 //! pdiagram-models.md, computed here independently of the code under test.
 
-mod common;
+use crate::common;
 
 use common::{config, err, ply_payload, run, stage};
 

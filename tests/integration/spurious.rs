@@ -2,7 +2,7 @@
 //! (pdiagram-models.md, "Spurious and replaced returns"), the fates, causes and clean
 //! ranges it records, and that stage order does not decide the result.
 
-mod common;
+use crate::common;
 
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Return, ReturnKind};

@@ -2,8 +2,6 @@
 //! defect 7: `stages`, `completions`, `validate`, `compare` exited 101 with "failed printing
 //! to stdout").
 
-mod common;
-
 use std::process::{Command, Stdio};
 
 #[test]

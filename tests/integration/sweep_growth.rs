@@ -4,7 +4,7 @@
 //! grown plan from scratch, and the manifest records the plan it grew from. Another base
 //! configuration, capture, key or a removed value is still another sweep, refused.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use std::path::Path;

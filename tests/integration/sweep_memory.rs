@@ -19,7 +19,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
 
-mod common;
+use crate::common;
 
 /// The system allocator, counting the bytes live and their peak.
 struct Counting;

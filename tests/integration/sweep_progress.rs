@@ -2,7 +2,7 @@
 //! the frames every cell runs (issue 33: the frames bar showed "31/0 frames" until the
 //! first batch of cells was done).
 
-mod common;
+use crate::common;
 
 use lidar_noise::hdl32e::frames::DecoderOptions;
 use lidar_noise::sweep::plan::{BaseConfig, Vary};

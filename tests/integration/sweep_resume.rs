@@ -1,6 +1,6 @@
 //! A sweep interrupted and restarted writes the same files as an uninterrupted one.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use lidar_noise::sweep::run::METRICS_VERSION;

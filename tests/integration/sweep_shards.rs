@@ -6,7 +6,7 @@
 //! file and the manifest `.lidar-noise.json`); nothing is excluded: the outputs hold no
 //! timing.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use std::collections::{BTreeMap, BTreeSet};

@@ -2,7 +2,7 @@
 //! object cluster made of echoes only as a false cluster and never credit echoes to an
 //! object; `run` reports them apart and its PLY says which points are echoes.
 
-mod common;
+use crate::common;
 
 use assert_cmd::Command;
 use std::collections::BTreeMap;

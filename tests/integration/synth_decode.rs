@@ -1,6 +1,6 @@
 //! Synthesized captures decode back to the ray-cast returns, and their labels line up.
 
-mod common;
+use crate::common;
 
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use lidar_noise::synth::{cast_frames, labels, write_capture, Scene, SynthOptions};

@@ -5,7 +5,7 @@
 //! The digest golden is written only by `scripts/update-rain-digest.sh` (which runs the
 //! ignored test `write_goodin_digest` with RAIN_DIGEST_WRITE=1); review its diff.
 
-mod common;
+use crate::common;
 
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};

@@ -2,7 +2,7 @@
 //! the formulas of pdiagram-models.md, computed here independently of the code under
 //! test, and of how their echoes compete in the firing slots.
 
-mod common;
+use crate::common;
 
 use common::{config, err, run, stage};
 

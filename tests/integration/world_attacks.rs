@@ -3,7 +3,7 @@
 //! expected values (box geometry, rates, shifts) are computed here independently of the
 //! code under test.
 
-mod common;
+use crate::common;
 
 use common::{config, err, ply_payload, run, stage};
 

@@ -2,7 +2,7 @@
 //! and second echoes) and `lens_damage` (10, transmission and deflected beams), against
 //! the formulas of pdiagram-models.md computed here independently of the code under test.
 
-mod common;
+use crate::common;
 
 use common::{config, ply_payload, run, stage};
 

@@ -1,6 +1,9 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod ground_eval;
+pub mod ground_scene;
+
 use std::path::PathBuf;
 
 /// Path of a file under ../shared/data, or None (with a skip message) when absent.

@@ -1,6 +1,8 @@
 //! Regression: the reports of the paper configuration on the crossroad fixture are the
-//! reviewed goldens in tests/golden/. After a deliberate change, run
-//! scripts/update-goldens.sh and review the diff; never edit a golden to pass a test.
+//! reviewed goldens in tests/golden/. After a deliberate change, rewrite them with
+//! `LIDAR_NOISE_BLESS=1 cargo test` and review the diff; never edit a golden to pass a test.
+
+use crate::common;
 
 use assert_cmd::Command;
 use lidar_noise::compare::{compare_file, Status, Tolerances};
@@ -31,10 +33,14 @@ fn paper_reports_on_the_crossroad_fixture_match_the_goldens() {
             .join("tests/golden")
             .join(format!("crossroad_paper_{file}"));
         let fresh = tmp.path().join("crossroad").join(file);
+        let rel = format!("tests/golden/crossroad_paper_{file}");
+        if common::bless_golden(&rel, &std::fs::read(&fresh).unwrap()) {
+            continue;
+        }
         if let Status::Different { count, listed } = compare_file(&golden, &fresh, &tolerances) {
             panic!(
                 "{file} differs from tests/golden/crossroad_paper_{file} in {count} fields:\n  {}\n\
-                 If the change is deliberate, run scripts/update-goldens.sh and review the diff.",
+                 If the change is deliberate, run `LIDAR_NOISE_BLESS=1 cargo test` and review the diff.",
                 listed.join("\n  ")
             );
         }

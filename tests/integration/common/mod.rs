@@ -312,3 +312,23 @@ pub fn refused_scan(scan: &std::path::Path, args: &[&str], what: &str) {
     assert!(err.contains(what), "{err}");
     assert!(!out.exists(), "{} was written", out.display());
 }
+
+/// Whether the golden tests rewrite their goldens instead of comparing with them: the one
+/// switch `LIDAR_NOISE_BLESS=1` (any value but empty or `0`), set by hand after a
+/// deliberate change, whose `git diff tests/golden` is then reviewed. Tests never rewrite a
+/// golden without it.
+pub fn bless() -> bool {
+    std::env::var_os("LIDAR_NOISE_BLESS").is_some_and(|v| !v.is_empty() && v != "0")
+}
+
+/// Writes `text` over the golden `rel` (a path under the project root) when blessing, with
+/// a note on standard error; returns whether it did, so that the caller skips comparing.
+pub fn bless_golden(rel: &str, text: &[u8]) -> bool {
+    if !bless() {
+        return false;
+    }
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(rel);
+    std::fs::write(&path, text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    eprintln!("BLESSED: rewrote {rel}; review `git diff tests/golden`");
+    true
+}

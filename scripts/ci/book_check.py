@@ -9,7 +9,7 @@ External links are not followed (nothing outside the repository is linked); thei
 is printed. 404.html is skipped: mdbook writes it for a web server, with its links made
 absolute to the site's root.
 
-Usage: scripts/book_check.py [BOOK_DIR] [README]   (defaults: target/book, README.md)
+Usage: scripts/ci/book_check.py [BOOK_DIR] [README]   (defaults: target/book, README.md)
 Exit: 0 good, 1 a link or anchor is broken, 2 no built book.
 Standard library only.
 """

@@ -10,7 +10,7 @@
 # temporary folder (with --allow-file-access-from-files), so the page itself carries no
 # test code.
 #
-# Usage: scripts/html_check.sh DIR/index.html [SHOT_DIR]
+# Usage: scripts/ci/html_check.sh DIR/index.html [SHOT_DIR]
 #   SHOT_DIR (default: a temporary folder) receives screenshot-wide.png (1400 px) and
 #   screenshot-narrow.png (480 px) to look at. CHROMIUM names the browser binary.
 # Exit: 0 good, 1 a check failed, 2 usage or no browser.

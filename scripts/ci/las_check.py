@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Checks lidar-noise LAS/LAZ files with an independent reader (laspy, lazrs for LAZ).
 
-Usage: python3 scripts/las_check.py FILE.las|FILE.laz [...]
+Usage: python3 scripts/ci/las_check.py FILE.las|FILE.laz [...]
 
 For each file: opens it with laspy, requires LAS 1.4 point format 6, scale 0.001 m,
 at least one point, the extra-bytes dimensions below with these types (the optional

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Checks lidar-noise PLY files with an independent reader (the `plyfile` package).
 
-Usage: python3 scripts/plyfile_check.py FILE.ply [FILE.ply ...]
+Usage: python3 scripts/ci/plyfile_check.py FILE.ply [FILE.ply ...]
 
 For each file: loads it with plyfile, requires an element `vertex` with at least the
 properties below and these dtypes, no 64-bit integer property anywhere, at least one

@@ -8,7 +8,7 @@ fixtures/ and configs/ (the README's commands run from the repository's root), w
 given binary's folder first on PATH, each sh block under `bash -euo pipefail`. A block
 that fails stops the run with its output and exit code.
 
-Usage: scripts/readme_run.py BINARY [--python PYTHON] [README]
+Usage: scripts/ci/readme_run.py BINARY [--python PYTHON] [README]
   PYTHON runs the python blocks (CI gives its virtual environment with laspy); without it
   they are reported as SKIPPED.
 Exit: 0 every block passed, 1 a block failed, 2 usage or no runnable block.

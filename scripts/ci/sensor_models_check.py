@@ -25,7 +25,7 @@ plain (not "advanced") path runs, as src/sensor/ has no distance corrections. Ea
 is written to DIR as NAME.bin (the 1206-byte payloads, concatenated) and NAME.csv (x, y,
 z, intensity, time in seconds past the hour, ring, return type: 1 strongest, 2 last, 3
 both), and the ignored test `synthesized_captures_match_velodyne_decoder` of
-tests/sensor_models.rs decodes NAME.bin with the model named in DIR/manifest.txt and
+tests/integration/sensor_models.rs decodes NAME.bin with the model named in DIR/manifest.txt and
 matches every point. Two more cases give both decoders a unit's full calibration file
 (hdl64e_s3_calibrated: HDL-64E_S3-VeloView.yml; hdl64e_s2_calibrated_dual: the SZTAKI
 S2 file), read by src/sensor/calibration.rs; their intensities are not compared
@@ -51,7 +51,7 @@ import numpy as np
 import velodyne_decoder as vd
 import yaml
 
-root = pathlib.Path(__file__).resolve().parent.parent
+root = pathlib.Path(__file__).resolve().parents[2]
 args = sys.argv[1:]
 captures = None
 if "--captures" in args:
@@ -283,6 +283,7 @@ calib.pop("status")
 (out / "hdl64e_s3_status.bin").write_bytes(b"".join(payloads))
 print(f"velodyne_decoder hdl64e.read_status_info: {meta['Model']}, {len(meta['Calibration'])} lasers -> {out / 'status_calib.yml'}")
 env = dict(os.environ, SENSOR_CHECK_DIR=str(out))
-cmd = ["cargo", "test", "--test", "sensor_models", "--", "--ignored", "--nocapture",
-       "synthesized_captures_match_velodyne_decoder", "status_byte_calibration_matches_velodyne_decoder"]
+cmd = ["cargo", "test", "--test", "integration", "--", "--ignored", "--nocapture",
+       "sensor_models::synthesized_captures_match_velodyne_decoder",
+       "sensor_models::status_byte_calibration_matches_velodyne_decoder"]
 sys.exit(subprocess.run(cmd, cwd=root, env=env).returncode)

@@ -7,9 +7,9 @@
 # prints "SKIPPED: <reason>" and exits 0 when they cannot be installed or the cluster
 # cannot start. Everything runs in a temporary folder: munged with its own key and socket,
 # slurmctld and slurmd (2 CPUs) with a generated slurm.conf on ports of their own; all
-# are stopped at the end. Usage: scripts/slurm_check.sh [path/to/lidar-noise]
+# are stopped at the end. Usage: scripts/ci/slurm_check.sh [path/to/lidar-noise]
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 root=$PWD
 bin=$(realpath "${1:-target/debug/lidar-noise}")
 [ -x "$bin" ] || { echo "slurm_check: $bin is not built (cargo build --bin lidar-noise)"; exit 1; }
@@ -117,8 +117,8 @@ args=("$root/fixtures/crossroad.pcap" "$root/fixtures/parking.pcap"
 
 out="$work/sharded"
 export LIDAR_NOISE="$bin"
-jid=$(sbatch --parsable --chdir="$work" --array=0-2 "$root/scripts/slurm/sweep.sbatch" "${args[@]}" -o "$out")
-mid=$(sbatch --parsable --chdir="$work" --dependency=afterok:"$jid" "$root/scripts/slurm/merge.sbatch" "${args[@]}" -o "$out")
+jid=$(sbatch --parsable --chdir="$work" --array=0-2 "$root/scripts/dev/slurm/sweep.sbatch" "${args[@]}" -o "$out")
+mid=$(sbatch --parsable --chdir="$work" --dependency=afterok:"$jid" "$root/scripts/dev/slurm/merge.sbatch" "${args[@]}" -o "$out")
 echo "slurm_check: submitted array job $jid (3 shards) and merge job $mid (afterok)"
 for _ in $(seq 1 180); do
   [ -z "$(squeue -h -j "$jid,$mid" 2>/dev/null)" ] && break
@@ -147,9 +147,9 @@ rargs=("$root/fixtures/crossroad.pcap" "$root/fixtures/parking.pcap" --keep-part
 "$bin" --quiet run "${rargs[@]}" -o "$work/run-single"
 rout="$work/run-sharded"
 rjid=$(sbatch --parsable --export=ALL,CHUNK_FRAMES=1 --chdir="$work" --array=0-2 \
-  "$root/scripts/slurm/run.sbatch" "${rargs[@]}" -o "$rout")
+  "$root/scripts/dev/slurm/run.sbatch" "${rargs[@]}" -o "$rout")
 rmid=$(sbatch --parsable --export=ALL,CHUNK_FRAMES=1 --chdir="$work" \
-  --dependency=afterok:"$rjid" "$root/scripts/slurm/run-merge.sbatch" "${rargs[@]}" -o "$rout")
+  --dependency=afterok:"$rjid" "$root/scripts/dev/slurm/run-merge.sbatch" "${rargs[@]}" -o "$rout")
 echo "slurm_check: submitted run array job $rjid (3 shards, --chunk-frames 1) and merge job $rmid (afterok)"
 for _ in $(seq 1 180); do
   [ -z "$(squeue -h -j "$rjid,$rmid" 2>/dev/null)" ] && break

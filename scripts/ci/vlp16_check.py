@@ -5,7 +5,7 @@ velodyne_decoder decodes ../shared/data/negative/vlp16_mrpt.pcap as a VLP-16 (bu
 VLP-16.yml calibration, no minimum range); the points of its frame 1 are written to a
 CSV (x, y, z, intensity, time, ring; time in seconds past the hour: the frame's device
 stamp modulo 3600 plus the point's relative time), then the ignored test
-`real_vlp16_capture_matches_velodyne_decoder` of tests/sensor_models.rs matches every
+`real_vlp16_capture_matches_velodyne_decoder` of tests/integration/sensor_models.rs matches every
 point to the return of the same ring fired at the same microsecond and checks the
 position difference and the counts per ring.
 
@@ -19,7 +19,7 @@ import sys
 
 import velodyne_decoder as vd
 
-root = pathlib.Path(__file__).resolve().parent.parent
+root = pathlib.Path(__file__).resolve().parents[2]
 pcap = sys.argv[1] if len(sys.argv) > 1 else str(root / "../shared/data/negative/vlp16_mrpt.pcap")
 out = sys.argv[2] if len(sys.argv) > 2 else "/tmp/vlp16_mrpt.frame1.csv"
 if not os.path.exists(pcap):
@@ -55,6 +55,6 @@ with open(out, "w") as f:
         f.write("%.9g,%.9g,%.9g,%d,%.9f,%d\n" % (p["x"], p["y"], p["z"], p["intensity"], base + float(p["time"]), p["ring"]))
 print(f"velodyne_decoder {vd.__version__}: {len(frames)} frames, frame 1 has {len(points)} points -> {out}")
 env = dict(os.environ, VLP16_REFERENCE_CSV=out, VLP16_PCAP=str(pathlib.Path(pcap).resolve()))
-cmd = ["cargo", "test", "--test", "sensor_models", "--", "--ignored", "--nocapture",
-       "real_vlp16_capture_matches_velodyne_decoder"]
+cmd = ["cargo", "test", "--test", "integration", "--", "--ignored", "--nocapture",
+       "sensor_models::real_vlp16_capture_matches_velodyne_decoder"]
 sys.exit(subprocess.run(cmd, cwd=root, env=env).returncode)

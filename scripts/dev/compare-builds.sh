@@ -5,7 +5,7 @@
 # OLD build, and compared too) and a point-cloud scan; plus `info`, `convert` and
 # `--pcap-out`. For refactors that must not change a byte (issue 51).
 #
-#   scripts/compare-builds.sh OLD_BINARY NEW_BINARY [WORK_DIR]
+#   scripts/dev/compare-builds.sh OLD_BINARY NEW_BINARY [WORK_DIR]
 #
 # Exit 0 when every output is identical, 1 with the differing files listed. The shared
 # captures are skipped (and said so) when ../shared is absent. Lines of run.json and the
@@ -15,7 +15,7 @@ set -euo pipefail
 old=$(realpath "$1")
 new=$(realpath "$2")
 work=${3:-$(mktemp -d)}
-root=$(cd "$(dirname "$0")/.." && pwd)
+root=$(cd "$(dirname "$0")/../.." && pwd)
 shared=${LIDAR_NOISE_SHARED:-$root/../shared/data}
 mkdir -p "$work"
 inputs="$work/inputs"

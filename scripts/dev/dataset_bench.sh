@@ -13,10 +13,10 @@
 # 500 scans and their fate sidecars). Prints the wall time of the run and of a rerun that
 # finds every file done (the resume path).
 #
-# Usage: scripts/dataset_bench.sh [path/to/lidar-noise] [scans] [threads]
+# Usage: scripts/dev/dataset_bench.sh [path/to/lidar-noise] [scans] [threads]
 #        (default target/release/lidar-noise, 500 scans, 2 threads)
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 bin=$(realpath "${1:-target/release/lidar-noise}")
 scans=${2:-500}
 threads=${3:-2}

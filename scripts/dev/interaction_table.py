@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Markdown tables from `sweep --interactions` folders (scripts/make-interaction-tables.sh).
+"""Markdown tables from `sweep --interactions` folders (scripts/dev/make-interaction-tables.sh).
 
 Arguments: CONFIG:METHOD=DIR ... Each DIR holds an interactions.csv. Per-capture rows are
 shown for single captures (crossroad, parking, monterey); a folder of several random scenes

@@ -8,12 +8,12 @@
 # Writes docs/figures/interactions_by_band.md (included in the manual's "Interactions between noise stages"). Run by hand; review
 # the diff.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 cargo build --quiet --release --bin lidar-noise
 bin=target/release/lidar-noise
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
-. scripts/lib/scenes.sh
+. scripts/dev/lib/scenes.sh
 make_scenes
 run() {
   local dir=$1 config=$2
@@ -31,5 +31,5 @@ run "$out/sensor" configs/pdiagram-sensor.toml fixtures/crossroad.pcap fixtures/
   "${real[@]}"
 run "$out/sensor-random" configs/pdiagram-sensor.toml "${random[@]}"
 args+=("sensor:patchwork=$out/sensor" "sensor:patchwork=$out/sensor-random")
-python3 scripts/interaction_table.py "${args[@]}" > docs/figures/interactions_by_band.md
+python3 scripts/dev/interaction_table.py "${args[@]}" > docs/figures/interactions_by_band.md
 cat docs/figures/interactions_by_band.md

@@ -2,7 +2,7 @@
 # Regenerates the manual's reference-study figures and tables (docs/figures/) from the
 # crossroad fixture and the shared capture. Run by hand; review the diff before committing.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 cargo build --quiet --release --bin lidar-noise
 bin=target/release/lidar-noise
 out=$(mktemp -d)

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes the seed inputs of the `sensor` fuzz target (tests/fuzz.rs) into
+"""Writes the seed inputs of the `sensor` fuzz target (tests/integration/fuzz.rs) into
 fuzz/corpus/sensor/, built from the documented 1206-byte data packet layout (VLP-16
 manual 9.3.1 and HDL-32E manual: 12 blocks of 0xFFEE flag, azimuth u16 and 32 channels
 of distance u16 + intensity u8; timestamp u32 at 1200; return mode at 1204; product id
@@ -15,7 +15,7 @@ nanoseconds), payload length (u16 LE) and the payload."""
 import os
 import struct
 
-OUT = os.path.join(os.path.dirname(__file__), "..", "fuzz", "corpus", "sensor")
+OUT = os.path.join(os.path.dirname(__file__), "..", "..", "fuzz", "corpus", "sensor")
 MODES = {"strongest": 0x37, "last": 0x38, "dual": 0x39}
 # Packet period (us) in single return mode and azimuth step per firing (centidegrees,
 # 10 Hz) of each timing family: HDL-32E 12 firings of 46.08 us, VLP-16 family 12 blocks

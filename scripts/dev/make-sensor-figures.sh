@@ -4,7 +4,7 @@
 # configs/clear.toml as the base (the stage is added by the --vary shorthand, its other
 # options at their defaults), seeds 1..3. Run by hand; review the diff before committing.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 cargo build --quiet --release --bin lidar-noise
 bin=target/release/lidar-noise
 out=$(mktemp -d)

@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # The reference study again with physical rain (issue 29): the tables of
-# scripts/make-study-tables.sh (detected share by distance band) and
-# scripts/make-interaction-tables.sh (occlusion x rain interaction, configs/paper.toml part)
+# scripts/dev/make-study-tables.sh (detected share by distance band) and
+# scripts/dev/make-interaction-tables.sh (occlusion x rain interaction, configs/paper.toml part)
 # for every ground method, once with configs/paper.toml as it is (Goodin rain, 7 mm/h) and
-# once with its rain switched to `model = "mie"` (scripts/fidelity/mie_config.py: the same
+# once with its rain switched to `model = "mie"` (scripts/dev/fidelity/mie_config.py: the same
 # rate, Goodin's range_noise line removed), side by side in docs/study-mie.md.
 # Same scenes and seeds as those scripts: crossroad and parking fixtures, five randomized
 # street scenes (synth seeds 7001-7005), the shared real capture when present; noise seeds
@@ -12,7 +12,7 @@
 # review the diff.
 set -euo pipefail
 export PYTHONDONTWRITEBYTECODE=1  # no __pycache__ in the tree
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 # LIDAR_NOISE_BIN: use that binary instead of building this tree's; STUDY_MIE_OUT: write
 # the page there instead of docs/study-mie.md (both for trying another build).
 bin=${LIDAR_NOISE_BIN:-target/release/lidar-noise}
@@ -20,10 +20,10 @@ page=${STUDY_MIE_OUT:-docs/study-mie.md}
 [ -n "${LIDAR_NOISE_BIN:-}" ] || cargo build --quiet --release --bin lidar-noise
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
-python3 scripts/fidelity/mie_config.py configs/paper.toml mie > "$out/paper-mie.toml"
+python3 scripts/dev/fidelity/mie_config.py configs/paper.toml mie > "$out/paper-mie.toml"
 # the Goodin half says `model = "goodin"` explicitly (a build whose default is mie must not
 # run the study's rain as mie); a build without the option runs paper.toml as it is
-python3 scripts/fidelity/mie_config.py configs/paper.toml goodin > "$out/paper-goodin.toml"
+python3 scripts/dev/fidelity/mie_config.py configs/paper.toml goodin > "$out/paper-goodin.toml"
 goodin_cfg=configs/paper.toml
 if "$bin" --quiet validate "$out/paper-goodin.toml" > /dev/null 2>&1; then
   goodin_cfg="$out/paper-goodin.toml"
@@ -36,7 +36,7 @@ else
   mie_error=$(tail -n 1 "$out/mie.err" | sed 's|^.*paper-mie.toml: ||')
   echo "mie rain not available in this build: $mie_error" >&2
 fi
-. scripts/lib/scenes.sh
+. scripts/dev/lib/scenes.sh
 make_scenes
 timing=()
 for model in "${models[@]}"; do
@@ -82,5 +82,5 @@ for model in "${models[@]}"; do
   fi
   timing+=("$model=$(($(date +%s) - start))")
 done
-python3 scripts/fidelity/study_mie.py "$out" "$mie_error" "${timing[@]}" > "$page"
+python3 scripts/dev/fidelity/study_mie.py "$out" "$mie_error" "${timing[@]}" > "$page"
 echo "wrote $page (${timing[*]} s)"

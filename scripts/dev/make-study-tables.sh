@@ -5,7 +5,7 @@
 # tuning seeds 1-6 nor its test seeds) and the shared real capture. Seeds 1..3 of the noise.
 # Writes docs/figures/study_by_band.md (included in the manual's "The reference study, reproduced"). Run by hand; review the diff.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 cargo build --quiet --release --bin lidar-noise
 bin=target/release/lidar-noise
 out=$(mktemp -d)
@@ -22,7 +22,7 @@ sweep "$out/crossroad" fixtures/crossroad.pcap
 args+=("crossroad=$out/crossroad")
 sweep "$out/parking" fixtures/parking.pcap
 args+=("parking=$out/parking")
-. scripts/lib/scenes.sh
+. scripts/dev/lib/scenes.sh
 for seed in "${random_seeds[@]}"; do
   make_random_scene "$seed"
   sweep "$out/random-$seed" "$out/scenes/random-$seed"/*.pcap
@@ -34,5 +34,5 @@ if [ -e ../shared/data/hdl32e/monterey.pcap ]; then
 else
   echo "SKIPPED: ../shared/data is absent; the table has no real-capture rows" >&2
 fi
-python3 scripts/study_table.py "${args[@]}" > docs/figures/study_by_band.md
+python3 scripts/dev/study_table.py "${args[@]}" > docs/figures/study_by_band.md
 cat docs/figures/study_by_band.md

@@ -11,7 +11,7 @@
 # the --vary / --set shorthand, its other options at their defaults), seeds 1..3 for
 # the sweeps. Run by hand; review the diff before committing.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 cargo build --quiet --release --bin lidar-noise
 bin=target/release/lidar-noise
 out=$(mktemp -d)

@@ -5,7 +5,7 @@ stages: the issue 32 benchmark, run by hand (not in CI: nothing may depend on ma
 speed).
 
     pip install ./python
-    python scripts/python_bench.py [--scan FILE.pcd.bin] [--config configs/adverse-weather.toml]
+    python scripts/dev/python_bench.py [--scan FILE.pcd.bin] [--config configs/adverse-weather.toml]
                                    [--repeat 50]
 
 The scan: a nuScenes LIDAR_TOP sweep (.pcd.bin, float32 x y z intensity ring; nuScenes
@@ -130,7 +130,7 @@ def fmt(m):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scan", help="a nuScenes .pcd.bin (default: the synthetic street)")
-    ap.add_argument("--config", default=os.path.join(os.path.dirname(__file__), "..",
+    ap.add_argument("--config", default=os.path.join(os.path.dirname(__file__), "..", "..",
                                                      "configs", "adverse-weather.toml"))
     ap.add_argument("--repeat", type=int, default=50)
     ap.add_argument("--rotation-hz", type=float, default=20.0)
@@ -147,7 +147,7 @@ def main():
 
     out = chain.apply(pts, threads=1, **kw)
     fates = np.bincount(out["fate"], minlength=len(ln.FATES))
-    print(f"scan: {args.scan or 'synthetic street (scripts/python_bench.py)'}: {len(pts)} points")
+    print(f"scan: {args.scan or 'synthetic street (scripts/dev/python_bench.py)'}: {len(pts)} points")
     print(f"config: {args.config}: stages {chain.stages}, rotation_hz {args.rotation_hz}")
     print("fates: " + ", ".join(f"{ln.FATES[i]} {c}" for i, c in enumerate(fates) if c)
           + f"; {len(out)} rows, {int(out['kept'].sum())} kept")

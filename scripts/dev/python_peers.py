@@ -4,7 +4,7 @@ corruption, in one run (issue 32, "Speed"): Hahner et al.'s LiDAR_fog_sim, LISA 
 al.) and lidar-aug (PyPI, C++/libtorch). Run by hand, not in CI (nothing may depend on
 machine speed); prints a markdown table and the command that made it.
 
-    python scripts/python_peers.py --fog-sim DIR --lisa DIR [--scan FILE.pcd.bin]
+    python scripts/dev/python_peers.py --fog-sim DIR --lisa DIR [--scan FILE.pcd.bin]
                                    [--config configs/adverse-weather.toml] [--repeat 20]
 
 DIR: a checked-out snapshot of github:MartinHahner/LiDAR_fog_sim (fog_simulation.py,
@@ -20,7 +20,7 @@ else the synthetic 20 Hz street of scripts/python_bench.py. Each tool gets them 
 layout: lidar_noise the (N, 5) array as is (rotation_hz 20: nuScenes' HDL-32E); Hahner's
 simulate_fog x y z intensity(0-255) ring as float64 (its own __main__'s layout); LISA
 x y z and the reflectance our power model gives the intensity byte (0-100 percent,
-retro-reflectors 1, floor 0.005; scripts/references/common.py); lidar-aug a float32 torch
+retro-reflectors 1, floor 0.005; scripts/dev/references/common.py); lidar-aug a float32 torch
 tensor x y z intensity/255 (its IntensityRange.MAX_INTENSITY_1).
 
 The corruptions, each stage's settings taken from --config (by default
@@ -100,7 +100,7 @@ def timed(f, repeat):
 
 def reflectance(intensity):
     """The reflectance our power model gives a calibrated-reflectivity byte (as
-    scripts/references/common.py)."""
+    scripts/dev/references/common.py)."""
     rho = np.where(intensity > 100, 1.0, intensity / 100.0)
     return np.maximum(rho, 0.005)
 
@@ -267,7 +267,7 @@ def main():
     ap.add_argument("--fog-sim", help="LiDAR_fog_sim snapshot folder")
     ap.add_argument("--lisa", help="LISA snapshot folder")
     ap.add_argument("--scan", help="a nuScenes .pcd.bin (default: the synthetic street)")
-    ap.add_argument("--config", default=os.path.join(HERE, "..", "configs", "adverse-weather.toml"))
+    ap.add_argument("--config", default=os.path.join(HERE, "..", "..", "configs", "adverse-weather.toml"))
     ap.add_argument("--repeat", type=int, default=20)
     ap.add_argument("--slow-repeat", type=int, default=1,
                     help="calls of a peer that took over 1 s once (LISA's per-point loops)")

@@ -63,7 +63,7 @@ fn a_scan_gives_the_same_fates_as_the_capture_frame_it_came_from() {
     write_pcd_bin(&fixture_frame(1), &scan);
     // The configs whose stages act on recorded returns only: those that also fill empty
     // firing slots need the scan on a grid of the capture's own rate (tested in
-    // `tests/cloud_equivalence.rs`, and by time in `a_scan_with_times_is_placed_by_them`).
+    // `tests/integration/cloud_equivalence.rs`, and by time in `a_scan_with_times_is_placed_by_them`).
     for config in ["clear", "occlusion", "paper", "rain", "pdiagram-sensor"] {
         let c = format!("configs/{config}.toml");
         let out = dir.path().join(format!("cloud-{config}"));

@@ -269,7 +269,7 @@ fn no_fog_echo_in_clear_air_on_the_shared_capture() {
 /// The numbers of the fidelity report (not a check): on frames 2-4 of the shared capture
 /// with configs/clear.toml plus one fog stage (`FOG_EXTRA` adds option lines), the share
 /// of returns replaced and added, and where the echoes sit in range and by ring, as JSON
-/// on stdout. Run: `cargo test --release --test fog_calibration -- --ignored --nocapture`.
+/// on stdout. Run: `cargo test --release --test integration -- --ignored --nocapture fog_calibration::`.
 #[test]
 #[ignore]
 fn measure_the_shared_capture() {

@@ -429,7 +429,7 @@ fn fuzz_cloud_csv_reader() {
 
 /// The packets of a `sensor` input: an option byte, then records of capture time (u64
 /// LE, ns), payload length (u16 LE) and payload, the last one cut where the input ends
-/// (see scripts/make-sensor-corpus.py, which writes the seeds from the documented
+/// (see scripts/dev/make-sensor-corpus.py, which writes the seeds from the documented
 /// layout).
 fn sensor_packets(bytes: &[u8]) -> (u8, Vec<(&[u8], u64)>) {
     let Some((&options, mut rest)) = bytes.split_first() else {

@@ -273,7 +273,7 @@ fn duplicated_packets_are_reported() {
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
-    // The copies are dropped and counted (see tests/readers_hostile.rs): no copy is
+    // The copies are dropped and counted (see tests/integration/readers_hostile.rs): no copy is
     // decoded, so the clock no longer seems to run backwards.
     assert!(
         err.contains(&format!("dropped {data} duplicate data packets")),

@@ -306,7 +306,7 @@ fn visible_files(dir: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
     }
     common::files(dir)
         .into_iter()
-        // The lock file and the manifest (`.lidar-noise.json`, tests/output_folders.rs).
+        // The lock file and the manifest (`.lidar-noise.json`, tests/integration/output_folders.rs).
         .filter(|(p, _)| !p.ends_with(".lidar-noise.lock") && !p.ends_with(".lidar-noise.json"))
         .collect()
 }

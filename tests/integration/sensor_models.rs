@@ -1,11 +1,11 @@
 //! Sensor models of issue 31 (src/sensor/): identification by structure on synthetic
 //! packet sequences and the real captures in ../shared/data, the VLP-16 decoder on the
 //! real VLP-16 capture (counts per ring from the raw bytes), and, as an ignored test run
-//! by scripts/vlp16_check.py, against velodyne_decoder's points of one frame. The
+//! by scripts/ci/vlp16_check.py, against velodyne_decoder's points of one frame. The
 //! VLP-32C and HDL-64E S2/S3 decoders on hand-written packets checked against tables
 //! typed here from the manuals (and VeloView's default HDL-64 table), their
 //! identification (also with a lying product byte), and, as an ignored test run by
-//! scripts/sensor_models_check.py, against velodyne_decoder on synthesized captures.
+//! scripts/ci/sensor_models_check.py, against velodyne_decoder on synthesized captures.
 
 use crate::common;
 
@@ -208,10 +208,10 @@ fn real_vlp16_capture_counts_per_ring_match_the_raw_bytes() {
         .all(|w| w[1].time > w[0].time));
 }
 
-/// Against velodyne_decoder: run `scripts/vlp16_check.py` (it writes the reference CSV
+/// Against velodyne_decoder: run `scripts/ci/vlp16_check.py` (it writes the reference CSV
 /// of frame 1 and runs this test with VLP16_REFERENCE_CSV set).
 #[test]
-#[ignore = "needs the reference CSV written by scripts/vlp16_check.py"]
+#[ignore = "needs the reference CSV written by scripts/ci/vlp16_check.py"]
 fn real_vlp16_capture_matches_velodyne_decoder() {
     // VLP16_PCAP: another real VLP-16 capture (notes/h-vls-out.md: VeloView's test data).
     let path = match std::env::var_os("VLP16_PCAP") {
@@ -718,7 +718,7 @@ fn vlp32c_and_hdl64e_are_identified_by_structure() {
     );
 }
 
-/// Against velodyne_decoder: run `scripts/sensor_models_check.py` (it synthesizes the
+/// Against velodyne_decoder: run `scripts/ci/sensor_models_check.py` (it synthesizes the
 /// captures, writes velodyne_decoder's points and runs this test with SENSOR_CHECK_DIR).
 /// Cases marked `real` (real captures, `--captures`) are held to the same count, ring,
 /// return, intensity and time, with two tolerances their data needs: times to 0.1 us
@@ -729,7 +729,7 @@ fn vlp32c_and_hdl64e_are_identified_by_structure() {
 /// points of a packet with a gap between its blocks (a sensor whose field of view is
 /// cut sends a packet whose blocks jump across the cut) are counted, not compared.
 #[test]
-#[ignore = "needs the files written by scripts/sensor_models_check.py"]
+#[ignore = "needs the files written by scripts/ci/sensor_models_check.py"]
 fn synthesized_captures_match_velodyne_decoder() {
     let dir =
         std::path::PathBuf::from(std::env::var("SENSOR_CHECK_DIR").expect("SENSOR_CHECK_DIR"));
@@ -1025,10 +1025,10 @@ fn hdl64e_calibration_db_xml_reads_as_the_same_yaml() {
 }
 
 /// Against velodyne_decoder's `hdl64e.read_status_info`: run
-/// `scripts/sensor_models_check.py` (it writes the packets and the calibration
+/// `scripts/ci/sensor_models_check.py` (it writes the packets and the calibration
 /// velodyne_decoder read from their status bytes).
 #[test]
-#[ignore = "needs the files written by scripts/sensor_models_check.py"]
+#[ignore = "needs the files written by scripts/ci/sensor_models_check.py"]
 fn status_byte_calibration_matches_velodyne_decoder() {
     let dir =
         std::path::PathBuf::from(std::env::var("SENSOR_CHECK_DIR").expect("SENSOR_CHECK_DIR"));

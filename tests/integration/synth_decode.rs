@@ -102,7 +102,7 @@ fn labels_line_up_with_the_decoded_returns_one_to_one() {
 }
 
 /// The committed fixtures are exactly what the synthesizer writes today; after a
-/// deliberate change, regenerate them with scripts/make-fixtures.sh and review the diff.
+/// deliberate change, regenerate them with scripts/dev/make-fixtures.sh and review the diff.
 #[test]
 fn committed_fixtures_match_the_synthesizer() {
     for preset in ["crossroad", "parking", "empty"] {
@@ -111,7 +111,7 @@ fn committed_fixtures_match_the_synthesizer() {
         let committed = std::fs::read(dir.join(format!("{preset}.pcap"))).unwrap();
         assert!(
             committed == pcap,
-            "fixtures/{preset}.pcap is stale: run scripts/make-fixtures.sh and review"
+            "fixtures/{preset}.pcap is stale: run scripts/dev/make-fixtures.sh and review"
         );
         let committed_rows =
             labels::read_labels_file(&dir.join(format!("{preset}.labels.{}", labels::EXTENSION)))

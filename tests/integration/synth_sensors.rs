@@ -2,7 +2,7 @@
 //! a pcap that identification by structure names as that sensor, and that its decoder
 //! reads back into exactly the cast returns (laser ids over the sensor's whole beam
 //! table, raw distances, intensities, positions where the ray hit); the labels file
-//! keys every return. The HDL-32E default keeps its bytes (tests/synth_capture.rs and
+//! keys every return. The HDL-32E default keeps its bytes (tests/integration/synth_capture.rs and
 //! the fixtures).
 
 use lidar_noise::capture::CaptureReader;

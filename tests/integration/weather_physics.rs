@@ -310,8 +310,8 @@ fn mie_drop_echoes_exist_and_grow_with_rate() {
     assert!(heavy > 0);
 }
 
-/// Prints the numbers of /work/notes (h-rain.md): `cargo test --test weather_physics --
-/// --ignored --nocapture measure_rain`. Asserts nothing beyond sanity: a measurement.
+/// Prints the numbers of /work/notes (h-rain.md): `cargo test --test integration --
+/// --ignored --nocapture weather_physics::measure_rain`. Asserts nothing beyond sanity: a measurement.
 #[test]
 #[ignore = "measurement for the notes; prints"]
 fn measure_rain() {

@@ -173,7 +173,7 @@ fn fog_echo_power_follows_the_paper_integral_within_1_percent() {
     // The echo power is proportional to beta = beta_r / V.
     // The optics before issue 50 (pulse of 20 ns, 25 mm apertures, a 5 mrad field),
     // whose noiseless peak reaches the threshold at 100 m (the calibrated ones never do:
-    // their echoes are the receiver's noise's, tests/fog_calibration.rs).
+    // their echoes are the receiver's noise's, tests/integration/fog_calibration.rs).
     let one = proposals(
         &stage("fog", &format!("visibility_m = 100\n{OLD_OPTICS}")),
         vec![ret(0, 50.0, 0, 0, ReturnKind::Strongest)],
@@ -237,7 +237,7 @@ fn strongest_return_keeps_a_strong_near_target_and_replaces_a_weak_far_one() {
 #[test]
 fn fog_fills_empty_slots_and_occluded_beams_get_no_echo() {
     // The threshold detection (noiseless): the echo is detectable in every free slot.
-    // Under the receiver's noise it is a chance per beam (tests/fog_calibration.rs).
+    // Under the receiver's noise it is a chance per beam (tests/integration/fog_calibration.rs).
     // With the optics before issue 50 (`OLD_OPTICS`) the noiseless peak is detectable.
     let threshold = "[detection]\nmodel = \"threshold\"\n";
     let fog = format!("visibility_m = 100\n{OLD_OPTICS}");

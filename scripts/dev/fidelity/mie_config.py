@@ -20,7 +20,7 @@ def main(path, model="mie"):
             drop = r"\s*(model|range_noise)\s*=" if model == "mie" else r"\s*model\s*="
             kept = [x for x in block if not re.match(drop, x)]
             at = next(i for i, x in enumerate(kept) if re.match(r'\s*type\s*=\s*"rain"', x))
-            kept.insert(at + 1, f'model = "{model}"    # written by scripts/make-study-mie.sh')
+            kept.insert(at + 1, f'model = "{model}"    # written by scripts/dev/make-study-mie.sh')
             out.extend(kept)
         else:
             out.extend(block)

@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Runs the published reference implementations on the same points as the fidelity report
 # (frames 2-4 of ../shared/data/hdl32e/monterey.pcap, decoded by our own `convert`) and
-# writes docs/fidelity/references.json, which scripts/fidelity/generate.py reads.
+# writes docs/fidelity/references.json, which scripts/dev/fidelity/generate.py reads.
 #
-# Usage: scripts/references/run-references.sh FOG_SIM LISA PYTHON [LISA_SAMPLE]
+# Usage: scripts/dev/references/run-references.sh FOG_SIM LISA PYTHON [LISA_SAMPLE]
 #   FOG_SIM  snapshot of github:MartinHahner/LiDAR_fog_sim: a bare git dir (as the `fetch`
 #            tool or `git clone --bare` gives) or a checked-out tree
 #   LISA     snapshot of github:velatkilic/LISA, the same
@@ -20,8 +20,8 @@
 # its mie.c with its own Makefile (falls back to the shipped mie.so if that fails).
 set -euo pipefail
 export PYTHONDONTWRITEBYTECODE=1  # no __pycache__ in the tree
-cd "$(dirname "$0")/../.."
-invocation="scripts/references/run-references.sh $*"
+cd "$(dirname "$0")/../../.."
+invocation="scripts/dev/references/run-references.sh $*"
 fog_src=$1 lisa_src=$2 py=$3 sample=${4:-0}
 capture=../shared/data/hdl32e/monterey.pcap
 [ -e "$capture" ] || { echo "needs $capture" >&2; exit 1; }
@@ -59,19 +59,19 @@ fi
 "$bin" --quiet convert "$capture" --frames 2..4 -o "$tmp/points"
 plys=("$tmp"/points/*.ply)
 
-fog_cmd="$py scripts/references/run_hahner_fog.py FOG_SIM_TREE POINTS/*.ply"
-lisa_cmd="$py scripts/references/run_lisa.py LISA_TREE POINTS/*.ply --rates 1,7.29,25 --snow-rates 1 --sample $sample --seed 1"
+fog_cmd="$py scripts/dev/references/run_hahner_fog.py FOG_SIM_TREE POINTS/*.ply"
+lisa_cmd="$py scripts/dev/references/run_lisa.py LISA_TREE POINTS/*.ply --rates 1,7.29,25 --snow-rates 1 --sample $sample --seed 1"
 matched_cmd="$lisa_cmd --optics hdl32e"
 start=$(date +%s)
-"$py" scripts/references/run_hahner_fog.py "$tmp/fog" "${plys[@]}" > "$tmp/fog.json"
+"$py" scripts/dev/references/run_hahner_fog.py "$tmp/fog" "${plys[@]}" > "$tmp/fog.json"
 mid=$(date +%s)
-"$py" scripts/references/run_lisa.py "$tmp/lisa" "${plys[@]}" --rates 1,7.29,25 \
+"$py" scripts/dev/references/run_lisa.py "$tmp/lisa" "${plys[@]}" --rates 1,7.29,25 \
   --snow-rates 1 --sample "$sample" --seed 1 > "$tmp/lisa.json"
 end=$(date +%s)
-"$py" scripts/references/run_lisa.py "$tmp/lisa" "${plys[@]}" --rates 1,7.29,25 \
+"$py" scripts/dev/references/run_lisa.py "$tmp/lisa" "${plys[@]}" --rates 1,7.29,25 \
   --snow-rates 1 --sample "$sample" --seed 1 --optics hdl32e > "$tmp/lisa_matched.json"
 matched_end=$(date +%s)
-# The real recording's figures (scripts/references/measure_radiate_fog.py, run by hand on
+# The real recording's figures (scripts/dev/references/measure_radiate_fog.py, run by hand on
 # data kept outside the project) are carried over from the file as it was.
 cp docs/fidelity/references.json "$tmp/old.json" 2>/dev/null || echo '{}' > "$tmp/old.json"
 

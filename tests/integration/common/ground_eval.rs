@@ -1,4 +1,4 @@
-//! Ground precision and recall on synthesized scenes, shared by `tests/ground_targets.rs`
+//! Ground precision and recall on synthesized scenes, shared by `tests/integration/ground_targets.rs`
 //! and `examples/ground_table.rs`.
 //!
 //! A scene is synthesized in memory (capture bytes plus the ray-caster's labels), the
@@ -122,7 +122,7 @@ pub fn measure(
 /// never used by the targets test, so the test measures scenes the settings did not see.
 pub const TUNING_SEEDS: [u64; 6] = [1, 2, 3, 4, 5, 6];
 
-/// Seeds of the randomized scenes of `tests/ground_targets.rs` (and the manual's table, "Ground removal").
+/// Seeds of the randomized scenes of `tests/integration/ground_targets.rs` (and the manual's table, "Ground removal").
 pub const TEST_SEEDS: [u64; 6] = [1009, 2027, 3041, 4057, 5077, 6089];
 
 /// Rotations synthesized per scene.

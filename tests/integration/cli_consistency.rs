@@ -4,13 +4,10 @@
 
 use crate::common;
 
+use crate::common::bin;
 use assert_cmd::Command;
 use lidar_noise::compare::{compare_file, Status, Tolerances};
 use std::path::Path;
-
-fn bin() -> Command {
-    Command::cargo_bin("lidar-noise").unwrap()
-}
 
 fn stdout(args: &[&str]) -> String {
     let out = bin().args(args).output().unwrap();

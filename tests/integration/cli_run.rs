@@ -2,13 +2,9 @@
 
 use crate::common;
 
-use assert_cmd::Command;
+use crate::common::bin;
 use std::collections::BTreeMap;
 use std::path::Path;
-
-fn bin() -> Command {
-    Command::cargo_bin("lidar-noise").unwrap()
-}
 
 fn run_with(threads: &str, seed: &str, out: &Path, extra: &[&str]) {
     let fixture = common::fixtures().join("crossroad.pcap");

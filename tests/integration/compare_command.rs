@@ -3,12 +3,8 @@
 
 use crate::common;
 
-use assert_cmd::Command;
+use crate::common::bin;
 use std::path::Path;
-
-fn bin() -> Command {
-    Command::cargo_bin("lidar-noise").unwrap()
-}
 
 /// One run of the crossroad fixture (frame 0, PLY and LAS) into `out`, from `cwd`.
 fn run_into(cwd: &Path, capture: &Path, out: &Path, format: &str) {

@@ -1,13 +1,7 @@
 //! Hostile inputs of issue 30 (defects 6, 7 and 8): impossible calibration values, reads
 //! without a size limit, and a `--set` whose value hides a second line.
 
-use std::process::Command;
-
-fn bin() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_lidar-noise"));
-    c.current_dir(env!("CARGO_MANIFEST_DIR"));
-    c
-}
+use crate::common::command_at_root as bin;
 
 fn fails_with(args: &[&str], needles: &[&str]) {
     let dir = tempfile::tempdir().unwrap();

@@ -15,7 +15,7 @@
 //! - independent: one stage removes the front and right walls, the other the front and
 //!   left walls: each alone keeps half of the walls, both keep a quarter, the product.
 
-use assert_cmd::Command;
+use crate::common::bin;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
@@ -67,10 +67,6 @@ width_m = 0.3
 height_m = 3.0
 reflectance = 0.5
 "#;
-
-fn bin() -> Command {
-    Command::cargo_bin("lidar-noise").unwrap()
-}
 
 /// Synthesizes the scene once per test into `dir`; returns the capture.
 fn capture(dir: &Path) -> PathBuf {

@@ -3,13 +3,9 @@
 
 use crate::common;
 
-use assert_cmd::Command;
+use crate::common::bin;
 use std::collections::HashMap;
 use std::path::Path;
-
-fn bin() -> Command {
-    Command::cargo_bin("lidar-noise").unwrap()
-}
 
 fn run(out: &Path, extra: &[&str]) {
     bin()

@@ -6,7 +6,7 @@
 
 use crate::common;
 
-use assert_cmd::Command;
+use crate::common::bin2 as bin;
 use lidar_noise::frame::FrameSource;
 use lidar_noise::hdl32e::frames::DecoderOptions;
 use lidar_noise::sensor::frames::ModelFrameReader;
@@ -116,12 +116,6 @@ fn a_reader_resumed_at_a_scanned_frame_yields_the_frames_from_the_start() {
             }
         }
     }
-}
-
-fn bin() -> Command {
-    let mut c = Command::cargo_bin("lidar-noise").unwrap();
-    c.env("RAYON_NUM_THREADS", "2");
-    c
 }
 
 /// `lidar-noise COMMAND capture -c configs/adverse-weather.toml --keep-partial --quiet

@@ -3,13 +3,9 @@
 
 use crate::common;
 
-use assert_cmd::Command;
+use crate::common::bin;
 use lidar_noise::compare::{compare_dirs, Tolerances};
 use std::path::Path;
-
-fn bin() -> Command {
-    Command::cargo_bin("lidar-noise").unwrap()
-}
 
 fn run(out: &Path, config: Option<&Path>, extra: &[&str]) {
     let mut cmd = bin();

@@ -3,18 +3,13 @@
 //! FIFO capture, mixed sensors in the first packets, and how `run` and `convert` name a
 //! capture in their messages.
 
+use crate::common::command_at_root as bin;
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader, DUPLICATE_WINDOW};
 use lidar_noise::hdl32e::index::FrameScan;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::Arc;
-
-fn bin() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_lidar-noise"));
-    c.current_dir(env!("CARGO_MANIFEST_DIR"));
-    c
-}
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -3,12 +3,9 @@
 
 use crate::common;
 
+use crate::common::command as bin;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_lidar-noise"))
-}
 
 fn fixture(name: &str) -> PathBuf {
     common::fixtures().join(name)

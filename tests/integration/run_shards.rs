@@ -6,19 +6,13 @@
 
 use crate::common;
 
-use assert_cmd::Command;
+use crate::common::bin2 as bin;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
 /// Exit code of a refused output folder (README and manual, exit codes).
 const EXIT_REFUSED: i32 = 3;
-
-fn bin() -> Command {
-    let mut c = Command::cargo_bin("lidar-noise").unwrap();
-    c.env("RAYON_NUM_THREADS", "2");
-    c
-}
 
 /// Two captures with their partial sweeps: 3 + 2 frames.
 fn run(out: &Path, extra: &[&str]) -> Output {

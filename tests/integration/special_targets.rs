@@ -2,13 +2,8 @@
 //! `--junit` over a device, a FIFO or a link; a dangling link at the lock file's name;
 //! the root folder as `-o`.
 
+use crate::common::command_at_root as bin;
 use std::process::Command;
-
-fn bin() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_lidar-noise"));
-    c.current_dir(env!("CARGO_MANIFEST_DIR"));
-    c
-}
 
 /// Makes result folders `a` in `dir` to compare.
 fn results(dir: &std::path::Path) -> String {

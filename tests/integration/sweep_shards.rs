@@ -8,16 +8,11 @@
 
 use crate::common;
 
+use crate::common::bin2 as bin;
 use assert_cmd::Command;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::Output;
-
-fn bin() -> Command {
-    let mut c = Command::cargo_bin("lidar-noise").unwrap();
-    c.env("RAYON_NUM_THREADS", "2");
-    c
-}
 
 /// A small sweep: two captures x two rates x two seeds = 8 cells.
 fn sweep(out: &Path, extra: &[&str]) -> Output {

@@ -4,17 +4,13 @@
 
 use crate::common;
 
-use assert_cmd::Command;
+use crate::common::bin;
 use std::collections::BTreeMap;
 use std::path::Path;
 
 /// A fake car (spoofing, p-diagram 14) 8 m to the right of the sensor, where the
 /// crossroad fixture has free road: its points can only form a cluster of their own.
 const SPOOF: &str = "seed = 3\n[[noise]]\ntype = \"spoofing\"\nazimuth_deg = 90.0\nrange_m = 8.0\n";
-
-fn bin() -> Command {
-    Command::cargo_bin("lidar-noise").unwrap()
-}
 
 /// Rows of a CSV file as maps from column name to text.
 fn rows(path: &Path) -> Vec<BTreeMap<String, String>> {

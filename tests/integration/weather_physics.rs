@@ -99,7 +99,9 @@ fn goodin_rain_outputs_are_unchanged() {
             "# Goodin rain: returns, xxh3 of (range bits, power bits, fate, cause) per entry.\n\
              # Written by `LIDAR_NOISE_BLESS=1 cargo test`; never edit by hand.\n",
         );
-        let kept = want.iter().filter(|w| !got.iter().any(|g| key(g) == key(w)));
+        let kept = want
+            .iter()
+            .filter(|w| !got.iter().any(|g| key(g) == key(w)));
         for l in got.iter().map(String::as_str).chain(kept.copied()) {
             text.push_str(l);
             text.push('\n');

@@ -332,3 +332,21 @@ pub fn bless_golden(rel: &str, text: &[u8]) -> bool {
     eprintln!("BLESSED: rewrote {rel}; review `git diff tests/golden`");
     true
 }
+
+/// The `lidar-noise` binary under test.
+pub fn bin() -> assert_cmd::Command {
+    assert_cmd::Command::cargo_bin("lidar-noise").unwrap()
+}
+
+/// The `lidar-noise` binary as a plain process (for tests that read its output as it
+/// comes, or feed or kill it).
+pub fn command() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_lidar-noise"))
+}
+
+/// [`command`] run from the project root, where `fixtures/` and `configs/` resolve.
+pub fn command_at_root() -> std::process::Command {
+    let mut c = command();
+    c.current_dir(env!("CARGO_MANIFEST_DIR"));
+    c
+}

@@ -22,20 +22,12 @@ fn ret(laser: u8, range: f32, intensity: u8, firing: u32) -> Return {
 /// A 10 Hz rotation: ranges 1..70 m, intensities 0..120 (some retro-reflectors, some
 /// returns saturated at short range).
 fn turn() -> Frame {
-    let mut v = Vec::new();
-    for f in 0..2000u32 {
-        for l in 0..32u8 {
-            let k = f * 32 + u32::from(l);
-            let range = 1.0 + (k.wrapping_mul(2_654_435_761) % 6900) as f32 / 100.0;
-            let intensity = (k.wrapping_mul(40_503) % 121) as u8;
-            v.push(ret(l, range, intensity, f));
-        }
-    }
-    Frame {
-        index: 0,
-        partial: false,
-        returns: v,
-    }
+    common::rotation(0, 2000, |f, l| {
+        let k = f * 32 + u32::from(l);
+        let range = 1.0 + (k.wrapping_mul(2_654_435_761) % 6900) as f32 / 100.0;
+        let intensity = (k.wrapping_mul(40_503) % 121) as u8;
+        Some(ret(l, range, intensity, f))
+    })
 }
 
 /// Ideal power of byte `i` at `r` m for a reflectivity (`full` = 100) or raw (255)

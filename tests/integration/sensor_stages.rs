@@ -29,21 +29,13 @@ fn ret(laser: u8, range: f32, azimuth: f32, intensity: u8, firing: u32, time: f6
 
 /// A 10 Hz rotation: 2000 firings of 32 lasers, ranges 2..60 m, varied intensities.
 fn turn(index: u32) -> Frame {
-    let mut v = Vec::new();
-    for f in 0..2000u32 {
+    common::rotation(index, 2000, |f, l| {
         let az = f as f32 * 0.18;
-        for l in 0..32u8 {
-            let k = f * 32 + u32::from(l);
-            let range = 2.0 + (k.wrapping_mul(2_654_435_761) % 5800) as f32 / 100.0;
-            let t = 100.0 + f64::from(f) * 46.08e-6 + f64::from(l) * 1.152e-6;
-            v.push(ret(l, range, az, (k % 101) as u8, f, t));
-        }
-    }
-    Frame {
-        index,
-        partial: false,
-        returns: v,
-    }
+        let k = f * 32 + u32::from(l);
+        let range = 2.0 + (k.wrapping_mul(2_654_435_761) % 5800) as f32 / 100.0;
+        let t = 100.0 + f64::from(f) * 46.08e-6 + f64::from(l) * 1.152e-6;
+        Some(ret(l, range, az, (k % 101) as u8, f, t))
+    })
 }
 
 /// (clean, noisy) pairs of the surviving returns.

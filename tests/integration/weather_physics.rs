@@ -195,19 +195,11 @@ fn ret(laser: u8, range: f32, intensity: u8, firing: u32) -> Return {
 
 /// 1800 firings of 32 lasers, ranges 2..60 m, varied reflectivities.
 fn turn() -> Frame {
-    let mut v = Vec::new();
-    for f in 0..1800u32 {
-        for l in 0..32u8 {
-            let k = f * 32 + u32::from(l);
-            let range = 2.0 + (k.wrapping_mul(2_654_435_761) % 5800) as f32 / 100.0;
-            v.push(ret(l, range, (k % 101) as u8, f));
-        }
-    }
-    Frame {
-        index: 0,
-        partial: false,
-        returns: v,
-    }
+    common::rotation(0, 1800, |f, l| {
+        let k = f * 32 + u32::from(l);
+        let range = 2.0 + (k.wrapping_mul(2_654_435_761) % 5800) as f32 / 100.0;
+        Some(ret(l, range, (k % 101) as u8, f))
+    })
 }
 
 fn ideal() -> IdealPower {

@@ -23,22 +23,14 @@ fn ret(laser: u8, range: f32, intensity: u8, firing: u32, kind: ReturnKind) -> R
 /// 1800 firings of 32 lasers, ranges 2..60 m, varied intensities; every 7th slot is
 /// empty (sky), so echoes are also added.
 fn turn(index: u32) -> Frame {
-    let mut v = Vec::new();
-    for f in 0..1800u32 {
-        for l in 0..32u8 {
-            let k = f * 32 + u32::from(l);
-            if k % 7 == 3 {
-                continue;
-            }
-            let range = 2.0 + (k.wrapping_mul(2_654_435_761) % 5800) as f32 / 100.0;
-            v.push(ret(l, range, (k % 101) as u8, f, ReturnKind::Strongest));
+    common::rotation(index, 1800, |f, l| {
+        let k = f * 32 + u32::from(l);
+        if k % 7 == 3 {
+            return None;
         }
-    }
-    Frame {
-        index,
-        partial: false,
-        returns: v,
-    }
+        let range = 2.0 + (k.wrapping_mul(2_654_435_761) % 5800) as f32 / 100.0;
+        Some(ret(l, range, (k % 101) as u8, f, ReturnKind::Strongest))
+    })
 }
 
 /// Independent reference for the fog echo: the paper's integral in its own variable t,

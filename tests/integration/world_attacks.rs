@@ -43,20 +43,12 @@ fn ret(laser: u8, range: f32, intensity: u8, firing: u32, kind: ReturnKind) -> R
 /// A 10 Hz rotation (2000 firings x 32 lasers), every return detectable and none
 /// saturated: ranges 20..60 m, intensities 20..80 (power 0.0011 to 0.2).
 fn turn(index: u32) -> Frame {
-    let mut v = Vec::new();
-    for f in 0..2000u32 {
-        for l in 0..32u8 {
-            let k = (index * 2000 + f) * 32 + u32::from(l);
-            let range = 20.0 + (k.wrapping_mul(2_654_435_761) % 4000) as f32 / 100.0;
-            let intensity = 20 + (k.wrapping_mul(40_503) % 61) as u8;
-            v.push(ret(l, range, intensity, f, ReturnKind::Strongest));
-        }
-    }
-    Frame {
-        index,
-        partial: false,
-        returns: v,
-    }
+    common::rotation(index, 2000, |f, l| {
+        let k = (index * 2000 + f) * 32 + u32::from(l);
+        let range = 20.0 + (k.wrapping_mul(2_654_435_761) % 4000) as f32 / 100.0;
+        let intensity = 20 + (k.wrapping_mul(40_503) % 61) as u8;
+        Some(ret(l, range, intensity, f, ReturnKind::Strongest))
+    })
 }
 
 /// A rotation with sky: lasers pointing up (elevation >= 0) return only from a building

@@ -40,25 +40,17 @@ fn bands(near: f32, far: f32, dual: bool) -> Frame {
 
 /// A 10 Hz rotation: 2000 firings of 32 lasers, ranges 2..30 m, intensities 40..140.
 fn turn(index: u32) -> Frame {
-    let mut v = Vec::new();
-    for f in 0..2000u32 {
-        for l in 0..32u8 {
-            let k = f * 32 + u32::from(l);
-            let range = 2.0 + (k.wrapping_mul(2_654_435_761) % 2800) as f32 / 100.0;
-            v.push(ret(
-                l,
-                range,
-                40 + (k % 101) as u8,
-                f,
-                ReturnKind::Strongest,
-            ));
-        }
-    }
-    Frame {
-        index,
-        partial: false,
-        returns: v,
-    }
+    common::rotation(index, 2000, |f, l| {
+        let k = f * 32 + u32::from(l);
+        let range = 2.0 + (k.wrapping_mul(2_654_435_761) % 2800) as f32 / 100.0;
+        Some(ret(
+            l,
+            range,
+            40 + (k % 101) as u8,
+            f,
+            ReturnKind::Strongest,
+        ))
+    })
 }
 
 /// Is return `i` of a `bands` frame next to a depth edge (neighbour firing in the other

@@ -350,3 +350,24 @@ pub fn command_at_root() -> std::process::Command {
     c.current_dir(env!("CARGO_MANIFEST_DIR"));
     c
 }
+
+/// A rotation of the built-in 32-laser sensor as frame `index`: for each firing in
+/// `0..firings`, lasers 0 to 31 in turn, the return `make(firing, laser)` gives (`None`
+/// for an empty slot). The modules' synthetic `turn`s differ only in `make`.
+pub fn rotation(
+    index: u32,
+    firings: u32,
+    mut make: impl FnMut(u32, u8) -> Option<lidar_noise::frame::Return>,
+) -> lidar_noise::frame::Frame {
+    let mut returns = Vec::new();
+    for f in 0..firings {
+        for l in 0..32u8 {
+            returns.extend(make(f, l));
+        }
+    }
+    lidar_noise::frame::Frame {
+        index,
+        partial: false,
+        returns,
+    }
+}

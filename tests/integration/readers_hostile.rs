@@ -4,18 +4,13 @@
 //! capture in their messages.
 
 use crate::common::command_at_root as bin;
+use crate::common::fixture;
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader, DUPLICATE_WINDOW};
 use lidar_noise::hdl32e::index::FrameScan;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::Arc;
-
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("fixtures")
-        .join(name)
-}
 
 /// A classic pcap's file header and its records (each with its 16-byte header), with the
 /// byte offset of each record.

@@ -4,12 +4,9 @@
 use crate::common;
 
 use crate::common::command as bin;
+use crate::common::fixture;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
-
-fn fixture(name: &str) -> PathBuf {
-    common::fixtures().join(name)
-}
 
 fn run_ok(cmd: &mut Command) -> Output {
     let o = cmd.output().unwrap();

@@ -4,6 +4,7 @@
 
 use crate::common;
 
+use crate::common::ideal;
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Return, ReturnKind};
 use lidar_noise::noise::spurious::resolve;
@@ -15,13 +16,6 @@ use std::sync::Arc;
 fn ret(laser: u8, range: f32, firing: u32, kind: ReturnKind) -> Return {
     let time = 10.0 + f64::from(firing) * 46.08e-6 + f64::from(laser) * 1.152e-6;
     common::beam_return(laser, range, firing as f32 * 0.2, 50, firing, time, kind)
-}
-
-fn ideal() -> IdealPower {
-    let c = Config::from_toml_str("seed = 1\n", Path::new("t.toml"), &[], None)
-        .unwrap()
-        .0;
-    IdealPower::new(&c.power, &c.sensor, &c.detection)
 }
 
 fn frame(returns: Vec<Return>) -> NoisyFrame {

@@ -1,5 +1,6 @@
 //! Object matching metrics on hand-made partitions (cluster id per clean return).
 
+use crate::common::fixture;
 use lidar_noise::sweep::metrics::{
     band_index, band_metrics, match_objects, object_outcomes, precision_recall, MatchRule,
     ObjectResult, Outcome, ReturnState, Tally,
@@ -460,12 +461,6 @@ fn bands_option_needs_increasing_non_negative_edges() {
         let e = parse_bands(bad).unwrap_err().to_string();
         assert!(e.contains("--bands"), "{bad}: {e}");
     }
-}
-
-fn fixture(name: &str) -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("fixtures")
-        .join(name)
 }
 
 fn sweep_cmd(out: &std::path::Path, extra: &[&str]) -> std::process::Output {

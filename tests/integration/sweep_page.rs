@@ -5,16 +5,11 @@
 //! Each test runs one small sweep (crossroad fixture, two frames, rain 0/1/7 mm/h x
 //! occlusion on/off, two seeds).
 
+use crate::common::fixture;
 use assert_cmd::Command;
 use lidar_noise::sweep::tables;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-
-fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("fixtures")
-        .join(name)
-}
 
 /// A sweep folder of its own for each test (the sweep takes well under a second).
 struct Sweep {

@@ -2,15 +2,10 @@
 
 use crate::common;
 
+use crate::common::fixture;
 use assert_cmd::Command;
 use lidar_noise::sweep::run::METRICS_VERSION;
 use std::path::{Path, PathBuf};
-
-fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("fixtures")
-        .join(name)
-}
 
 fn sweep(out: &Path) -> String {
     let o = Command::cargo_bin("lidar-noise")

@@ -7,6 +7,7 @@
 
 use crate::common;
 
+use crate::common::ideal;
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
@@ -200,11 +201,6 @@ fn turn() -> Frame {
         let range = 2.0 + (k.wrapping_mul(2_654_435_761) % 5800) as f32 / 100.0;
         Some(ret(l, range, (k % 101) as u8, f))
     })
-}
-
-fn ideal() -> IdealPower {
-    let c = common::config("seed = 1\n");
-    IdealPower::new(&c.power, &c.sensor, &c.detection)
 }
 
 #[test]

@@ -6,6 +6,7 @@ use crate::common;
 
 use common::{config, err, run, stage};
 
+use crate::common::ideal;
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::noise::{Fate, IdealPower, NoiseChain, NoisyFrame, NO_CAUSE};
@@ -91,11 +92,6 @@ fn reference_echo(v: f64, r0: f64, r1: f64, r2: f64, tau_h: f64, kappa: f64) -> 
 /// and 4.1 mrad), for tests of the noiseless echo (`[detection] model = "threshold"`).
 const OLD_OPTICS: &str =
     "tau_h_ns = 20\ntx_aperture_mm = 25\nrx_aperture_mm = 25\nrx_fov_mrad = 5\n";
-
-fn ideal() -> IdealPower {
-    let c = config("seed = 1\n");
-    IdealPower::new(&c.power, &c.sensor, &c.detection)
-}
 
 /// A chain's stages applied to a frame without resolving: the proposed echoes.
 fn proposals(text: &str, returns: Vec<Return>) -> NoisyFrame {

@@ -371,3 +371,14 @@ pub fn rotation(
         returns,
     }
 }
+
+/// A file of the project's fixture directory.
+pub fn fixture(name: &str) -> PathBuf {
+    fixtures().join(name)
+}
+
+/// The default configuration's ideal received power (power model, sensor, detection).
+pub fn ideal() -> lidar_noise::noise::IdealPower {
+    let c = config("seed = 1\n");
+    lidar_noise::noise::IdealPower::new(&c.power, &c.sensor, &c.detection)
+}

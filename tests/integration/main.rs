@@ -7,9 +7,10 @@
 //!
 //! Run one subject with a filter: `cargo test --test integration -- fuzz::`.
 //!
-//! No module changes the process's environment, current directory or global thread
-//! pool: every command under test runs as a child process, so the modules share this
-//! process safely.
+//! No module changes the process's environment, current directory, global thread pool
+//! or allocator, so the modules share this process safely. The one test that must have
+//! a process of its own, the sweep's heap peak under a counting global allocator, is
+//! the second binary, `tests/sweep_memory/main.rs`.
 
 mod common;
 
@@ -68,7 +69,6 @@ mod special_targets;
 mod spurious;
 mod stdout_full;
 mod sweep_growth;
-mod sweep_memory;
 mod sweep_metrics;
 mod sweep_page;
 mod sweep_progress;

@@ -10,6 +10,10 @@
 //! nothing (24,850,844 and 24,850,729 bytes). One worker thread makes the allocations
 //! the same from run to run. The tests of this binary run one at a time ([`SERIAL`]):
 //! no other test allocates meanwhile.
+//!
+//! Why a test binary of its own, beside `tests/integration/`: its counting allocator is
+//! the process's global allocator and its counts are process-wide, so in the shared
+//! binary every other test's allocations would count too. It shares `common/` by path.
 
 use lidar_noise::hdl32e::frames::DecoderOptions;
 use lidar_noise::sweep::outputs::write_outputs;
@@ -19,7 +23,8 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
 
-use crate::common;
+#[path = "../integration/common/mod.rs"]
+mod common;
 
 /// The system allocator, counting the bytes live and their peak.
 struct Counting;

@@ -5,7 +5,9 @@
 //! module live in `common/` (with the ground-segmentation scenes and evaluation as its
 //! modules); data stays in `tests/data/` and the reviewed goldens in `tests/golden/`.
 //!
-//! Run one subject with a filter: `cargo test --test integration -- fuzz::`.
+//! Run one subject with a filter: `cargo test --test integration -- fuzz::`. Refresh the
+//! goldens after a deliberate change with `LIDAR_NOISE_BLESS=1 cargo test`
+//! (`common::bless`), then review `git diff tests/golden`.
 //!
 //! No module changes the process's environment, current directory, global thread pool
 //! or allocator, so the modules share this process safely. The one test that must have

@@ -5,7 +5,6 @@
 use crate::common;
 
 use crate::common::bin;
-use assert_cmd::Command;
 use lidar_noise::compare::{compare_file, Status, Tolerances};
 use std::path::Path;
 

@@ -8,7 +8,7 @@ use crate::common::fixture;
 use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader, DUPLICATE_WINDOW};
 use lidar_noise::hdl32e::index::FrameScan;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::sync::Arc;
 

@@ -5,11 +5,9 @@
 use crate::common;
 
 use crate::common::ideal;
-use lidar_noise::config::Config;
 use lidar_noise::frame::{Return, ReturnKind};
 use lidar_noise::noise::spurious::resolve;
-use lidar_noise::noise::{Echo, Fate, IdealPower, NoisyFrame, NO_CAUSE};
-use std::path::Path;
+use lidar_noise::noise::{Echo, Fate, NoisyFrame, NO_CAUSE};
 use std::sync::Arc;
 
 /// A return of `laser` at `range` m in firing `firing` (azimuth 0.2 deg per firing).

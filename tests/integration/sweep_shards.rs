@@ -9,7 +9,6 @@
 use crate::common;
 
 use crate::common::bin2 as bin;
-use assert_cmd::Command;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::Output;

@@ -9,7 +9,7 @@ use common::{config, err, run, stage};
 use crate::common::ideal;
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
-use lidar_noise::noise::{Fate, IdealPower, NoiseChain, NoisyFrame, NO_CAUSE};
+use lidar_noise::noise::{Fate, NoiseChain, NoisyFrame, NO_CAUSE};
 use std::path::Path;
 use std::sync::Arc;
 

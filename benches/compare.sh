@@ -21,4 +21,4 @@ target/release/lidar-noise --quiet run -c configs/clear.toml --frames 1 -o "$out
 cargo bench --quiet --bench pipeline -- ground_plus_clustering 2>&1 | grep -E "frame|time:" || true
 cargo bench --quiet --bench cluster -- monterey 2>&1 | grep -E "time:" || true
 echo "== alternatives"
-"$venv/bin/python" scripts/bench_compare.py "$capture" "$out/monterey/frame_00001.ply"
+"$venv/bin/python" scripts/dev/bench_compare.py "$capture" "$out/monterey/frame_00001.ply"

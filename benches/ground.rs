@@ -2,7 +2,7 @@
 //! and of every method on a real frame (monterey frame 1, about 50k returns) when the
 //! shared data is present.
 
-#[path = "../tests/ground_scene/mod.rs"]
+#[path = "../tests/integration/common/ground_scene.rs"]
 mod ground_scene;
 
 use criterion::{criterion_group, criterion_main, Criterion};

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Whole-process speed on the shared capture (17 frames, 1.49 s of recording at 11.8 Hz),
 # the paper pipeline with PLY and reports written, against the Python pipeline a user
-# would assemble (scripts/python_peer.py: velodyne_decoder + numpy noise + Patchwork++ +
+# would assemble (scripts/dev/python_peer.py: velodyne_decoder + numpy noise + Patchwork++ +
 # Open3D DBSCAN + plyfile), measured in the same run. Also `convert` against
 # velodyne_decoder + plyfile writing the same per-frame PLY. Not part of CI: it installs
 # Python packages (Open3D is large).
@@ -81,7 +81,7 @@ for _ in 1 2 3; do
   # Its errors are shown: a failing peer must not pass for a missing line. The whole
   # process is timed too: Python's start-up and the imports are part of a user's run.
   t0=$(date +%s.%N)
-  "$venv/bin/python" scripts/python_peer.py "$capture" "$out/peer" | grep peer | tee -a "$out/peer.txt"
+  "$venv/bin/python" scripts/dev/python_peer.py "$capture" "$out/peer" | grep peer | tee -a "$out/peer.txt"
   t1=$(date +%s.%N)
   echo "python peer whole process: $(python3 -c "print(f'{$t1 - $t0:.3f}')") s" | tee -a "$out/peer.txt"
 done

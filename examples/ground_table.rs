@@ -2,9 +2,9 @@
 //! randomized scenes under clean, rain, occlusion and paper noise (the manual's table, "Ground removal").
 //!
 //! `cargo run --release --example ground_table [SEED...]`; without seeds, the test seeds
-//! of `tests/ground_targets.rs`.
+//! of `tests/integration/ground_targets.rs`.
 
-#[path = "../tests/ground_eval/mod.rs"]
+#[path = "../tests/integration/common/ground_eval.rs"]
 mod ground_eval;
 
 use ground_eval::{config, labelled_frames, measure, CONFIGS};

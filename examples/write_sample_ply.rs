@@ -1,5 +1,5 @@
 //! Writes a synthetic frame as PLY, for checking files with outside readers
-//! (`python3 scripts/plyfile_check.py OUT.ply`, CloudCompare, Open3D).
+//! (`python3 scripts/ci/plyfile_check.py OUT.ply`, CloudCompare, Open3D).
 //!
 //! Usage: `cargo run --example write_sample_ply -- OUT.ply [--ascii] [--points N] [--extras]`
 

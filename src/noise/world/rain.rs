@@ -356,9 +356,8 @@ impl NoiseStage for Rain {
             RangeNoise::Lisa => "lisa",
         };
         // `model` is always listed: the default changed to mie with issue 29, so a
-        // printed configuration of a Goodin run must say goodin to rerun the same (the
-        // reference study's summary.json gains this one key; golden updated by
-        // scripts/update-goldens.sh). Order as in the option specs.
+        // printed configuration of a Goodin run must say goodin to rerun the same.
+        // Order as in the option specs.
         let mut v = vec![(
             "model",
             Value::String(

@@ -16,7 +16,7 @@
 //! Every reader works on the file's bytes, read whole and bounded by [`MAX_CLOUD_BYTES`],
 //! so a header claiming 2^40 points is checked against the real size and refused, never
 //! allocated. Every error names the file and the place (byte offset, point index, line
-//! and column), and no input makes a reader panic (tests/fuzz.rs, targets `cloud-*`).
+//! and column), and no input makes a reader panic (tests/integration/fuzz.rs, targets `cloud-*`).
 
 pub(crate) mod atan;
 pub mod boxes;

@@ -29,7 +29,7 @@
 //!   laser l's lead), the turn cut at 0 as a capture's sweeps are: a firing started just
 //!   before 0 (its lasers interpolated past the cut) is the turn's last, one past 360 (a
 //!   laser's offset) the next turn's first; so a capture's frame written as a scan keeps
-//!   its firings' order (`tests/cloud_equivalence.rs`). When two points claim one slot
+//!   its firings' order (`tests/integration/cloud_equivalence.rs`). When two points claim one slot
 //!   (a dataset's motion compensation, a merged sweep, or KITTI's lines, whose points
 //!   come a little faster than the grid's firings), the later in file order moves to the
 //!   nearest firing within two on either side that no point claims, and shares the slot
@@ -45,7 +45,7 @@
 //!   offset, in firing periods (rounded), counted from the earliest firing; its return's
 //!   time is its own; two points of one slot share it (a dual return, a merged sweep),
 //!   none moves. A real capture's frame written with its times keeps every firing
-//!   (`tests/cloud_equivalence.rs`), where on the azimuth grid a turn whose speed varies
+//!   (`tests/integration/cloud_equivalence.rs`), where on the azimuth grid a turn whose speed varies
 //!   moves some points. [`CloudReturns::time`] says which placed them.
 //! - packet and block from the firing (firings numbered from 0 at the turn's start,
 //!   `sequences_per_packet` firings a packet in single return mode: 12 on the HDL-32E and

@@ -4,7 +4,7 @@
 //! - [`GroundMethod::Patchwork`] (default): region-wise plane fitting after Patchwork++
 //!   (Lee et al., RA-L 2022) with a per-point height test of our own, see [`patchwork`].
 //!   It is the method that keeps ground precision and recall at 0.97 or more under the
-//!   Goodin rain of `configs/rain.toml` (`tests/ground_targets.rs`).
+//!   Goodin rain of `configs/rain.toml` (`tests/integration/ground_targets.rs`).
 //! - [`GroundMethod::RangeImage`]: the angle-image segmentation of MATLAB's
 //!   `segmentGroundFromLidarData` after Bogoslavskyi and Stachniss, see [`range_image`];
 //!   the reference study's method (`configs/paper.toml` selects it).

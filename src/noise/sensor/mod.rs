@@ -14,7 +14,7 @@
 //!   recording. Their range terms at their defaults (per-laser bias 5 mm, jitter 20 ps
 //!   = 3 mm, drift 50 ppm = 1.25 mm at 25 m, receiver 0.03 m / sqrt(2 SNR) = 5.3 mm for
 //!   a 10 % target at 25 m) add 7.9 mm RMS at 25 m, so a unit within the datasheet
-//!   stays within it when its own noise is under 1.8 cm (tests/conventions.rs).
+//!   stays within it when its own noise is under 1.8 cm (tests/integration/conventions.rs).
 //!   For a noise-free synthetic scene, the whole sensor's noise is about
 //!   `receiver.range_noise_m = 0.09` (LISA's dR) with `clock.jitter_ps = 70`.
 //! - `mounting`: the spread between installations of a calibrated rig.

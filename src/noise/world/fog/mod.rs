@@ -76,7 +76,7 @@
 //!
 //! Clear air: the echo's mean peak falls as 1/V; with the receiver's noise the chance
 //! of a fog echo falls smoothly with it, to under one echo in 10,000 frames at
-//! V = 1 km and none at V >= 10 km (tests/fog_calibration.rs).
+//! V = 1 km and none at V >= 10 km (tests/integration/fog_calibration.rs).
 //!
 //! The integral is computed here (Gauss-Legendre quadrature on the smooth pieces between
 //! R1, R2 and R0, the biaxial overlap in pieces of at most 0.75 m), not read from the

@@ -368,8 +368,13 @@ fn interrupted_run_and_sweep_leave_nothing_partial_and_rerun_identically() {
             }
             let status = child.wait().unwrap();
             if !sigkill {
+                // 130: the handler cleaned up; 0: it had finished. On a loaded machine the
+                // signal may come before the process installed its handler (before it
+                // wrote anything): then it dies of the signal itself, which is no
+                // failure as long as nothing is left behind (checked below).
+                use std::os::unix::process::ExitStatusExt;
                 assert!(
-                    matches!(status.code(), Some(130) | Some(0)),
+                    matches!(status.code(), Some(130) | Some(0)) || status.signal() == Some(2),
                     "{what}: SIGINT after {delay_ms} ms gave {status:?}"
                 );
                 assert!(leftovers(&out).is_empty(), "{what}: {:?}", leftovers(&out));

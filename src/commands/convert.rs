@@ -228,6 +228,8 @@ fn convert_one(
             }
         }
         CaptureFrames::Model(reader) => {
+            let duplicates = reader.summary().duplicate_packets;
+            crate::engine::inputs::warn_duplicates(global, Path::new(&shown), duplicates);
             if written == 0 {
                 return Err(crate::engine::reports::no_model_frame_error(
                     &shown, range, reader,

@@ -650,7 +650,11 @@ fn join_capture(
             );
             super::reports::SourceSummary::Capture(&capture_summary)
         }
-        CaptureFrames::Model(r) => super::reports::SourceSummary::Model(r.summary()),
+        CaptureFrames::Model(r) => {
+            let duplicates = r.summary().duplicate_packets;
+            super::inputs::warn_duplicates(global, Path::new(&job.shown()), duplicates);
+            super::reports::SourceSummary::Model(r.summary())
+        }
     };
     let totals = Totals {
         ground_fraction: stages.ground_fraction(),

@@ -38,17 +38,7 @@ pub fn warn_capture(global: Global, path: &Path, s: &CaptureSummary, check_inten
             s.bad_data_packets
         ));
     }
-    if s.duplicate_packets > 0 {
-        global.warn(&format!(
-            "{}: dropped {} duplicate data packet{} (exact copies, same timestamp and bytes, \
-             of one of the {} data packets before; the capture was recorded or merged twice?): \
-             frames are decoded from the first copies only",
-            path.display(),
-            s.duplicate_packets,
-            if s.duplicate_packets == 1 { "" } else { "s" },
-            crate::hdl32e::frames::DUPLICATE_WINDOW
-        ));
-    }
+    warn_duplicates(global, path, s.duplicate_packets);
     if s.clock_backward_steps > 0 {
         global.warn(&format!(
             "{}: the sensor clock runs backwards {} time{} between data packets: the capture \
@@ -84,6 +74,21 @@ pub fn warn_capture(global: Global, path: &Path, s: &CaptureSummary, check_inten
         if let Some(hint) = raw_intensity_hint(s) {
             global.warn(&format!("{}: {hint}", path.display()));
         }
+    }
+}
+
+/// Warns about the data packets dropped as exact copies of one before them, if any.
+pub fn warn_duplicates(global: Global, path: &Path, duplicates: u64) {
+    if duplicates > 0 {
+        global.warn(&format!(
+            "{}: dropped {} duplicate data packet{} (exact copies, same timestamp and bytes, \
+             of one of the {} data packets before; the capture was recorded or merged twice?): \
+             frames are decoded from the first copies only",
+            path.display(),
+            duplicates,
+            if duplicates == 1 { "" } else { "s" },
+            crate::hdl32e::frames::DUPLICATE_WINDOW
+        ));
     }
 }
 

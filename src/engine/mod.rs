@@ -75,7 +75,7 @@ impl Plan {
     pub fn for_sensor(&self, sensor: &crate::sensor::SensorModel) -> Result<Plan> {
         let pipeline = self
             .pipeline
-            .for_lasers(sensor.lasers)
+            .for_sensor(sensor)
             .map_err(|e| anyhow::anyhow!("the {} ({} lasers): {e}", sensor.name, sensor.lasers))?;
         Ok(Plan {
             pipeline,
@@ -566,6 +566,7 @@ fn run_source(
             SourceSummary::Capture(&capture_summary)
         }
         Source::Model(r) => {
+            inputs::warn_duplicates(global, Path::new(&shown), r.summary().duplicate_packets);
             if spool.frames == 0 {
                 return Err(reports::no_model_frame_error(&shown, &plan.frames, r));
             }

@@ -1088,6 +1088,12 @@ pub trait NoiseStage: Send + Sync + std::fmt::Debug {
     fn check_lasers(&self, _lasers: usize) -> Result<(), String> {
         Ok(())
     }
+    /// Why the stage's options do not fit the sensor's geometry (an elevation interval
+    /// holding none of its lasers), if they do not; laser counts are
+    /// [`NoiseStage::check_lasers`]'s.
+    fn check_sensor(&self, _sensor: &crate::sensor::SensorModel) -> Result<(), String> {
+        Ok(())
+    }
 }
 
 /// Frame index reserved for per-unit draws: the unit stream of a stage is
@@ -1190,6 +1196,19 @@ impl NoiseChain {
         }
         self.lasers = lasers;
         Ok(self)
+    }
+
+    /// The chain for frames of `sensor`: [`NoiseChain::for_lasers`] with its laser count,
+    /// and each stage's options checked against its laser table
+    /// ([`NoiseStage::check_sensor`]).
+    pub fn for_sensor(self, sensor: &crate::sensor::SensorModel) -> Result<Self, String> {
+        let chain = self.for_lasers(sensor.lasers)?;
+        for (i, stage) in chain.stages.iter().enumerate() {
+            stage
+                .check_sensor(sensor)
+                .map_err(|e| format!("[[noise]] #{} ({}): {e}", i + 1, stage.kind()))?;
+        }
+        Ok(chain)
     }
 
     /// Lasers a firing of the sensor the chain is for.

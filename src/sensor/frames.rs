@@ -26,7 +26,7 @@ use super::{ReturnMode, SensorModel};
 use crate::capture::CaptureReader;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, Return};
-use crate::hdl32e::frames::Building;
+use crate::hdl32e::frames::{Building, RecentPackets};
 use serde::Serialize;
 use std::collections::VecDeque;
 use std::ops::RangeInclusive;
@@ -257,6 +257,15 @@ pub struct ModelCaptureSummary {
     /// The calibration decoded with: "built-in" (the model's table), or the unit's own
     /// read from an HDL-64E's status bytes.
     pub calibration: String,
+    /// Data packets dropped as exact copies of one of the few before them, as the
+    /// HDL-32E reader drops them (left out of reports when 0).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub duplicate_packets: u64,
+}
+
+/// True for 0 (serde: counters left out of reports when nothing happened).
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }
 
 impl ModelCaptureSummary {
@@ -280,6 +289,7 @@ pub struct ModelSeek {
     hour_offset_us: f64,
     prev_rel: Option<u32>,
     previous: Vec<u8>,
+    recent: RecentPackets,
 }
 
 /// One frame found by [`ModelFrameReader::scan`].
@@ -354,6 +364,8 @@ pub struct ModelFrameReader {
     prev_rel: Option<u32>,
     /// The data packet before the current one (the VLS-128's dual-mode step).
     previous: Vec<u8>,
+    /// The last data packets kept, to drop exact copies.
+    recent: RecentPackets,
     packet: Vec<u8>,
     scratch: Vec<Return>,
     spare: Vec<Vec<Return>>,
@@ -427,6 +439,7 @@ impl ModelFrameReader {
             hour_offset_us: 0.0,
             prev_rel: None,
             previous: Vec::new(),
+            recent: RecentPackets::default(),
             packet: Vec::new(),
             scratch: Vec::new(),
             spare: Vec::new(),
@@ -468,6 +481,7 @@ impl ModelFrameReader {
         self.hour_offset_us = at.hour_offset_us;
         self.prev_rel = at.prev_rel;
         self.previous.clone_from(&at.previous);
+        self.recent = at.recent;
         self.ready.clear();
         self.done = false;
         self.past_range = false;
@@ -561,6 +575,15 @@ impl ModelFrameReader {
             return Ok(());
         }
         let (record, offset) = (d.record, d.offset);
+        // While scanning, the window a frame starting in this packet resumes with.
+        let recent = self.recent;
+        // Exact copies are dropped before they touch the frame state (the HDL-32E
+        // reader's rule); a packet the decoder refuses does not join the window.
+        let lay = &self.model.layout;
+        if lay.return_mode(d.payload).is_ok() && self.recent.is_duplicate(d.payload) {
+            self.summary.duplicate_packets += 1;
+            return Ok(());
+        }
         let mut payload = std::mem::take(&mut self.packet);
         payload.clear();
         payload.extend_from_slice(d.payload);
@@ -584,6 +607,7 @@ impl ModelFrameReader {
                     hour_offset_us: before.3,
                     prev_rel: before.4,
                     previous: self.previous.clone(),
+                    recent,
                 });
             }
         }

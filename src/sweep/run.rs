@@ -389,7 +389,7 @@ pub fn run_mode(
             // Per-laser options must fit the capture's sensor (`occlusion` lasers = [40]
             // would select nothing on an HDL-32E).
             let pipeline = Pipeline::new(&config)
-                .for_lasers(sensor.lasers)
+                .for_sensor(sensor)
                 .map_err(|e| {
                     Error::Invalid(format!(
                         "{}: {}: the {} ({} lasers): {e}",

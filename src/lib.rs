@@ -5,7 +5,6 @@
 
 #![warn(missing_docs)]
 
-pub mod calibration;
 pub mod capture;
 pub mod cli;
 pub mod cloud;
@@ -17,7 +16,6 @@ pub mod engine;
 pub mod error;
 pub mod frame;
 pub mod ground;
-pub mod hdl32e;
 pub mod loader;
 pub mod memory;
 pub mod noise;

@@ -1,9 +1,9 @@
 //! Validation of command-line values into the plain types the library takes.
 
-use crate::calibration::Calibration;
 use crate::error::{Error, Result};
-use crate::hdl32e::decode::DualSelect;
-use crate::hdl32e::frames::{CalibrationFile, DecoderOptions};
+use crate::sensor::calibration::Calibration;
+use crate::sensor::decode::DualSelect;
+use crate::sensor::frames::{CalibrationFile, DecoderOptions};
 use crate::writers::ply::{PlyEncoding, PlyStyle};
 use crate::writers::{FrameFormat, FrameOutput};
 use std::ops::RangeInclusive;

@@ -8,7 +8,7 @@ mod common;
 
 use assert_cmd::Command;
 use lidar_noise::frame::FrameSource;
-use lidar_noise::hdl32e::frames::DecoderOptions;
+use lidar_noise::sensor::frames::DecoderOptions;
 use lidar_noise::sensor::frames::ModelFrameReader;
 use lidar_noise::synth::{write_capture, Scene, SynthOptions};
 use std::path::{Path, PathBuf};

@@ -7,7 +7,7 @@
 mod common;
 
 use lidar_noise::commands::frames_total;
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use std::path::Path;
 
 /// Frames the reader yields in `range`: what `run` and `convert` process.

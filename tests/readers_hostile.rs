@@ -3,8 +3,8 @@
 //! FIFO capture, mixed sensors in the first packets, and how `run` and `convert` name a
 //! capture in their messages.
 
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader, DUPLICATE_WINDOW};
-use lidar_noise::hdl32e::index::FrameScan;
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader, DUPLICATE_WINDOW};
+use lidar_noise::sensor::index::FrameScan;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -57,7 +57,7 @@ fn frames(
     bytes: Vec<u8>,
 ) -> (
     Vec<Vec<lidar_noise::frame::Return>>,
-    lidar_noise::hdl32e::frames::CaptureSummary,
+    lidar_noise::sensor::frames::CaptureSummary,
 ) {
     let mut reader = FrameReader::from_bytes(
         Arc::from(bytes),

@@ -58,7 +58,11 @@ fn doubled(src: &Path, dst: &Path) -> u64 {
 
 /// `info --json` of a capture.
 fn info(capture: &Path) -> serde_json::Value {
-    let o = bin2().args(["info", "--json"]).arg(capture).assert().success();
+    let o = bin2()
+        .args(["info", "--json"])
+        .arg(capture)
+        .assert()
+        .success();
     serde_json::from_slice(&o.get_output().stdout).unwrap()
 }
 
@@ -193,7 +197,11 @@ fn occlusion_elevations_are_checked_against_the_captures_sensor() {
     let occluded = &s["totals"]["noise"]["dropped_by_laser"]["occluded"];
     assert!(per_laser[10].as_u64().unwrap() > 0, "{per_laser}");
     for k in 0..VLP16.lasers {
-        let want = if k == 10 { &per_laser[10] } else { &serde_json::json!(0) };
+        let want = if k == 10 {
+            &per_laser[10]
+        } else {
+            &serde_json::json!(0)
+        };
         assert_eq!(&occluded[k], want, "laser {k}");
     }
 

@@ -11,7 +11,7 @@
 //! the same from run to run. The tests of this binary run one at a time ([`SERIAL`]):
 //! no other test allocates meanwhile.
 
-use lidar_noise::hdl32e::frames::DecoderOptions;
+use lidar_noise::sensor::frames::DecoderOptions;
 use lidar_noise::sweep::outputs::write_outputs;
 use lidar_noise::sweep::plan::{BaseConfig, Vary};
 use lidar_noise::sweep::run::{run, CaptureInput, Silent, SweepSettings};

@@ -4,7 +4,7 @@
 
 mod common;
 
-use lidar_noise::hdl32e::frames::DecoderOptions;
+use lidar_noise::sensor::frames::DecoderOptions;
 use lidar_noise::sweep::plan::{BaseConfig, Vary};
 use lidar_noise::sweep::run::{run, CaptureInput, Observer, SweepSettings};
 use std::sync::Mutex;

@@ -1094,7 +1094,7 @@ fn read_capture<'py>(
     use lidar_noise::sensor::frames::CaptureFrames;
     let (sensor, frames) = py
         .detach(|| -> Result<(&'static str, Vec<Frame>), Error> {
-            let options = lidar_noise::hdl32e::frames::DecoderOptions {
+            let options = lidar_noise::sensor::frames::DecoderOptions {
                 keep_partial,
                 ..Default::default()
             };

@@ -976,7 +976,7 @@ mod tests {
     fn on_grid(k: u32, laser: usize, range: f64) -> CloudPoint {
         // 46.08 us a firing, 1.152 us a laser; 10 Hz is 3.6e-3 degrees a microsecond.
         let az = (f64::from(k) * 46.08 + laser as f64 * 1.152) * 3.6e-3;
-        let el = crate::calibration::BUILTIN_ELEVATION_DEG[laser];
+        let el = crate::sensor::calibration::BUILTIN_ELEVATION_DEG[laser];
         let (sa, ca) = az.to_radians().sin_cos();
         let (se, ce) = el.to_radians().sin_cos();
         point(
@@ -1090,7 +1090,8 @@ mod tests {
             assert!((r.time - t).abs() < 1e-12, "firing {k}: {} vs {t}", r.time);
             assert!((r.range - 20.0).abs() < 1e-4);
             assert!(
-                (f64::from(r.elevation) - crate::calibration::BUILTIN_ELEVATION_DEG[laser]).abs()
+                (f64::from(r.elevation) - crate::sensor::calibration::BUILTIN_ELEVATION_DEG[laser])
+                    .abs()
                     < 1e-3
             );
             assert_eq!(r.raw_distance, 10_000);
@@ -1443,7 +1444,7 @@ mod tests {
         let mut az = 0.0f64;
         for k in 0..firings {
             for laser in 0..32 {
-                let el = crate::calibration::BUILTIN_ELEVATION_DEG[laser];
+                let el = crate::sensor::calibration::BUILTIN_ELEVATION_DEG[laser];
                 let (sa, ca) = az.to_radians().sin_cos();
                 let (se, ce) = el.to_radians().sin_cos();
                 let t_us = f64::from(k) * 46.08 + HDL32E.laser_offset_us(laser);

@@ -2,9 +2,9 @@
 
 use crate::cli::Global;
 use crate::frame::{Frame, FrameSource};
-use crate::hdl32e::frames::DecoderOptions;
 use crate::options::{parse_range, DecoderArgs, FrameOutputArgs};
 use crate::sensor::frames::CaptureFrames;
+use crate::sensor::frames::DecoderOptions;
 use crate::writers::ply::PlyFrame;
 use crate::writers::staging::{self, OutputFolder, Staged};
 use crate::writers::{write_file, FrameOutput};

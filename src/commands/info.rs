@@ -3,8 +3,8 @@
 
 use crate::cli::Global;
 use crate::frame::FrameSource;
-use crate::hdl32e::frames::CaptureSummary;
 use crate::options::DecoderArgs;
+use crate::sensor::frames::CaptureSummary;
 use crate::sensor::frames::{CaptureFrames, ModelCaptureSummary};
 use anyhow::Result;
 use std::io::Write;
@@ -113,7 +113,7 @@ fn write_duplicates(out: &mut impl Write, duplicates: u64) -> Result<()> {
             "  duplicates    {} data packet{} dropped (exact copies of one of the {} before)",
             duplicates,
             if duplicates == 1 { "" } else { "s" },
-            crate::hdl32e::frames::DUPLICATE_WINDOW
+            crate::sensor::frames::DUPLICATE_WINDOW
         )?;
     }
     Ok(())

@@ -4,7 +4,7 @@
 //! [j*M, (j+1)*M) of those in `--frames`, numbered over the captures in the order given;
 //! `--shard K/N` takes the units `i` with `i % N == K`. Captures of any described sensor:
 //! a unit resumes the decoder where its chunk starts (the HDL-32E's from its frame index,
-//! [`crate::hdl32e::index`], which reads no returns; another sensor's from a scan of the
+//! [`crate::sensor::index`], which reads no returns; another sensor's from a scan of the
 //! capture, [`ModelFrameReader::scan`]), writes its frames' own files (point
 //! clouds, linkage) straight into the capture's folder `DIR/<name>/`, and last a part,
 //! `DIR/<name>/.run.chunk<M>-<j>.json`: the chunk's report pieces as the text one run
@@ -26,14 +26,14 @@
 
 use super::{Plan, RunRequest};
 use crate::cli::Global;
-use crate::hdl32e::frames::FrameReader;
-use crate::hdl32e::index::FrameScan;
 use crate::noise::summary::{
     DropCounts, DropsByLaser, NoiseSummary, RangeChange, RangeChangeState, SpuriousCounts,
 };
 use crate::pipeline::report::Totals;
 use crate::pipeline::StageCounts;
+use crate::sensor::frames::FrameReader;
 use crate::sensor::frames::{CaptureFrames, CaptureSeek};
+use crate::sensor::index::FrameScan;
 use crate::writers::staging::{self, OutputFolder, Refused};
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};

@@ -3,7 +3,7 @@
 //! and the progress shown while frames are processed.
 
 use crate::cli::Global;
-use crate::hdl32e::frames::CaptureSummary;
+use crate::sensor::frames::CaptureSummary;
 use std::path::Path;
 
 /// The capture the main command runs on when none is given.
@@ -87,7 +87,7 @@ pub fn warn_duplicates(global: Global, path: &Path, duplicates: u64) {
             path.display(),
             duplicates,
             if duplicates == 1 { "" } else { "s" },
-            crate::hdl32e::frames::DUPLICATE_WINDOW
+            crate::sensor::frames::DUPLICATE_WINDOW
         ));
     }
 }
@@ -131,13 +131,13 @@ pub fn progress(global: Global, unit: &'static str) -> indicatif::ProgressBar {
 /// (a FIFO can be read only once), and when the count fails (the run then reports why).
 pub fn frames_total(
     capture: &Path,
-    options: &crate::hdl32e::frames::DecoderOptions,
+    options: &crate::sensor::frames::DecoderOptions,
     range: &std::ops::RangeInclusive<u32>,
 ) -> Option<u64> {
     if is_stdin(capture) || !std::fs::metadata(capture).is_ok_and(|m| m.is_file()) {
         return None;
     }
-    let scan = crate::hdl32e::index::FrameScan::open(capture, options).ok()?;
+    let scan = crate::sensor::index::FrameScan::open(capture, options).ok()?;
     let (_, _, n) =
         crate::sweep::chunks::chunk_plan(scan, range, options.keep_partial, u32::MAX).ok()?;
     Some(n as u64)
@@ -149,7 +149,7 @@ pub fn frames_total(
 pub fn frames_progress(
     global: Global,
     capture: &Path,
-    options: &crate::hdl32e::frames::DecoderOptions,
+    options: &crate::sensor::frames::DecoderOptions,
     range: &std::ops::RangeInclusive<u32>,
 ) -> indicatif::ProgressBar {
     use std::io::IsTerminal;
@@ -195,7 +195,7 @@ pub fn capture_label(path: &Path) -> String {
 /// and the sensor's structure fits it (a FIFO is read once: only the HDL-32E's).
 pub fn open_any_capture(
     path: &Path,
-    options: &crate::hdl32e::frames::DecoderOptions,
+    options: &crate::sensor::frames::DecoderOptions,
 ) -> anyhow::Result<crate::sensor::frames::CaptureFrames> {
     if !is_stdin(path) {
         return Ok(crate::sensor::frames::open_capture(path, options)?);

@@ -1119,7 +1119,7 @@ mod tests {
             laser,
             block,
             kind,
-            ..crate::hdl32e::decode::BLANK
+            ..crate::sensor::decode::BLANK
         }
     }
 

@@ -54,8 +54,10 @@ pub mod decode;
 pub mod encode;
 pub mod frames;
 pub mod identify;
+pub mod index;
+pub mod packet;
 
-pub use crate::hdl32e::packet::ReturnMode;
+pub use packet::ReturnMode;
 
 /// The data packet layout of these sensors (1206-byte UDP payload: 12 blocks of flag,
 /// azimuth and 32 channels; timestamp; two factory or status bytes).
@@ -303,7 +305,7 @@ pub struct SensorModel {
 const MODES: [ReturnMode; 3] = [ReturnMode::Strongest, ReturnMode::Last, ReturnMode::Dual];
 
 /// Elevations of the HDL-32E by laser id (the built-in calibration table).
-const HDL32E_ELEVATION_DEG: [f64; 32] = crate::calibration::BUILTIN_ELEVATION_DEG;
+const HDL32E_ELEVATION_DEG: [f64; 32] = crate::sensor::calibration::BUILTIN_ELEVATION_DEG;
 
 /// Elevations of the VLP-16 and Puck LITE by laser id (VLP-16 manual, Table 9-1).
 const VLP16_ELEVATION_DEG: [f64; 16] = [
@@ -924,8 +926,8 @@ mod tests {
 #[cfg(test)]
 mod hdl32e_constants {
     use super::*;
-    use crate::calibration::Calibration;
-    use crate::hdl32e::packet as p;
+    use crate::sensor::calibration::Calibration;
+    use crate::sensor::packet as p;
 
     #[test]
     fn hdl32e_description_holds_the_decoder_constants() {

@@ -11,8 +11,8 @@
 
 use super::run::SweepSettings;
 use crate::error::{Error, Result};
-use crate::hdl32e::index::{FrameScan, FrameSeek};
 use crate::sensor::frames::CaptureSeek;
+use crate::sensor::index::{FrameScan, FrameSeek};
 use crate::sensor::SensorModel;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
@@ -174,7 +174,7 @@ mod tests {
 
     #[test]
     fn chunk_plans_cut_the_frames_the_reader_yields() {
-        use crate::hdl32e::frames::{DecoderOptions, FrameReader};
+        use crate::sensor::frames::{DecoderOptions, FrameReader};
         let path = Path::new("fixtures/crossroad.pcap");
         for keep in [false, true] {
             let opts = DecoderOptions {

@@ -20,8 +20,8 @@ pub mod scene;
 
 pub use scene::Scene;
 
-use crate::calibration::Calibration;
-use crate::hdl32e::encode::{
+use crate::sensor::calibration::Calibration;
+use crate::sensor::encode::{
     encode_data_packet_into, encode_position_packet, FiringBlock, BLOCKS_PER_PACKET,
     BLOCK_DURATION_US, DATA_PAYLOAD_LEN, DATA_PORT, LASERS_PER_BLOCK, PACKET_DURATION_US,
     POSITION_PAYLOAD_LEN, POSITION_PORT, RETURN_MODE_STRONGEST, US_PER_HOUR,

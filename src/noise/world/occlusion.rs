@@ -304,7 +304,7 @@ mod tests {
                 azimuth: (k / 64) as f32 * 0.17,
                 packet: k / 384,
                 block: ((k / 64) % 6) as u8,
-                ..crate::hdl32e::decode::BLANK
+                ..crate::sensor::decode::BLANK
             })
             .collect();
         let ideal = crate::noise::IdealPower::new(

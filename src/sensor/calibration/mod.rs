@@ -3,8 +3,11 @@
 //! [`Calibration::from_file`] reads the two formats users have: the ROS velodyne
 //! driver's YAML ([`yaml`]) and VeloView's XML ([`xml`]).
 
+mod model;
 pub mod xml;
 pub mod yaml;
+
+pub use model::{LaserCorrection, ModelCalibration};
 
 use crate::error::{Error, Result};
 use std::path::Path;

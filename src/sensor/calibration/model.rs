@@ -16,8 +16,8 @@
 //! 2.40 m / 1.93 m and 25.04 m, the horizontal offset across the beam, z corrected by the
 //! mean of the x and y corrections as velodyne_decoder does).
 
-use super::SensorModel;
 use crate::error::{Error, Result};
+use crate::sensor::SensorModel;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -207,8 +207,8 @@ impl ModelCalibration {
             path: path.to_path_buf(),
             message,
         };
-        let max = crate::calibration::xml::MAX_DEPTH;
-        if let Some(line) = crate::calibration::xml::too_deep(text, max) {
+        let max = crate::sensor::calibration::xml::MAX_DEPTH;
+        if let Some(line) = crate::sensor::calibration::xml::too_deep(text, max) {
             return Err(err(format!(
                 "elements nested more than {max} levels deep at line {line}: not a VeloView \
                  calibration file"

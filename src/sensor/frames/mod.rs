@@ -5,14 +5,18 @@
 //! within one firing step of the cut angle, the last when it ends within one step of
 //! it; partial sweeps are numbered like the others but left out unless asked for.
 
+mod model;
+
+pub use model::*;
+
 use super::decode::{first_firing_us, DecodeCounts, DualSelect, PacketDecoder, ReturnTally};
 use super::identify::{self, Identity, Sample};
 use super::index::FrameSeek;
 use super::packet::{self, ReturnMode};
-use crate::calibration::Calibration;
 use crate::capture::{CaptureReader, CaptureStats, Format};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
+use crate::sensor::calibration::Calibration;
 use serde::Serialize;
 use std::collections::VecDeque;
 use std::ops::RangeInclusive;
@@ -395,7 +399,7 @@ pub(super) fn identify_in(mut capture: CaptureReader) -> Result<Identity> {
             }
         }
     }
-    identify::identify(&sample).map_err(|refusal| {
+    identify::hdl32e_identity(&sample).map_err(|refusal| {
         if refusal.other_sensor {
             return Error::OtherSensor {
                 path: path.clone(),

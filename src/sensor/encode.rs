@@ -17,6 +17,10 @@
 //! synthesizer and tests that need captures with known content, follow the HDL-32E
 //! manual (appendix B).
 
+use super::packet::{
+    BLOCKS, BLOCK_BYTES, BLOCK_FLAG, DATA_PACKET_BYTES, LASERS, POSITION_PACKET_BYTES,
+    PRODUCT_HDL32E,
+};
 use super::{ReturnMode, SensorModel};
 use crate::frame::Return;
 
@@ -329,32 +333,6 @@ mod tests {
     }
 }
 
-/// Length of a data packet's UDP payload.
-pub const DATA_PAYLOAD_LEN: usize = 1206;
-/// Length of a position (telemetry) packet's UDP payload.
-pub const POSITION_PAYLOAD_LEN: usize = 512;
-/// UDP port the sensor sends data packets to.
-pub const DATA_PORT: u16 = 2368;
-/// UDP port the sensor sends position packets to.
-pub const POSITION_PORT: u16 = 8308;
-/// Blocks (firings) in one data packet.
-pub const BLOCKS_PER_PACKET: usize = 12;
-/// Lasers in one block.
-pub const LASERS_PER_BLOCK: usize = 32;
-/// Bytes in one block: flag, azimuth and 32 three-byte returns.
-pub const BLOCK_LEN: usize = 100;
-/// Block flag bytes as they appear in the packet (0xEEFF little-endian).
-pub const BLOCK_FLAG: [u8; 2] = [0xFF, 0xEE];
-/// Return mode byte for single strongest return.
-pub const RETURN_MODE_STRONGEST: u8 = 0x37;
-/// Product id byte of the HDL-32E.
-pub const PRODUCT_ID_HDL32E: u8 = 0x21;
-/// Duration of one firing cycle (block) in microseconds.
-pub const BLOCK_DURATION_US: f64 = 46.08;
-/// Time between two lasers of a block in microseconds.
-pub const LASER_SPACING_US: f64 = 1.152;
-/// Time from the first firing of a packet to its timestamp, in microseconds.
-pub const FIRST_FIRING_OFFSET_US: f64 = 542.592;
 /// Time covered by one data packet (12 blocks) in microseconds.
 pub const PACKET_DURATION_US: f64 = 552.96;
 /// Microseconds in one hour: the sensor timestamp wraps at this value.
@@ -366,17 +344,17 @@ pub struct FiringBlock {
     /// Azimuth in hundredths of a degree, 0..35999.
     pub azimuth: u16,
     /// Raw distance per laser id, in 2 mm units (0 = no return).
-    pub distances: [u16; LASERS_PER_BLOCK],
+    pub distances: [u16; LASERS],
     /// Intensity byte per laser id.
-    pub intensities: [u8; LASERS_PER_BLOCK],
+    pub intensities: [u8; LASERS],
 }
 
 impl Default for FiringBlock {
     fn default() -> Self {
         FiringBlock {
             azimuth: 0,
-            distances: [0; LASERS_PER_BLOCK],
-            intensities: [0; LASERS_PER_BLOCK],
+            distances: [0; LASERS],
+            intensities: [0; LASERS],
         }
     }
 }
@@ -384,20 +362,20 @@ impl Default for FiringBlock {
 /// Writes one 1206-byte data packet payload into `out`.
 ///
 /// `timestamp_us` is microseconds past the top of the hour and marks the end of the
-/// packet (the first firing happened [`FIRST_FIRING_OFFSET_US`] earlier). Azimuths
+/// packet (the first firing happened 542.592 us earlier). Azimuths
 /// above 35999 are written as given: the encoder is also used to build malformed
 /// packets for tests.
 pub fn encode_data_packet_into(
-    blocks: &[FiringBlock; BLOCKS_PER_PACKET],
+    blocks: &[FiringBlock; BLOCKS],
     timestamp_us: u32,
     return_mode: u8,
-    out: &mut [u8; DATA_PAYLOAD_LEN],
+    out: &mut [u8; DATA_PACKET_BYTES],
 ) {
     for (b, block) in blocks.iter().enumerate() {
-        let base = b * BLOCK_LEN;
-        out[base..base + 2].copy_from_slice(&BLOCK_FLAG);
+        let base = b * BLOCK_BYTES;
+        out[base..base + 2].copy_from_slice(&BLOCK_FLAG.to_le_bytes());
         out[base + 2..base + 4].copy_from_slice(&block.azimuth.to_le_bytes());
-        for j in 0..LASERS_PER_BLOCK {
+        for j in 0..LASERS {
             let at = base + 4 + 3 * j;
             out[at..at + 2].copy_from_slice(&block.distances[j].to_le_bytes());
             out[at + 2] = block.intensities[j];
@@ -405,16 +383,16 @@ pub fn encode_data_packet_into(
     }
     out[1200..1204].copy_from_slice(&timestamp_us.to_le_bytes());
     out[1204] = return_mode;
-    out[1205] = PRODUCT_ID_HDL32E;
+    out[1205] = PRODUCT_HDL32E;
 }
 
 /// Returns one 1206-byte data packet payload (see [`encode_data_packet_into`]).
 pub fn encode_data_packet(
-    blocks: &[FiringBlock; BLOCKS_PER_PACKET],
+    blocks: &[FiringBlock; BLOCKS],
     timestamp_us: u32,
     return_mode: u8,
-) -> [u8; DATA_PAYLOAD_LEN] {
-    let mut out = [0u8; DATA_PAYLOAD_LEN];
+) -> [u8; DATA_PACKET_BYTES] {
+    let mut out = [0u8; DATA_PACKET_BYTES];
     encode_data_packet_into(blocks, timestamp_us, return_mode, &mut out);
     out
 }
@@ -441,7 +419,7 @@ pub fn raw_distance(range_m: f32, offset_m: f32, resolution_m: f32) -> Option<u1
 /// a data packet payload; the block flag and azimuth are left as they are.
 #[inline]
 pub fn write_return_slot(payload: &mut [u8], block: usize, laser: usize, raw: u16, intensity: u8) {
-    let at = block * BLOCK_LEN + 4 + 3 * laser;
+    let at = block * BLOCK_BYTES + 4 + 3 * laser;
     payload[at..at + 2].copy_from_slice(&raw.to_le_bytes());
     payload[at + 2] = intensity;
 }
@@ -453,8 +431,8 @@ pub fn write_return_slot(payload: &mut [u8], block: usize, laser: usize, raw: u1
 /// timestamp (little-endian u32, µs past the hour), 206.. the NMEA sentence
 /// terminated by CR LF, the rest zero. The sentence carries the UTC time derived from
 /// `timestamp_us` on a fixed date and position, status `A`.
-pub fn encode_position_packet(timestamp_us: u32) -> [u8; POSITION_PAYLOAD_LEN] {
-    let mut out = [0u8; POSITION_PAYLOAD_LEN];
+pub fn encode_position_packet(timestamp_us: u32) -> [u8; POSITION_PACKET_BYTES] {
+    let mut out = [0u8; POSITION_PACKET_BYTES];
     out[198..202].copy_from_slice(&timestamp_us.to_le_bytes());
     let secs = timestamp_us / 1_000_000;
     let body = format!(
@@ -475,14 +453,14 @@ mod hdl32e_tests {
 
     #[test]
     fn data_packet_layout_matches_the_manual() {
-        let mut blocks = [FiringBlock::default(); BLOCKS_PER_PACKET];
+        let mut blocks = [FiringBlock::default(); BLOCKS];
         blocks[0].azimuth = 35999;
         blocks[0].distances[0] = 0x1234;
         blocks[0].intensities[0] = 7;
         blocks[11].azimuth = 258;
         blocks[11].distances[31] = 0xBEEF;
         blocks[11].intensities[31] = 255;
-        let p = encode_data_packet(&blocks, 0x0102_0304, RETURN_MODE_STRONGEST);
+        let p = encode_data_packet(&blocks, 0x0102_0304, 0x37);
         assert_eq!(&p[0..2], &[0xFF, 0xEE]);
         assert_eq!(u16::from_le_bytes([p[2], p[3]]), 35999);
         assert_eq!(&p[4..7], &[0x34, 0x12, 7]);
@@ -526,7 +504,7 @@ mod hdl32e_tests {
 
     #[test]
     fn return_slot_lands_where_the_decoder_reads_it() {
-        let mut p = encode_data_packet(&[FiringBlock::default(); BLOCKS_PER_PACKET], 0, 0x37);
+        let mut p = encode_data_packet(&[FiringBlock::default(); BLOCKS], 0, 0x37);
         write_return_slot(&mut p, 11, 31, 0xBEEF, 9);
         assert_eq!(&p[1197..1200], &[0xEF, 0xBE, 9]);
         write_return_slot(&mut p, 0, 0, 0x0102, 3);

@@ -3,8 +3,8 @@
 //! Hi-Res, VLP-32C, HDL-64E S2/S3 and VLS-128 (Alpha Prime) as instances.
 //!
 //! Sources:
-//! - HDL-32E: the constants of `src/hdl32e/packet.rs` and the built-in table of
-//!   `src/calibration/mod.rs` (HDL-32E user manual, appendices B and E; notes in
+//! - HDL-32E: the constants of [`packet`] and the built-in table of
+//!   [`calibration`] (HDL-32E user manual, appendices B and E; notes in
 //!   `../shared/docs/hdl32e.md`). A test holds this description to those constants.
 //! - VLP-16, Puck LITE, Puck Hi-Res: VLP-16 user manual 63-9243 Rev D, section 9.2
 //!   (Table 9-1, laser id to vertical angle and vertical correction for the VLP-16, Puck
@@ -921,8 +921,8 @@ mod tests {
     }
 }
 
-/// Item 4 of issue 31's first step: the HDL-32E description holds the constants the
-/// HDL-32E decoder uses (its packet layout, timing, product byte, built-in calibration).
+/// The HDL-32E description holds the constants the HDL-32E kernel of the decoder uses
+/// (its packet layout, timing, product byte, built-in calibration).
 #[cfg(test)]
 mod hdl32e_constants {
     use super::*;

@@ -6,12 +6,13 @@
 //! table), and its returns go to frames firing by firing: a firing sequence's azimuth is
 //! its block's, plus its share of the step to the next block for the second sequence of
 //! a VLP-16 block, and a frame ends where that azimuth crosses the cut angle, as the
-//! HDL-32E reader cuts (`src/hdl32e/frames.rs`, whose sweep and partial-frame rules this
-//! follows). The first and last sweeps are partial unless they start and end at the cut.
+//! HDL-32E reader cuts ([`super::FrameReader`], whose sweep, partial-frame and
+//! repeated-packet rules this follows). The first and last sweeps are partial unless they
+//! start and end at the cut.
 //!
-//! Why a reader of its own beside the HDL-32E's: that one's packet index, duplicate
-//! window and `--pcap-out` re-encoding are the HDL-32E's, and a capture's returns are the
-//! same however it is read.
+//! Why a reader of its own beside the HDL-32E's: that one decodes firing by firing with
+//! the HDL-32E's kernel ([`crate::sensor::decode::PacketDecoder`]); this one decodes a
+//! whole packet of any layout ([`ModelDecoder`]) and then distributes its returns.
 //!
 //! `run --chunk-frames` starts a chunk mid-capture: [`ModelFrameReader::scan`] reads the
 //! capture once and gives each frame a [`ModelSeek`] (the packet its first firing is in
@@ -20,12 +21,14 @@
 //! reader from the start (`tests/model_chunks.rs`). Unlike the HDL-32E's index, the scan
 //! decodes the returns (once, for the plan; each chunk then reads only its own packets).
 
-use super::{Building, RecentPackets};
+use super::{is_zero, Building, RecentPackets};
 use crate::capture::CaptureReader;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, Return};
 use crate::sensor::decode::ModelDecoder;
+use crate::sensor::identify::SAMPLE_PACKETS;
 use crate::sensor::identify::{identify, Identified};
+use crate::sensor::packet::POSITION_PACKET_BYTES;
 use crate::sensor::{ReturnMode, SensorModel};
 use serde::Serialize;
 use std::collections::VecDeque;
@@ -215,12 +218,6 @@ fn status_calibration(
     Ok(crate::sensor::calibration::ModelCalibration::from_status_bytes(status, model).ok())
 }
 
-/// Data packets read to identify the sensor.
-const SAMPLE_PACKETS: usize = 64;
-
-/// Size of a position (GPS) packet's payload.
-const POSITION_PACKET_BYTES: usize = 512;
-
 /// What was read from a capture of another sensor, for `summary.json`.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct ModelCaptureSummary {
@@ -261,11 +258,6 @@ pub struct ModelCaptureSummary {
     /// HDL-32E reader drops them (left out of reports when 0).
     #[serde(skip_serializing_if = "is_zero")]
     pub duplicate_packets: u64,
-}
-
-/// True for 0 (serde: counters left out of reports when nothing happened).
-fn is_zero(n: &u64) -> bool {
-    *n == 0
 }
 
 impl ModelCaptureSummary {

@@ -120,7 +120,7 @@ fn every_model_drops_repeated_packets_and_reports_them() {
         let original = synth(tmp.path(), name, scene);
         let twice = tmp.path().join(format!("{name}-twice.pcap"));
         let data = doubled(&original, &twice);
-        assert!(data > 100, "{name}: {data} data packets");
+        assert!(data > 20, "{name}: {data} data packets");
 
         let (a, b) = (info(&original), info(&twice));
         assert!(a["returns"].as_u64().unwrap() > 1000, "{name}: {a}");

@@ -1,7 +1,7 @@
 //! Decoding speed: the shared HDL-32E capture, in memory, to returns with xyz.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 

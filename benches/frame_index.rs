@@ -3,8 +3,8 @@
 //! a chunk of a sharded run or sweep saves), on the shared HDL-32E capture in memory.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
-use lidar_noise::hdl32e::index::FrameScan;
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::index::FrameScan;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 

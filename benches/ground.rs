@@ -8,7 +8,7 @@ mod ground_scene;
 use criterion::{criterion_group, criterion_main, Criterion};
 use ground_scene::Scene;
 use lidar_noise::ground::{segment, GroundMethod, GroundOptions};
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::hint::black_box;

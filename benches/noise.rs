@@ -2,10 +2,10 @@
 //! synthetic frame (target: under 2 ms on one core).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use lidar_noise::calibration::Calibration;
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::noise::NoiseChain;
+use lidar_noise::sensor::calibration::Calibration;
 use std::hint::black_box;
 
 // The allocator of the `lidar-noise` binary (src/main.rs), so the chain is timed as it
@@ -94,8 +94,8 @@ fn bench_chain(c: &mut Criterion) {
     let capture = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/data/hdl32e/monterey.pcap");
     if capture.exists() {
-        let options = lidar_noise::hdl32e::frames::DecoderOptions::default();
-        let real = lidar_noise::hdl32e::frames::FrameReader::open(&capture, &options)
+        let options = lidar_noise::sensor::frames::DecoderOptions::default();
+        let real = lidar_noise::sensor::frames::FrameReader::open(&capture, &options)
             .expect("monterey.pcap opens")
             .next()
             .expect("a frame")

@@ -9,9 +9,10 @@
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use lidar_noise::capture::writer::PcapWriter;
 use lidar_noise::config::Config;
-use lidar_noise::hdl32e::encode::{encode_data_packet, FiringBlock, DATA_PORT};
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use lidar_noise::noise::NoiseChain;
+use lidar_noise::sensor::encode::{encode_data_packet, FiringBlock};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::packet::DATA_PORT;
 use lidar_noise::writers::pcap::NoisyCapture;
 use std::hint::black_box;
 use std::path::Path;

@@ -4,9 +4,9 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use lidar_noise::cluster::{cluster, ClusterOptions};
 use lidar_noise::config::Config;
 use lidar_noise::ground::{segment, GroundOptions};
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use lidar_noise::noise::stage_rng;
 use lidar_noise::pipeline::Pipeline;
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use std::path::{Path, PathBuf};
 
 fn bench_pipeline(c: &mut Criterion) {

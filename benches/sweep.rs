@@ -3,8 +3,8 @@
 //! (target: under 15 s on the 2-core machine), tables and plots included.
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
-use lidar_noise::hdl32e::frames::DecoderOptions;
 use lidar_noise::observe::Silent;
+use lidar_noise::sensor::frames::DecoderOptions;
 use lidar_noise::sweep::outputs::write_outputs;
 use lidar_noise::sweep::plan::{BaseConfig, Vary};
 use lidar_noise::sweep::run::{run, CaptureInput, SweepSettings};

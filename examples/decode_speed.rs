@@ -1,6 +1,6 @@
 //! Decodes a capture from memory N times and prints returns per second of CPU time;
 //! run under `perf stat` or `time` on a loaded machine (criterion's wall clock suffers).
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use std::path::Path;
 use std::sync::Arc;
 

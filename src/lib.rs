@@ -8,7 +8,6 @@
 
 #![warn(missing_docs)]
 
-pub mod calibration;
 pub mod capture;
 pub mod cloud;
 pub mod cluster;
@@ -18,7 +17,6 @@ pub mod engine;
 pub mod error;
 pub mod frame;
 pub mod ground;
-pub mod hdl32e;
 pub mod loader;
 pub mod memory;
 pub mod noise;

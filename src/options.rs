@@ -2,10 +2,10 @@
 //! and point-cloud output settings; shards and frame ranges parse with
 //! [`lidar_noise::shard`] and [`lidar_noise::range`]).
 
-use lidar_noise::calibration::Calibration;
 use lidar_noise::error::{Error, Result};
-use lidar_noise::hdl32e::decode::DualSelect;
-use lidar_noise::hdl32e::frames::{CalibrationFile, DecoderOptions};
+use lidar_noise::sensor::calibration::Calibration;
+use lidar_noise::sensor::decode::DualSelect;
+use lidar_noise::sensor::frames::{CalibrationFile, DecoderOptions};
 use lidar_noise::writers::ply::{PlyEncoding, PlyStyle};
 use lidar_noise::writers::{FrameFormat, FrameOutput};
 use std::path::PathBuf;

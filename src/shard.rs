@@ -10,8 +10,8 @@
 //! and settings, so that parts of another `--chunk-frames` are refused, never joined.
 
 use crate::error::{Error, Result};
-use crate::hdl32e::index::{FrameScan, FrameSeek};
 use crate::sensor::frames::CaptureSeek;
+use crate::sensor::index::{FrameScan, FrameSeek};
 use crate::sensor::SensorModel;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
@@ -72,7 +72,7 @@ pub type ChunkRanges = (Vec<RangeInclusive<u32>>, Vec<CaptureSeek>, usize);
 /// sensor's is decoded once.
 pub fn capture_chunks(
     path: &Path,
-    decoder: &crate::hdl32e::frames::DecoderOptions,
+    decoder: &crate::sensor::frames::DecoderOptions,
     frames: &RangeInclusive<u32>,
     m: u32,
 ) -> Result<(&'static SensorModel, ChunkRanges)> {
@@ -298,7 +298,7 @@ mod tests {
 
     #[test]
     fn chunk_plans_cut_the_frames_the_reader_yields() {
-        use crate::hdl32e::frames::{DecoderOptions, FrameReader};
+        use crate::sensor::frames::{DecoderOptions, FrameReader};
         let path = Path::new("fixtures/crossroad.pcap");
         for keep in [false, true] {
             let opts = DecoderOptions {

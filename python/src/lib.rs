@@ -696,7 +696,7 @@ impl Chain {
 /// The noise chain of `config` for frames of `sensor` (as `run` builds it per sensor).
 fn build_chain(config: &Config, sensor: &SensorModel) -> PyResult<NoiseChain> {
     NoiseChain::new(config)
-        .for_lasers(sensor.lasers)
+        .for_sensor(sensor)
         .map_err(|e| misfit(sensor, e))
 }
 
@@ -995,7 +995,7 @@ impl Chain {
         let (applied, ground, labels, clusters) = py
             .detach(|| -> Result<_, Error> {
                 let pipeline = Pipeline::new(&config)
-                    .for_lasers(sensor.lasers)
+                    .for_sensor(sensor)
                     .map_err(|e| Error::Invalid(misfit_message(sensor, &e)))?;
                 let r = pipeline.process(Frame {
                     index: frame,
@@ -1094,7 +1094,7 @@ fn read_capture<'py>(
     use lidar_noise::sensor::frames::CaptureFrames;
     let (sensor, frames) = py
         .detach(|| -> Result<(&'static str, Vec<Frame>), Error> {
-            let options = lidar_noise::hdl32e::frames::DecoderOptions {
+            let options = lidar_noise::sensor::frames::DecoderOptions {
                 keep_partial,
                 ..Default::default()
             };

@@ -4,10 +4,10 @@ use crate::cli::{Console, Global};
 use crate::options::{DecoderArgs, FrameOutputArgs};
 use anyhow::Result;
 use lidar_noise::frame::{Frame, FrameSource};
-use lidar_noise::hdl32e::frames::DecoderOptions;
 use lidar_noise::observe::{Counter, Observer};
 use lidar_noise::range::parse_range;
 use lidar_noise::sensor::frames::CaptureFrames;
+use lidar_noise::sensor::frames::DecoderOptions;
 use lidar_noise::writers::ply::PlyFrame;
 use lidar_noise::writers::staging::{self, OutputFolder, Staged};
 use lidar_noise::writers::{write_file, FrameOutput};
@@ -232,6 +232,8 @@ fn convert_one(
             }
         }
         CaptureFrames::Model(reader) => {
+            let duplicates = reader.summary().duplicate_packets;
+            lidar_noise::engine::inputs::warn_duplicates(observer, Path::new(&shown), duplicates);
             if written == 0 {
                 return Err(lidar_noise::engine::reports::no_model_frame_error(
                     &shown, range, reader,

@@ -5,7 +5,7 @@ use crate::cli::Global;
 use crate::options::DecoderArgs;
 use anyhow::Result;
 use lidar_noise::frame::FrameSource;
-use lidar_noise::hdl32e::frames::CaptureSummary;
+use lidar_noise::sensor::frames::CaptureSummary;
 use lidar_noise::sensor::frames::{CaptureFrames, ModelCaptureSummary};
 use std::io::Write;
 use std::path::PathBuf;
@@ -91,6 +91,7 @@ fn write_model(
         "  packets       {} data, {} position, {} other UDP, {} bad data",
         s.data_packets, s.position_packets, s.other_udp, s.bad_data_packets
     )?;
+    write_duplicates(out, s.duplicate_packets)?;
     write_dead(out, &dead)?;
     writeln!(out, "  calibration   {}", s.calibration)?;
     writeln!(out, "  packet period {:.0} us", s.packet_period_us)?;
@@ -101,6 +102,20 @@ fn write_model(
         s.full_frames, s.partial_frames
     )?;
     writeln!(out, "  returns       {} in all", s.returns)?;
+    Ok(())
+}
+
+/// The line counting the data packets dropped as copies, where there are any.
+fn write_duplicates(out: &mut impl Write, duplicates: u64) -> Result<()> {
+    if duplicates > 0 {
+        writeln!(
+            out,
+            "  duplicates    {} data packet{} dropped (exact copies of one of the {} before)",
+            duplicates,
+            if duplicates == 1 { "" } else { "s" },
+            lidar_noise::sensor::frames::DUPLICATE_WINDOW
+        )?;
+    }
     Ok(())
 }
 
@@ -173,15 +188,7 @@ fn write_text(out: &mut impl Write, path: &std::path::Path, s: &CaptureSummary) 
             if s.clock_backward_steps == 1 { "" } else { "s" }
         )?;
     }
-    if s.duplicate_packets > 0 {
-        writeln!(
-            out,
-            "  duplicates    {} data packet{} dropped (exact copies of one of the {} before)",
-            s.duplicate_packets,
-            if s.duplicate_packets == 1 { "" } else { "s" },
-            lidar_noise::hdl32e::frames::DUPLICATE_WINDOW
-        )?;
-    }
+    write_duplicates(out, s.duplicate_packets)?;
     if s.short_frames > 0 {
         writeln!(
             out,

@@ -4,7 +4,7 @@
 //! [j*M, (j+1)*M) of those in `--frames`, numbered over the captures in the order given;
 //! `--shard K/N` takes the units `i` with `i % N == K`. Captures of any described sensor:
 //! a unit resumes the decoder where its chunk starts (the HDL-32E's from its frame index,
-//! [`crate::hdl32e::index`], which reads no returns; another sensor's from a scan of the
+//! [`crate::sensor::index`], which reads no returns; another sensor's from a scan of the
 //! capture, [`ModelFrameReader::scan`]), writes its frames' own files (point
 //! clouds, linkage) straight into the capture's folder `DIR/<name>/`, and last a part,
 //! `DIR/<name>/.run.chunk<M>-<j>.json`: the chunk's report pieces as the text one run
@@ -25,15 +25,15 @@
 //! folder holding another run's results is refused (delete it or choose another folder).
 
 use super::{Plan, RunRequest};
-use crate::hdl32e::frames::FrameReader;
-use crate::hdl32e::index::FrameScan;
 use crate::noise::summary::{
     DropCounts, DropsByLaser, NoiseSummary, RangeChange, RangeChangeState, SpuriousCounts,
 };
 use crate::observe::Observer;
 use crate::pipeline::report::Totals;
 use crate::pipeline::StageCounts;
+use crate::sensor::frames::FrameReader;
 use crate::sensor::frames::{CaptureFrames, CaptureSeek};
+use crate::sensor::index::FrameScan;
 use crate::shard::{self, Batch};
 use crate::writers::staging::{self, OutputFolder, Refused};
 use anyhow::{bail, Result};
@@ -606,7 +606,11 @@ fn join_capture(
             );
             super::reports::SourceSummary::Capture(&capture_summary)
         }
-        CaptureFrames::Model(r) => super::reports::SourceSummary::Model(r.summary()),
+        CaptureFrames::Model(r) => {
+            let duplicates = r.summary().duplicate_packets;
+            super::inputs::warn_duplicates(observer, Path::new(&job.shown()), duplicates);
+            super::reports::SourceSummary::Model(r.summary())
+        }
     };
     let totals = Totals {
         ground_fraction: stages.ground_fraction(),

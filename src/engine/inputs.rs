@@ -2,8 +2,8 @@
 //! capture, how outputs and messages name them, the warnings about what a capture held,
 //! and the progress shown while frames are processed.
 
-use crate::hdl32e::frames::CaptureSummary;
 use crate::observe::{Counter, Observer};
+use crate::sensor::frames::CaptureSummary;
 use std::path::Path;
 
 /// The capture the main command runs on when none is given.
@@ -43,17 +43,7 @@ pub fn warn_capture(
             s.bad_data_packets
         ));
     }
-    if s.duplicate_packets > 0 {
-        observer.warn(&format!(
-            "{}: dropped {} duplicate data packet{} (exact copies, same timestamp and bytes, \
-             of one of the {} data packets before; the capture was recorded or merged twice?): \
-             frames are decoded from the first copies only",
-            path.display(),
-            s.duplicate_packets,
-            if s.duplicate_packets == 1 { "" } else { "s" },
-            crate::hdl32e::frames::DUPLICATE_WINDOW
-        ));
-    }
+    warn_duplicates(observer, path, s.duplicate_packets);
     if s.clock_backward_steps > 0 {
         observer.warn(&format!(
             "{}: the sensor clock runs backwards {} time{} between data packets: the capture \
@@ -92,6 +82,21 @@ pub fn warn_capture(
     }
 }
 
+/// Warns about the data packets dropped as exact copies of one before them, if any.
+pub fn warn_duplicates(observer: &dyn Observer, path: &Path, duplicates: u64) {
+    if duplicates > 0 {
+        observer.warn(&format!(
+            "{}: dropped {} duplicate data packet{} (exact copies, same timestamp and bytes, \
+             of one of the {} data packets before; the capture was recorded or merged twice?): \
+             frames are decoded from the first copies only",
+            path.display(),
+            duplicates,
+            if duplicates == 1 { "" } else { "s" },
+            crate::sensor::frames::DUPLICATE_WINDOW
+        ));
+    }
+}
+
 /// The advice printed when the intensities look like raw levels, if they do.
 pub fn raw_intensity_hint(s: &CaptureSummary) -> Option<String> {
     s.raw_intensity_suspected().map(|(share, median)| {
@@ -115,13 +120,13 @@ pub fn join_ids(ids: &[u8]) -> String {
 /// (a FIFO can be read only once), and when the count fails (the run then reports why).
 pub fn frames_total(
     capture: &Path,
-    options: &crate::hdl32e::frames::DecoderOptions,
+    options: &crate::sensor::frames::DecoderOptions,
     range: &std::ops::RangeInclusive<u32>,
 ) -> Option<u64> {
     if is_stdin(capture) || !std::fs::metadata(capture).is_ok_and(|m| m.is_file()) {
         return None;
     }
-    let scan = crate::hdl32e::index::FrameScan::open(capture, options).ok()?;
+    let scan = crate::sensor::index::FrameScan::open(capture, options).ok()?;
     let (_, _, n) = crate::shard::chunk_plan(scan, range, options.keep_partial, u32::MAX).ok()?;
     Some(n as u64)
 }
@@ -131,7 +136,7 @@ pub fn frames_total(
 pub fn start_frames(
     observer: &dyn Observer,
     capture: Option<&Path>,
-    options: &crate::hdl32e::frames::DecoderOptions,
+    options: &crate::sensor::frames::DecoderOptions,
     range: &std::ops::RangeInclusive<u32>,
 ) {
     let total = match capture {
@@ -167,7 +172,7 @@ pub fn capture_label(path: &Path) -> String {
 /// and the sensor's structure fits it (a FIFO is read once: only the HDL-32E's).
 pub fn open_any_capture(
     path: &Path,
-    options: &crate::hdl32e::frames::DecoderOptions,
+    options: &crate::sensor::frames::DecoderOptions,
 ) -> anyhow::Result<crate::sensor::frames::CaptureFrames> {
     if !is_stdin(path) {
         return Ok(crate::sensor::frames::open_capture(path, options)?);

@@ -18,10 +18,10 @@ pub mod stream;
 use crate::cloud::frames::{CloudOptions, CloudReader};
 use crate::config::Config;
 use crate::frame::Frame;
-use crate::hdl32e::frames::{DecoderOptions, FrameReader};
 use crate::observe::{Counter, Observer};
 use crate::pipeline::Pipeline;
 use crate::sensor::frames::ModelFrameReader;
+use crate::sensor::frames::{DecoderOptions, FrameReader};
 use crate::shard::Shard;
 use crate::writers::scan::ScanPoint;
 use crate::writers::staging::{self, OutputFolder};
@@ -75,7 +75,7 @@ impl Plan {
     pub fn for_sensor(&self, sensor: &crate::sensor::SensorModel) -> Result<Plan> {
         let pipeline = self
             .pipeline
-            .for_lasers(sensor.lasers)
+            .for_sensor(sensor)
             .map_err(|e| anyhow::anyhow!("the {} ({} lasers): {e}", sensor.name, sensor.lasers))?;
         Ok(Plan {
             pipeline,
@@ -560,6 +560,7 @@ fn run_source(
             SourceSummary::Capture(&capture_summary)
         }
         Source::Model(r) => {
+            inputs::warn_duplicates(observer, Path::new(&shown), r.summary().duplicate_packets);
             if spool.frames == 0 {
                 return Err(reports::no_model_frame_error(&shown, &plan.frames, r));
             }

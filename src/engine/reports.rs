@@ -4,8 +4,8 @@
 
 use super::Plan;
 use crate::cloud::frames::CloudSummary;
-use crate::hdl32e::frames::{CaptureSummary, FrameReader};
 use crate::pipeline::report::{FrameClusters, FrameReport, Totals, FATE_CODES};
+use crate::sensor::frames::{CaptureSummary, FrameReader};
 use anyhow::Result;
 use serde::Serialize;
 use std::ops::RangeInclusive;
@@ -53,7 +53,7 @@ pub struct ClusterReport<'a> {
 struct DecoderSettings {
     calibration: String,
     interpolate_azimuth: bool,
-    dual: crate::hdl32e::decode::DualSelect,
+    dual: crate::sensor::decode::DualSelect,
     cut_angle_deg: f64,
     keep_partial: bool,
 }

@@ -74,6 +74,19 @@ impl NoiseChain {
         Ok(self)
     }
 
+    /// The chain for frames of `sensor`: [`NoiseChain::for_lasers`] with its laser count,
+    /// and each stage's options checked against its laser table
+    /// ([`NoiseStage::check_sensor`]).
+    pub fn for_sensor(self, sensor: &crate::sensor::SensorModel) -> Result<Self, String> {
+        let chain = self.for_lasers(sensor.lasers)?;
+        for (i, stage) in chain.stages.iter().enumerate() {
+            stage
+                .check_sensor(sensor)
+                .map_err(|e| format!("[[noise]] #{} ({}): {e}", i + 1, stage.kind()))?;
+        }
+        Ok(chain)
+    }
+
     /// Lasers a firing of the sensor the chain is for.
     pub fn lasers(&self) -> usize {
         self.lasers

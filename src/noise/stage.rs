@@ -37,6 +37,12 @@ pub trait NoiseStage: Send + Sync + std::fmt::Debug {
     fn check_lasers(&self, _lasers: usize) -> Result<(), String> {
         Ok(())
     }
+    /// Why the stage's options do not fit the sensor's geometry (an elevation interval
+    /// holding none of its lasers), if they do not; laser counts are
+    /// [`NoiseStage::check_lasers`]'s.
+    fn check_sensor(&self, _sensor: &crate::sensor::SensorModel) -> Result<(), String> {
+        Ok(())
+    }
 }
 
 /// Frame index reserved for per-unit draws: the unit stream of a stage is

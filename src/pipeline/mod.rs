@@ -109,6 +109,14 @@ impl Pipeline {
         })
     }
 
+    /// The pipeline for frames of `sensor` (see [`NoiseChain::for_sensor`]).
+    pub fn for_sensor(&self, sensor: &crate::sensor::SensorModel) -> Result<Self, String> {
+        Ok(Pipeline {
+            chain: self.chain.clone().for_sensor(sensor)?,
+            ..self.clone()
+        })
+    }
+
     /// The noise chain.
     pub fn chain(&self) -> &NoiseChain {
         &self.chain

@@ -1,6 +1,15 @@
-//! Data packet decoding for any [`SensorModel`]: payload to returns, strongest, last and
-//! dual, with the conventions of `src/hdl32e/decode.rs` (ROS velodyne axes: x forward,
-//! y left, z up; azimuth clockwise seen from above; ring 0 lowest).
+//! Data packet decoding: payload to returns with xyz and firing time, strongest, last
+//! and dual (ROS velodyne axes: x forward, y left, z up; azimuth clockwise seen from
+//! above; ring 0 lowest).
+//!
+//! Two kernels share the conventions below. [`PacketDecoder`] decodes the HDL-32E's
+//! packets firing by firing into the frame being filled (the frame reader's hot path):
+//! laser `j` fires `j * 1.152 us` into the `46.08 us` firing, so its azimuth is the
+//! firing's plus `j / 40` of the step to the next firing's azimuth:
+//! `a_j = a_f + (a_{f+1} - a_f) * j / 40` (mod 360); the last firing of a packet uses
+//! the step before it, and steps larger than [`MAX_STEP_CENTIDEG`] (a gap or a corrupt
+//! azimuth) interpolate nothing. [`ModelDecoder`] decodes a whole packet of any
+//! [`SensorModel`] with the same rule written for its timing:
 //!
 //! Per channel `c` of block `b`: firing sequence `s = c / n`, laser id
 //! `k = bank * n + c % n`, where `n` is the lasers of a bank and `bank = b % banks`
@@ -12,7 +21,7 @@
 //! that fraction of the block duration times the step to the next block's azimuth (next
 //! pair in dual mode); the last block uses the step before it, and a step over
 //! [`MAX_STEP_CENTIDEG`] (a gap) interpolates nothing. For the HDL-32E this is
-//! `j / 40` of the step, as in `src/hdl32e/decode.rs`; for the VLP-16 it is the ROS
+//! `j / 40` of the step, as above; for the VLP-16 it is the ROS
 //! driver's `gap * (2.304 k + 55.296 s) / 110.592`. Positions:
 //! `x = r cos(w) cos(a)`, `y = -r cos(w) sin(a)`, `z = r sin(w) + v`, where `v` is the
 //! laser's vertical correction of VLP-16 manual Table 9-1 ("After computing X,Y,Z, apply
@@ -33,14 +42,355 @@
 //! single firing: [`ModelDecoder::decode_packet_after`] takes the step from the packet
 //! before, as velodyne_decoder does.
 
-use super::calibration::ModelCalibration;
+use super::calibration::{Calibration, ModelCalibration};
+use super::packet::{self, BLOCKS, BLOCK_BYTES, LASERS};
 use super::{ReturnMode, SensorModel};
 use crate::frame::{Return, ReturnKind};
-pub use crate::hdl32e::decode::DualSelect;
 
-/// Largest azimuth step between blocks (hundredths of a degree) used for interpolation
-/// (the value of `src/hdl32e/decode.rs`).
-pub const MAX_STEP_CENTIDEG: u32 = crate::hdl32e::decode::MAX_STEP_CENTIDEG;
+/// Largest azimuth step between firings (hundredths of a degree) used for interpolation.
+/// The HDL-32E turns at most 0.33 degrees per firing (20 Hz).
+pub const MAX_STEP_CENTIDEG: u32 = 500;
+
+/// Which returns of a dual-return capture to keep.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum DualSelect {
+    /// Keep both returns of each firing.
+    Both,
+    /// Keep only the last return (even blocks).
+    Last,
+    /// Keep only the strongest return (odd blocks).
+    Strongest,
+}
+
+/// Per-laser constants precomputed from the calibration.
+#[derive(Clone, Debug)]
+struct LaserTable {
+    cos_elev: [f32; LASERS],
+    sin_elev: [f32; LASERS],
+    elevation: [f32; LASERS],
+    cos_off: [f32; LASERS],
+    sin_off: [f32; LASERS],
+    offset_deg: [f32; LASERS],
+    dist_off: [f32; LASERS],
+    ring: [u8; LASERS],
+    /// `j as f32` for laser `j` (interpolation factor).
+    index_f32: [f32; LASERS],
+    /// `j as f64 * LASER_US`: laser `j`'s delay in its firing, in microseconds.
+    laser_us: [f64; LASERS],
+    has_offsets: bool,
+}
+
+/// Decodes data packets into returns.
+#[derive(Clone, Debug)]
+pub struct PacketDecoder {
+    table: LaserTable,
+    /// `(sin, cos)` of the per-laser azimuth step for each firing step in hundredths of
+    /// a degree up to [`MAX_STEP_CENTIDEG`] (the same computation as for one block).
+    step_sin_cos: Vec<(f64, f64)>,
+    resolution: f32,
+    interpolate: bool,
+    dual: DualSelect,
+}
+
+/// Azimuth of one firing and the packet block(s) that carry it.
+#[derive(Clone, Copy, Debug)]
+pub struct Firing {
+    /// Azimuth in hundredths of a degree.
+    pub azimuth: u16,
+    /// Step to the next firing in hundredths of a degree (0 across a gap).
+    pub step: u32,
+    /// Index of the firing within the packet.
+    pub index: usize,
+}
+
+/// Counters of the decoder.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct DecodeCounts {
+    /// Return slots with distance 0 (no return).
+    pub zero_distance: u64,
+    /// Blocks whose azimuth was 36000 or more (real sensors send 36000 for 0 degrees),
+    /// decoded modulo 360 degrees.
+    pub azimuth_over_360_blocks: u64,
+}
+
+impl PacketDecoder {
+    /// Creates a decoder for a calibration.
+    pub fn new(calibration: &Calibration, interpolate: bool, dual: DualSelect) -> Self {
+        let rings = calibration.rings();
+        let mut t = LaserTable {
+            cos_elev: [0.0; LASERS],
+            sin_elev: [0.0; LASERS],
+            elevation: [0.0; LASERS],
+            cos_off: [1.0; LASERS],
+            sin_off: [0.0; LASERS],
+            offset_deg: [0.0; LASERS],
+            dist_off: [0.0; LASERS],
+            ring: rings,
+            index_f32: std::array::from_fn(|j| j as f32),
+            laser_us: std::array::from_fn(|j| j as f64 * packet::LASER_US),
+            has_offsets: false,
+        };
+        for (j, cal) in calibration.lasers.iter().enumerate() {
+            let w = cal.elevation_deg.to_radians();
+            t.cos_elev[j] = w.cos() as f32;
+            t.sin_elev[j] = w.sin() as f32;
+            t.elevation[j] = cal.elevation_deg as f32;
+            let o = cal.azimuth_offset_deg.to_radians();
+            t.cos_off[j] = o.cos() as f32;
+            t.sin_off[j] = o.sin() as f32;
+            t.offset_deg[j] = cal.azimuth_offset_deg as f32;
+            t.dist_off[j] = cal.distance_offset_m as f32;
+            t.has_offsets |= cal.azimuth_offset_deg != 0.0;
+        }
+        let step_sin_cos = (0..=MAX_STEP_CENTIDEG)
+            .map(|step| Self::step_deg(interpolate, step).to_radians().sin_cos())
+            .collect();
+        PacketDecoder {
+            table: t,
+            step_sin_cos,
+            resolution: calibration.distance_resolution_m as f32,
+            interpolate,
+            dual,
+        }
+    }
+
+    /// Azimuth step in degrees from one laser to the next in a firing.
+    #[inline]
+    fn step_deg(interpolate: bool, step_centideg: u32) -> f64 {
+        if interpolate {
+            f64::from(step_centideg) * 0.01 / 40.0
+        } else {
+            0.0
+        }
+    }
+
+    /// Firings of a packet in order, with the step to the next firing.
+    ///
+    /// In dual mode two blocks share one firing; the firing's azimuth is the even block's.
+    pub fn firings(&self, payload: &[u8], mode: ReturnMode) -> ([Firing; BLOCKS], usize) {
+        let per = if mode == ReturnMode::Dual { 2 } else { 1 };
+        let n = BLOCKS / per;
+        let mut out = [Firing {
+            azimuth: 0,
+            step: 0,
+            index: 0,
+        }; BLOCKS];
+        for (f, firing) in out.iter_mut().enumerate().take(n) {
+            // Real sensors write 36000 for 0 degrees now and then; reduce modulo a turn.
+            firing.azimuth = packet::block_azimuth(payload, f * per) % 36000;
+            firing.index = f;
+        }
+        {
+            let step = |a: u16, b: u16| -> u32 {
+                let s = (u32::from(b) + 36000 - u32::from(a)) % 36000;
+                if s > MAX_STEP_CENTIDEG {
+                    0
+                } else {
+                    s
+                }
+            };
+            for f in 0..n - 1 {
+                out[f].step = step(out[f].azimuth, out[f + 1].azimuth);
+            }
+            out[n - 1].step = if n >= 2 { out[n - 2].step } else { 0 };
+        }
+        (out, n)
+    }
+
+    /// Blocks of a firing to decode, with the kind of return each carries.
+    pub fn blocks_of(&self, mode: ReturnMode, firing: usize) -> ([(usize, ReturnKind); 2], usize) {
+        match mode {
+            ReturnMode::Dual => {
+                let last = (firing * 2, ReturnKind::DualLast);
+                let strongest = (firing * 2 + 1, ReturnKind::DualStrongest);
+                match self.dual {
+                    DualSelect::Both => ([last, strongest], 2),
+                    DualSelect::Last => ([last, last], 1),
+                    DualSelect::Strongest => ([strongest, strongest], 1),
+                }
+            }
+            ReturnMode::Last => ([(firing, ReturnKind::Last); 2], 1),
+            ReturnMode::Strongest | ReturnMode::Unknown => {
+                ([(firing, ReturnKind::Strongest); 2], 1)
+            }
+        }
+    }
+
+    /// Decodes the 32 returns of one block into `out`; distance 0 is counted, not emitted.
+    ///
+    /// `time0_us` is the first firing's time in microseconds past the hour. Each emitted
+    /// return is also tallied in `tally` (per laser id and per intensity byte).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub fn decode_block(
+        &self,
+        payload: &[u8],
+        block: usize,
+        kind: ReturnKind,
+        firing: &Firing,
+        time0_us: f64,
+        record: u32,
+        counts: &mut DecodeCounts,
+        tally: &mut ReturnTally<'_>,
+        out: &mut Vec<Return>,
+    ) {
+        // One loop per calibration kind, so the per-return test is decided once.
+        if self.table.has_offsets {
+            self.decode_block_with::<true>(
+                payload, block, kind, firing, time0_us, record, counts, tally, out,
+            );
+        } else {
+            self.decode_block_with::<false>(
+                payload, block, kind, firing, time0_us, record, counts, tally, out,
+            );
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn decode_block_with<const OFFSETS: bool>(
+        &self,
+        payload: &[u8],
+        block: usize,
+        kind: ReturnKind,
+        firing: &Firing,
+        time0_us: f64,
+        record: u32,
+        counts: &mut DecodeCounts,
+        tally: &mut ReturnTally<'_>,
+        out: &mut Vec<Return>,
+    ) {
+        if packet::block_azimuth(payload, block) >= 36000 {
+            counts.azimuth_over_360_blocks += 1;
+        }
+        let t = &self.table;
+        let base = block * BLOCK_BYTES + 4;
+        let Ok(data) = <&[u8; LASERS * 3]>::try_from(&payload[base..base + LASERS * 3]) else {
+            return;
+        };
+        let az_deg = f64::from(firing.azimuth) * 0.01;
+        let step_deg = Self::step_deg(self.interpolate, firing.step);
+        // Rotate (cos, sin) laser by laser instead of calling sin_cos 32 times.
+        let (s0, c0) = az_deg.to_radians().sin_cos();
+        let (sd, cd) = match self.step_sin_cos.get(firing.step as usize) {
+            Some(&sc) => sc,
+            None => step_deg.to_radians().sin_cos(),
+        };
+        let (mut c, mut s) = (c0, s0);
+        let (az0, step) = (az_deg as f32, step_deg as f32);
+        let fire_us = time0_us + firing.index as f64 * packet::FIRING_US;
+        // Every slot is written in place and kept only when its distance is non-zero, so
+        // the loop has no branch on the data (a zero return is overwritten or cut off).
+        let start = out.len();
+        out.resize(start + LASERS, BLANK);
+        let Ok(slots) = <&mut [Return; LASERS]>::try_from(&mut out[start..]) else {
+            return;
+        };
+        // Per-laser quantities in passes without stores into the frame (the rotation is
+        // sequential, the rest vectorises); the last pass assembles the returns.
+        let mut dir = [[0f32; 2]; LASERS];
+        for d in &mut dir {
+            *d = [c as f32, s as f32];
+            // Advance to the next laser's firing azimuth.
+            let next_c = c * cd - s * sd;
+            s = s * cd + c * sd;
+            c = next_c;
+        }
+        let mut azimuth = [0f32; LASERS];
+        for (j, a) in azimuth.iter_mut().enumerate() {
+            let mut az = az0 + step * t.index_f32[j];
+            if OFFSETS {
+                az += t.offset_deg[j];
+            }
+            // Offsets and interpolation move an azimuth at most a few degrees past a turn.
+            if az >= 360.0 {
+                az -= 360.0;
+            } else if az < 0.0 {
+                az += 360.0;
+            }
+            *a = az;
+        }
+        let mut kept = 0usize;
+        for j in 0..LASERS {
+            let raw = u16::from_le_bytes([data[j * 3], data[j * 3 + 1]]);
+            let intensity = data[j * 3 + 2];
+            let [cj, sj] = dir[j];
+            let (ca, sa) = if OFFSETS {
+                (
+                    cj * t.cos_off[j] - sj * t.sin_off[j],
+                    sj * t.cos_off[j] + cj * t.sin_off[j],
+                )
+            } else {
+                (cj, sj)
+            };
+            let range = f32::from(raw) * self.resolution + t.dist_off[j];
+            let xy = range * t.cos_elev[j];
+            // `kept <= j < LASERS`, so the mask never changes the index.
+            slots[kept & (LASERS - 1)] = Return {
+                x: xy * ca,
+                y: -xy * sa,
+                z: range * t.sin_elev[j],
+                range,
+                azimuth: azimuth[j],
+                elevation: t.elevation[j],
+                time: (fire_us + t.laser_us[j]) * 1e-6,
+                packet: record,
+                raw_distance: raw,
+                intensity,
+                laser: j as u8,
+                ring: t.ring[j],
+                block: block as u8,
+                kind,
+            };
+            let hit = u64::from(raw != 0);
+            kept += hit as usize;
+            tally.per_laser[j] += hit;
+            tally.intensity[usize::from(intensity)] += hit;
+        }
+        counts.zero_distance += (LASERS - kept) as u64;
+        out.truncate(start + kept);
+    }
+}
+
+/// Per-return counts of a capture, kept by [`PacketDecoder::decode_block`].
+#[derive(Debug)]
+pub struct ReturnTally<'a> {
+    /// Returns per laser id.
+    pub per_laser: &'a mut [u64; LASERS],
+    /// Returns per intensity byte value.
+    pub intensity: &'a mut [u64; 256],
+}
+
+/// Filler for the slots of a block before they are decoded (every field is overwritten).
+pub(crate) const BLANK: Return = Return {
+    x: 0.0,
+    y: 0.0,
+    z: 0.0,
+    range: 0.0,
+    azimuth: 0.0,
+    elevation: 0.0,
+    time: 0.0,
+    packet: 0,
+    raw_distance: 0,
+    intensity: 0,
+    laser: 0,
+    ring: 0,
+    block: 0,
+    kind: ReturnKind::Strongest,
+};
+
+/// Time of a packet's first firing in microseconds past the hour.
+///
+/// The timestamp marks the last laser of the last firing, so the first firing lies
+/// `(firings - 1) * 46.08 + 31 * 1.152` us before it (542.592 us in single-return mode,
+/// as the manual gives).
+pub fn first_firing_us(payload: &[u8], firings: usize) -> f64 {
+    f64::from(packet::timestamp_us(payload))
+        - ((firings as f64 - 1.0) * packet::FIRING_US + 31.0 * packet::LASER_US)
+}
 
 /// Counters of one decoded packet.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -334,7 +684,7 @@ impl ModelDecoder {
 #[allow(clippy::needless_range_loop)] // packets are indexed by block and channel as in the manual
 mod tests {
     use super::*;
-    use crate::sensor::{HDL32E, VLP16};
+    use crate::sensor::VLP16;
 
     /// A VLP-16 packet: block azimuths `az[b]` (centidegrees), timestamp `ts`, and the
     /// distance and intensity of each channel from `fill(block, channel)`.
@@ -562,102 +912,5 @@ mod tests {
             .decode_packet(&p[..1000], 0, 0.0, &mut Vec::new())
             .unwrap_err();
         assert!(e.contains("1000 bytes"), "{e}");
-    }
-
-    /// Item 4 of issue 31's first step: the generic decoder on the HDL-32E description
-    /// gives the returns of `src/hdl32e/decode.rs` (built-in calibration), in single and
-    /// dual mode, so the description cannot drift from the decoder in use.
-    #[test]
-    fn hdl32e_description_decodes_as_the_hdl32e_decoder() {
-        use crate::calibration::Calibration;
-        use crate::hdl32e::decode::{first_firing_us, DecodeCounts, PacketDecoder, ReturnTally};
-        for (mode_byte, dual) in [
-            (0x37u8, DualSelect::Both),
-            (0x38, DualSelect::Both),
-            (0x39, DualSelect::Both),
-            (0x39, DualSelect::Strongest),
-        ] {
-            let mut p = vec![0u8; 1206];
-            for b in 0..12 {
-                let a = if mode_byte == 0x39 {
-                    35_950 + 17 * (b / 2)
-                } else {
-                    35_950 + 17 * b
-                };
-                p[b * 100] = 0xFF;
-                p[b * 100 + 1] = 0xEE;
-                p[b * 100 + 2..b * 100 + 4].copy_from_slice(&((a % 36_000) as u16).to_le_bytes());
-                for c in 0..32 {
-                    let d = if (b * 32 + c) % 11 == 0 {
-                        0
-                    } else {
-                        500 + (b * 32 + c) as u16 * 13
-                    };
-                    p[b * 100 + 4 + 3 * c..b * 100 + 6 + 3 * c].copy_from_slice(&d.to_le_bytes());
-                    p[b * 100 + 6 + 3 * c] = c as u8;
-                }
-            }
-            p[1200..1204].copy_from_slice(&2_000_000u32.to_le_bytes());
-            p[1204] = mode_byte;
-            p[1205] = 0x21;
-            let mode = ReturnMode::from_byte(mode_byte).unwrap();
-            let old = PacketDecoder::new(&Calibration::builtin(), true, dual);
-            let (firings, n) = old.firings(&p, mode);
-            let time0 = first_firing_us(&p, n);
-            let (mut per_laser, mut intensity) = ([0u64; 32], [0u64; 256]);
-            let mut tally = ReturnTally {
-                per_laser: &mut per_laser,
-                intensity: &mut intensity,
-            };
-            let mut want = Vec::new();
-            let mut dc = DecodeCounts::default();
-            for firing in firings.iter().take(n) {
-                let (blocks, k) = old.blocks_of(mode, firing.index);
-                for &(block, kind) in blocks.iter().take(k) {
-                    old.decode_block(
-                        &p, block, kind, firing, time0, 3, &mut dc, &mut tally, &mut want,
-                    );
-                }
-            }
-            let mut got = Vec::new();
-            ModelDecoder::new(&HDL32E, true, dual)
-                .decode_packet(&p, 3, 0.0, &mut got)
-                .unwrap();
-            assert_eq!(got.len(), want.len(), "mode 0x{mode_byte:02x}");
-            for (g, w) in got.iter().zip(&want) {
-                assert_eq!(
-                    (
-                        g.laser,
-                        g.ring,
-                        g.block,
-                        g.kind,
-                        g.raw_distance,
-                        g.intensity,
-                        g.packet
-                    ),
-                    (
-                        w.laser,
-                        w.ring,
-                        w.block,
-                        w.kind,
-                        w.raw_distance,
-                        w.intensity,
-                        w.packet
-                    )
-                );
-                assert!(close(g.time, w.time, 1e-9), "time {} vs {}", g.time, w.time);
-                for (a, b) in [
-                    (g.x, w.x),
-                    (g.y, w.y),
-                    (g.z, w.z),
-                    (g.range, w.range),
-                    (g.elevation, w.elevation),
-                ] {
-                    assert!(close(f64::from(a), f64::from(b), 2e-4), "{g:?} vs {w:?}");
-                }
-                let da = (f64::from(g.azimuth) - f64::from(w.azimuth)).rem_euclid(360.0);
-                assert!(da.min(360.0 - da) < 1e-4, "{g:?} vs {w:?}");
-            }
-        }
     }
 }

@@ -3,8 +3,8 @@
 //! Hi-Res, VLP-32C, HDL-64E S2/S3 and VLS-128 (Alpha Prime) as instances.
 //!
 //! Sources:
-//! - HDL-32E: the constants of `src/hdl32e/packet.rs` and the built-in table of
-//!   `src/calibration/mod.rs` (HDL-32E user manual, appendices B and E; notes in
+//! - HDL-32E: the constants of [`packet`] and the built-in table of
+//!   [`calibration`] (HDL-32E user manual, appendices B and E; notes in
 //!   `../shared/docs/hdl32e.md`). A test holds this description to those constants.
 //! - VLP-16, Puck LITE, Puck Hi-Res: VLP-16 user manual 63-9243 Rev D, section 9.2
 //!   (Table 9-1, laser id to vertical angle and vertical correction for the VLP-16, Puck
@@ -54,8 +54,10 @@ pub mod decode;
 pub mod encode;
 pub mod frames;
 pub mod identify;
+pub mod index;
+pub mod packet;
 
-pub use crate::hdl32e::packet::ReturnMode;
+pub use packet::ReturnMode;
 
 /// The data packet layout of these sensors (1206-byte UDP payload: 12 blocks of flag,
 /// azimuth and 32 channels; timestamp; two factory or status bytes).
@@ -303,7 +305,7 @@ pub struct SensorModel {
 const MODES: [ReturnMode; 3] = [ReturnMode::Strongest, ReturnMode::Last, ReturnMode::Dual];
 
 /// Elevations of the HDL-32E by laser id (the built-in calibration table).
-const HDL32E_ELEVATION_DEG: [f64; 32] = crate::calibration::BUILTIN_ELEVATION_DEG;
+const HDL32E_ELEVATION_DEG: [f64; 32] = crate::sensor::calibration::BUILTIN_ELEVATION_DEG;
 
 /// Elevations of the VLP-16 and Puck LITE by laser id (VLP-16 manual, Table 9-1).
 const VLP16_ELEVATION_DEG: [f64; 16] = [
@@ -919,13 +921,13 @@ mod tests {
     }
 }
 
-/// Item 4 of issue 31's first step: the HDL-32E description holds the constants the
-/// HDL-32E decoder uses (its packet layout, timing, product byte, built-in calibration).
+/// The HDL-32E description holds the constants the HDL-32E kernel of the decoder uses
+/// (its packet layout, timing, product byte, built-in calibration).
 #[cfg(test)]
 mod hdl32e_constants {
     use super::*;
-    use crate::calibration::Calibration;
-    use crate::hdl32e::packet as p;
+    use crate::sensor::calibration::Calibration;
+    use crate::sensor::packet as p;
 
     #[test]
     fn hdl32e_description_holds_the_decoder_constants() {

@@ -7,8 +7,8 @@
 use super::outputs::{write_outputs, BirdsEye};
 use super::plan::{BaseConfig, Vary};
 use super::run::{birdseye_panels, read_frame, run_mode, CaptureInput, Mode, SweepSettings};
-use crate::hdl32e::frames::DecoderOptions;
 use crate::observe::Observer;
+use crate::sensor::frames::DecoderOptions;
 use crate::shard::Shard;
 use crate::writers::figure::FigureFormat;
 use crate::writers::staging;

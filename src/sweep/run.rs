@@ -14,12 +14,12 @@ use crate::config::Config;
 use crate::error::{Error, Result};
 use crate::frame::Frame;
 use crate::frame::FrameSource;
-use crate::hdl32e::frames::DecoderOptions;
 use crate::observe::Observer;
 use crate::pipeline::{FrameResult, Pipeline};
 use crate::score::metrics::{self, ClassMetrics, FrameMetrics, MatchRule, ReturnState, Tally};
 use crate::sensor::frames::CaptureFrames;
 use crate::sensor::frames::CaptureSeek;
+use crate::sensor::frames::DecoderOptions;
 use crate::sensor::SensorModel;
 use crate::shard::{self, Batch, Shard};
 use crate::synth::labels::{check_frame, read_labels_file, LabelRow, LabelRows};
@@ -391,17 +391,15 @@ fn compute(
             let config = s.base.cell_config(&s.varies, &cell)?;
             // Per-laser options must fit the capture's sensor (`occlusion` lasers = [40]
             // would select nothing on an HDL-32E).
-            let pipeline = Pipeline::new(&config)
-                .for_lasers(sensor.lasers)
-                .map_err(|e| {
-                    Error::Invalid(format!(
-                        "{}: {}: the {} ({} lasers): {e}",
-                        capture.path.display(),
-                        cell.file_name(&s.varies),
-                        sensor.name,
-                        sensor.lasers
-                    ))
-                })?;
+            let pipeline = Pipeline::new(&config).for_sensor(sensor).map_err(|e| {
+                Error::Invalid(format!(
+                    "{}: {}: the {} ({} lasers): {e}",
+                    capture.path.display(),
+                    cell.file_name(&s.varies),
+                    sensor.name,
+                    sensor.lasers
+                ))
+            })?;
             let mut baseline = config.clone();
             baseline.noise.clear();
             // Without noise stages only RANSAC ground draws random numbers: otherwise the
@@ -734,7 +732,7 @@ fn chunk_ranges(
 fn count_frames(s: &SweepSettings, capture: &CaptureInput) -> Result<usize> {
     match crate::sensor::frames::open_capture(&capture.path, &s.decoder)? {
         CaptureFrames::Hdl32e(_) => {
-            let scan = crate::hdl32e::index::FrameScan::open(&capture.path, &s.decoder)?;
+            let scan = crate::sensor::index::FrameScan::open(&capture.path, &s.decoder)?;
             Ok(shard::chunk_plan(scan, &s.frames, s.decoder.keep_partial, u32::MAX)?.2)
         }
         // Another sensor's capture has no frame index: its frames are decoded and counted.

@@ -20,13 +20,16 @@ pub mod scene;
 
 pub use scene::Scene;
 
-use crate::calibration::Calibration;
-use crate::hdl32e::encode::{
-    encode_data_packet_into, encode_position_packet, FiringBlock, BLOCKS_PER_PACKET,
-    BLOCK_DURATION_US, DATA_PAYLOAD_LEN, DATA_PORT, LASERS_PER_BLOCK, PACKET_DURATION_US,
-    POSITION_PAYLOAD_LEN, POSITION_PORT, RETURN_MODE_STRONGEST, US_PER_HOUR,
+use crate::sensor::calibration::Calibration;
+use crate::sensor::encode::{
+    encode_data_packet_into, encode_position_packet, FiringBlock, PACKET_DURATION_US, US_PER_HOUR,
 };
 use crate::sensor::encode::{encode_packet, PacketHeader};
+use crate::sensor::packet::{
+    BLOCKS as BLOCKS_PER_PACKET, DATA_PACKET_BYTES as DATA_PAYLOAD_LEN, DATA_PORT,
+    FIRING_US as BLOCK_DURATION_US, LASERS as LASERS_PER_BLOCK,
+    POSITION_PACKET_BYTES as POSITION_PAYLOAD_LEN, POSITION_PORT,
+};
 use crate::sensor::{ReturnMode, SensorModel, TimestampMark};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -270,12 +273,7 @@ where
                 });
             }
         }
-        encode_data_packet_into(
-            &blocks,
-            (ts % US_PER_HOUR) as u32,
-            RETURN_MODE_STRONGEST,
-            &mut payload,
-        );
+        encode_data_packet_into(&blocks, (ts % US_PER_HOUR) as u32, 0x37, &mut payload);
         sink(
             Record::Data {
                 capture_time_us: CAPTURE_EPOCH_US + ts,

@@ -6,7 +6,7 @@
 //! sidewalks among its ground classes), and the face is only 0.1-0.2 m high.
 
 use super::scene::{Scene, Shape, CURB};
-use crate::calibration::{Calibration, LASERS};
+use crate::sensor::calibration::{Calibration, LASERS};
 
 /// Farthest return the synthesizer reports, metres.
 pub const MAX_RANGE_M: f64 = 100.0;

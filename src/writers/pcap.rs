@@ -42,13 +42,14 @@
 //! later frame may still share), and [`NoisyCapture::finish`] the rest. Only the patches
 //! of frames in flight and one payload are held, never the capture.
 
-use crate::calibration::Calibration;
 use crate::capture::{ArcBytes, CaptureReader};
 use crate::error::Error;
-use crate::hdl32e::decode::DualSelect;
-use crate::hdl32e::encode::{raw_distance, BLOCKS_PER_PACKET, BLOCK_LEN};
-use crate::hdl32e::packet::{self, ReturnMode};
 use crate::noise::{NoiseChain, NoisyFrame};
+use crate::sensor::calibration::Calibration;
+use crate::sensor::decode::DualSelect;
+use crate::sensor::encode::raw_distance;
+use crate::sensor::packet::{self, ReturnMode};
+use crate::sensor::packet::{BLOCKS as BLOCKS_PER_PACKET, BLOCK_BYTES as BLOCK_LEN};
 use crate::sensor::SensorModel;
 use crate::writers::atomic::AtomicFile;
 use anyhow::{bail, Context, Result};

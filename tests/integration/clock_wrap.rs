@@ -5,7 +5,7 @@ use crate::common;
 
 use lidar_noise::capture::writer::PcapWriter;
 use lidar_noise::capture::CaptureReader;
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -150,7 +150,7 @@ fn reordered(records: &[Record], order: impl Iterator<Item = usize>) -> Vec<u8> 
 }
 
 /// Summary of a capture read to the end.
-fn summary_of(bytes: Vec<u8>) -> lidar_noise::hdl32e::frames::CaptureSummary {
+fn summary_of(bytes: Vec<u8>) -> lidar_noise::sensor::frames::CaptureSummary {
     let mut reader = FrameReader::from_bytes(
         Arc::from(bytes),
         Path::new("reordered.pcap"),

@@ -8,7 +8,7 @@ use crate::common;
 
 use common::{bin2, crossroad, refused_scan};
 use lidar_noise::frame::Frame;
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use std::path::Path;
 
 /// Frame `index` of the crossroad fixture, decoded as `run` decodes it.

@@ -7,7 +7,7 @@ use crate::common;
 
 use common::{bin2, files, fixtures, kitti_bytes};
 use lidar_noise::frame::Frame;
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use std::path::{Path, PathBuf};
 
 /// The full frames of fixture `name`, decoded as `run` decodes them.

@@ -4,12 +4,12 @@
 use crate::common;
 
 use assert_cmd::Command;
-use lidar_noise::calibration::Calibration;
 use lidar_noise::capture::writer::PcapWriter;
 use lidar_noise::frame::{Frame, ReturnKind};
-use lidar_noise::hdl32e::decode::DualSelect;
-use lidar_noise::hdl32e::encode::{encode_data_packet, FiringBlock};
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::calibration::Calibration;
+use lidar_noise::sensor::decode::DualSelect;
+use lidar_noise::sensor::encode::{encode_data_packet, FiringBlock};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use ply_rs_bw::parser::Parser;
 use ply_rs_bw::ply::{DefaultElement, Property};
 use std::path::Path;
@@ -18,7 +18,7 @@ use std::sync::Arc;
 fn decode_bytes(
     bytes: Vec<u8>,
     opts: &DecoderOptions,
-) -> (Vec<Frame>, lidar_noise::hdl32e::frames::CaptureSummary) {
+) -> (Vec<Frame>, lidar_noise::sensor::frames::CaptureSummary) {
     let mut reader =
         FrameReader::from_bytes(Arc::from(bytes), Path::new("mem.pcap"), opts).unwrap();
     let frames = reader.by_ref().collect::<Result<Vec<_>, _>>().unwrap();

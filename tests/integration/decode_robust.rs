@@ -3,7 +3,7 @@
 use crate::common;
 
 use lidar_noise::frame::Frame;
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::path::Path;

@@ -3,14 +3,14 @@
 use crate::common;
 
 use lidar_noise::frame::Return;
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use serde_json::Value;
 
 fn decode_all(
     opts: &DecoderOptions,
 ) -> Option<(
     Vec<lidar_noise::frame::Frame>,
-    lidar_noise::hdl32e::frames::CaptureSummary,
+    lidar_noise::sensor::frames::CaptureSummary,
 )> {
     let path = common::shared("hdl32e/monterey.pcap")?;
     let mut reader = FrameReader::open(&path, opts).expect("open monterey");

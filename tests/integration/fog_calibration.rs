@@ -6,9 +6,9 @@
 use crate::common;
 
 use lidar_noise::frame::Frame;
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use lidar_noise::noise::world::fog::{self, Biaxial, Droplets, Fog, Overlap};
 use lidar_noise::noise::{Fate, NoiseChain};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use std::path::Path;
 
 const PI: f64 = std::f64::consts::PI;

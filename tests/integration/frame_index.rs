@@ -4,8 +4,8 @@
 //! recording.
 
 use lidar_noise::frame::Frame;
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
-use lidar_noise::hdl32e::index::{FrameScan, ScannedFrame};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::index::{FrameScan, ScannedFrame};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 

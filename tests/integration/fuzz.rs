@@ -22,7 +22,7 @@
 
 use crate::common;
 
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -297,8 +297,9 @@ fn fuzz_config_and_set() {
 fn fuzz_calibration_readers() {
     fuzz("calibration", &[], |bytes| {
         let text = String::from_utf8_lossy(bytes);
-        let yaml = lidar_noise::calibration::yaml::parse_str(&text, Path::new("fuzzed.yaml"));
-        let xml = lidar_noise::calibration::xml::parse_str(&text, Path::new("fuzzed.xml"));
+        let yaml =
+            lidar_noise::sensor::calibration::yaml::parse_str(&text, Path::new("fuzzed.yaml"));
+        let xml = lidar_noise::sensor::calibration::xml::parse_str(&text, Path::new("fuzzed.xml"));
         if let Err(e) = yaml {
             names(&e, "fuzzed.yaml")?;
         }

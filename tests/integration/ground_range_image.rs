@@ -234,8 +234,8 @@ fn approximate_angles_decide_like_exact_ones() {
     )
     .expect("paper.toml");
     let chain = lidar_noise::noise::NoiseChain::new(&cfg);
-    let options = lidar_noise::hdl32e::frames::DecoderOptions::default();
-    let reader = lidar_noise::hdl32e::frames::FrameReader::open(&capture, &options).unwrap();
+    let options = lidar_noise::sensor::frames::DecoderOptions::default();
+    let reader = lidar_noise::sensor::frames::FrameReader::open(&capture, &options).unwrap();
     for frame in reader.take(6) {
         let frame = frame.unwrap();
         let survivors = chain.process(&frame).survivors();

@@ -2,9 +2,9 @@
 //! frame 1). No labels exist, so the checks are physical: the sensor sits on a vehicle
 //! on a road, so road-level returns near it are ground and returns above it are not.
 
-use lidar_noise::calibration::Calibration;
 use lidar_noise::frame::{Return, ReturnKind};
 use lidar_noise::ground::{segment, GroundOptions};
+use lidar_noise::sensor::calibration::Calibration;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 

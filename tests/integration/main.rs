@@ -66,6 +66,7 @@ mod repository_files;
 mod run_shards;
 mod sensor_lasers;
 mod sensor_models;
+mod sensor_stack;
 mod sensor_stages;
 mod special_targets;
 mod spurious;

@@ -8,7 +8,7 @@ use crate::common;
 
 use crate::common::bin2 as bin;
 use lidar_noise::frame::FrameSource;
-use lidar_noise::hdl32e::frames::DecoderOptions;
+use lidar_noise::sensor::frames::DecoderOptions;
 use lidar_noise::sensor::frames::ModelFrameReader;
 use lidar_noise::synth::{write_capture, Scene, SynthOptions};
 use std::path::{Path, PathBuf};

@@ -8,13 +8,12 @@ use lidar_noise::capture::writer::{PcapNgWriter, PcapWriter};
 use lidar_noise::capture::CaptureReader;
 use lidar_noise::config::Config;
 use lidar_noise::frame::ReturnKind;
-use lidar_noise::hdl32e::encode::{
-    encode_data_packet, encode_position_packet, FiringBlock, DATA_PORT, POSITION_PORT,
-};
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
-use lidar_noise::hdl32e::packet;
 use lidar_noise::noise::Fate;
 use lidar_noise::pipeline::Pipeline;
+use lidar_noise::sensor::encode::{encode_data_packet, encode_position_packet, FiringBlock};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::packet;
+use lidar_noise::sensor::packet::{DATA_PORT, POSITION_PORT};
 use lidar_noise::writers::pcap::NoisyCapture;
 use std::collections::BTreeMap;
 use std::path::Path;

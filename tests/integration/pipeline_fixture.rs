@@ -3,9 +3,9 @@
 use crate::common;
 
 use lidar_noise::config::Config;
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use lidar_noise::noise::Fate;
 use lidar_noise::pipeline::{FrameResult, Pipeline};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use lidar_noise::synth::labels::{check_frame, read_labels_file, LabelRow};
 use std::collections::HashMap;
 use std::path::Path;

@@ -7,7 +7,7 @@
 use crate::common;
 
 use lidar_noise::engine::inputs::frames_total;
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use std::path::Path;
 
 /// Frames the reader yields in `range`: what `run` and `convert` process.

@@ -5,8 +5,8 @@
 
 use crate::common::command_at_root as bin;
 use crate::common::fixture;
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader, DUPLICATE_WINDOW};
-use lidar_noise::hdl32e::index::FrameScan;
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader, DUPLICATE_WINDOW};
+use lidar_noise::sensor::index::FrameScan;
 use std::io::Write;
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -47,7 +47,7 @@ fn frames(
     bytes: Vec<u8>,
 ) -> (
     Vec<Vec<lidar_noise::frame::Return>>,
-    lidar_noise::hdl32e::frames::CaptureSummary,
+    lidar_noise::sensor::frames::CaptureSummary,
 ) {
     let mut reader = FrameReader::from_bytes(
         Arc::from(bytes),

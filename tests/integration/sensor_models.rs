@@ -1325,7 +1325,7 @@ fn an_hdl64e_capture_is_decoded_with_the_calibration_of_its_status_bytes() {
     let path = tmp.path().join("s2.pcap");
     s2_capture(&path, &status);
     let open = |p: &Path| {
-        let options = lidar_noise::hdl32e::frames::DecoderOptions {
+        let options = lidar_noise::sensor::frames::DecoderOptions {
             interpolate_azimuth: true,
             dual: DualSelect::Both,
             cut_angle_deg: 0.0,
@@ -1429,8 +1429,8 @@ fn calibration_files_of_other_sensors_decode_their_captures() {
     assert_eq!(v["sensor"], "HDL-64E S2");
     assert_eq!(v["calibration"], yaml.display().to_string());
     // The file's angles decode the returns: laser 5 at -1.25 deg.
-    let options = lidar_noise::hdl32e::frames::DecoderOptions {
-        calibration_file: Some(lidar_noise::hdl32e::frames::CalibrationFile {
+    let options = lidar_noise::sensor::frames::DecoderOptions {
+        calibration_file: Some(lidar_noise::sensor::frames::CalibrationFile {
             path: yaml.clone(),
             not_hdl32e: Some("not an HDL-32E file".into()),
         }),

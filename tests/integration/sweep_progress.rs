@@ -4,8 +4,8 @@
 
 use crate::common;
 
-use lidar_noise::hdl32e::frames::DecoderOptions;
 use lidar_noise::observe::{Counter, Observer};
+use lidar_noise::sensor::frames::DecoderOptions;
 use lidar_noise::sweep::plan::{BaseConfig, Vary};
 use lidar_noise::sweep::run::{run, CaptureInput, SweepSettings};
 use std::sync::Mutex;

@@ -4,7 +4,7 @@
 use lidar_noise::capture::writer::{
     ByteOrder, PcapNgWriter, PcapOptions, PcapWriter, TimeResolution,
 };
-use lidar_noise::hdl32e::encode::{encode_data_packet, encode_position_packet, FiringBlock};
+use lidar_noise::sensor::encode::{encode_data_packet, encode_position_packet, FiringBlock};
 use lidar_noise::synth::{synthesize, write_capture, Scene, SynthOptions};
 use pcap_parser::traits::PcapNGPacketBlock;
 use pcap_parser::{Block, PcapBlockOwned, PcapError};

@@ -2,7 +2,7 @@
 
 use crate::common;
 
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use lidar_noise::synth::{cast_frames, labels, write_capture, Scene, SynthOptions};
 use std::path::Path;
 use std::sync::Arc;

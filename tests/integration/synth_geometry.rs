@@ -2,7 +2,7 @@
 //! returns inside their object. Points are rebuilt here from the raw distance and the
 //! beam direction, independently of the caster.
 
-use lidar_noise::calibration::Calibration;
+use lidar_noise::sensor::calibration::Calibration;
 use lidar_noise::synth::{synthesize, CastReturn, Scene, SynthOptions};
 use std::path::Path;
 

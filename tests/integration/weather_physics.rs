@@ -10,10 +10,10 @@ use crate::common;
 use crate::common::ideal;
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use lidar_noise::noise::world::mie::{self, Dsd};
 use lidar_noise::noise::world::rain;
 use lidar_noise::noise::{Fate, NoiseChain};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 

@@ -8,11 +8,11 @@ use crate::common;
 use common::{config, err, ply_payload, run, stage};
 
 use assert_cmd::Command;
-use lidar_noise::calibration::Calibration;
 use lidar_noise::config::Config;
 use lidar_noise::frame::{Frame, Return, ReturnKind};
 use lidar_noise::noise::world::emi::{in_burst, Emi};
 use lidar_noise::noise::{stage_rng, stage_tags, Fate, NoiseChain, NoisyFrame};
+use lidar_noise::sensor::calibration::Calibration;
 use std::collections::BTreeSet;
 use std::path::Path;
 

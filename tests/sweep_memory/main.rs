@@ -15,8 +15,8 @@
 //! the process's global allocator and its counts are process-wide, so in the shared
 //! binary every other test's allocations would count too. It shares `common/` by path.
 
-use lidar_noise::hdl32e::frames::DecoderOptions;
 use lidar_noise::observe::Silent;
+use lidar_noise::sensor::frames::DecoderOptions;
 use lidar_noise::sweep::outputs::write_outputs;
 use lidar_noise::sweep::plan::{BaseConfig, Vary};
 use lidar_noise::sweep::run::{run, CaptureInput, SweepSettings};

@@ -89,7 +89,7 @@ fn point(x: f32, y: f32, z: f32, intensity: f32, ring: Option<u16>) -> CloudPoin
 fn on_grid(k: u32, laser: usize, range: f64) -> CloudPoint {
     // 46.08 us a firing, 1.152 us a laser; 10 Hz is 3.6e-3 degrees a microsecond.
     let az = (f64::from(k) * 46.08 + laser as f64 * 1.152) * 3.6e-3;
-    let el = crate::calibration::BUILTIN_ELEVATION_DEG[laser];
+    let el = crate::sensor::calibration::BUILTIN_ELEVATION_DEG[laser];
     let (sa, ca) = az.to_radians().sin_cos();
     let (se, ce) = el.to_radians().sin_cos();
     point(
@@ -203,7 +203,8 @@ fn a_point_on_the_grid_gets_its_firing_laser_and_time() {
         assert!((r.time - t).abs() < 1e-12, "firing {k}: {} vs {t}", r.time);
         assert!((r.range - 20.0).abs() < 1e-4);
         assert!(
-            (f64::from(r.elevation) - crate::calibration::BUILTIN_ELEVATION_DEG[laser]).abs()
+            (f64::from(r.elevation) - crate::sensor::calibration::BUILTIN_ELEVATION_DEG[laser])
+                .abs()
                 < 1e-3
         );
         assert_eq!(r.raw_distance, 10_000);
@@ -556,7 +557,7 @@ fn uneven_turn(firings: u32, unit_s: f64, t0: f64) -> Vec<CloudPoint> {
     let mut az = 0.0f64;
     for k in 0..firings {
         for laser in 0..32 {
-            let el = crate::calibration::BUILTIN_ELEVATION_DEG[laser];
+            let el = crate::sensor::calibration::BUILTIN_ELEVATION_DEG[laser];
             let (sa, ca) = az.to_radians().sin_cos();
             let (se, ce) = el.to_radians().sin_cos();
             let t_us = f64::from(k) * 46.08 + HDL32E.laser_offset_us(laser);

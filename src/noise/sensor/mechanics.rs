@@ -265,7 +265,7 @@ mod tests {
                     packet: f / 12,
                     block: (f % 12) as u8,
                     laser: j as u8,
-                    ..crate::hdl32e::decode::BLANK
+                    ..crate::sensor::decode::BLANK
                 });
             }
         }

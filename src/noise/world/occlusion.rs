@@ -18,6 +18,7 @@
 use crate::config::reader::Section;
 use crate::error::Result;
 use crate::noise::{check_ids, Fate, LaserSet, NoiseStage, NoisyFrame, LASER_MASK};
+use crate::sensor::SensorModel;
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 use toml::Value;
@@ -144,6 +145,25 @@ impl NoiseStage for Occlusion {
         }
     }
 
+    fn check_sensor(&self, sensor: &SensorModel) -> std::result::Result<(), String> {
+        match self.selection {
+            Selection::Elevation([lo, hi]) if !selects_a_laser(sensor, [lo, hi]) => {
+                let (min, max) = sensor
+                    .elevation_deg
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &e| {
+                        (a.min(e), b.max(e))
+                    });
+                Err(format!(
+                    "elevation_deg [{lo}, {hi}] selects no laser: the {}'s lasers point \
+                     from {min} to {max} degrees",
+                    sensor.name
+                ))
+            }
+            _ => Ok(()),
+        }
+    }
+
     fn apply(&self, frame: &mut NoisyFrame, _rng: &mut ChaCha8Rng) {
         let stage = frame.stage;
         let blocks = self.transmission == 0.0;
@@ -165,6 +185,16 @@ impl NoiseStage for Occlusion {
             *power = if hit & !blocks { *power * t2 } else { *power };
         }
     }
+}
+
+/// True when a laser of `sensor`'s table lies in the elevation interval (with the slack
+/// of [`Occlusion::covers`]; a calibration file moves lasers by hundredths of a degree,
+/// and the frame's own elevations decide at run time).
+fn selects_a_laser(sensor: &SensorModel, [lo, hi]: [f64; 2]) -> bool {
+    sensor
+        .elevation_deg
+        .iter()
+        .any(|&e| e >= lo - ELEVATION_SLACK_DEG && e <= hi + ELEVATION_SLACK_DEG)
 }
 
 /// Reads the options of an `occlusion` entry.
@@ -193,18 +223,16 @@ pub fn build(opts: &Section<'_>) -> Result<Arc<dyn NoiseStage>> {
                 format!("interval [{lo}, {hi}] is empty: lo must not exceed hi"),
             ));
         }
-        // An interval between the lasers occludes nothing: refuse it like `lasers = []`.
-        // Checked against the manual's table (a calibration file moves lasers by hundredths
-        // of a degree, and the frame's own elevations decide at run time).
-        let table = crate::calibration::Calibration::builtin();
-        let inside = |e: f64| e >= lo - ELEVATION_SLACK_DEG && e <= hi + ELEVATION_SLACK_DEG;
-        if !table.lasers.iter().any(|l| inside(l.elevation_deg)) {
+        // An interval between the lasers of every described sensor occludes nothing:
+        // refuse it like `lasers = []`. The capture's own sensor is checked once it is
+        // known ([`NoiseStage::check_sensor`]).
+        if !crate::sensor::MODELS
+            .iter()
+            .any(|m| selects_a_laser(m, [lo, hi]))
+        {
             return Err(opts.error(
                 "elevation_deg",
-                format!(
-                    "[{lo}, {hi}] selects no laser: the HDL-32E's lasers point from -30.67 to \
-                     +10.67 degrees, 1.33 degrees apart"
-                ),
+                format!("[{lo}, {hi}] selects no laser of any described sensor"),
             ));
         }
         Selection::Elevation([lo, hi])
@@ -276,7 +304,7 @@ mod tests {
                 azimuth: (k / 64) as f32 * 0.17,
                 packet: k / 384,
                 block: ((k / 64) % 6) as u8,
-                ..crate::hdl32e::decode::BLANK
+                ..crate::sensor::decode::BLANK
             })
             .collect();
         let ideal = crate::noise::IdealPower::new(

@@ -12,8 +12,8 @@
 use lidar_noise::config::Config;
 use lidar_noise::frame::Frame;
 use lidar_noise::ground::{segment, GroundMethod, GroundOptions};
-use lidar_noise::hdl32e::frames::{DecoderOptions, FrameReader};
 use lidar_noise::noise::{stage_rng, NoiseChain};
+use lidar_noise::sensor::frames::{DecoderOptions, FrameReader};
 use lidar_noise::synth::{cast_frames, write_capture, Scene, SynthOptions};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

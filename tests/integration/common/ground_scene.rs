@@ -2,8 +2,8 @@
 //! calibration ray-cast against a ground plane and a few boxes, with exact labels.
 #![allow(dead_code)]
 
-use lidar_noise::calibration::Calibration;
 use lidar_noise::frame::{Return, ReturnKind};
+use lidar_noise::sensor::calibration::Calibration;
 
 /// An axis-aligned box standing on the ground.
 #[derive(Clone, Copy, Debug)]

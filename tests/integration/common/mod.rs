@@ -90,7 +90,7 @@ pub fn beam_return(
     kind: lidar_noise::frame::ReturnKind,
 ) -> lidar_noise::frame::Return {
     use lidar_noise::frame::ReturnKind;
-    let cal = lidar_noise::calibration::Calibration::builtin();
+    let cal = lidar_noise::sensor::calibration::Calibration::builtin();
     let el = cal.lasers[laser as usize].elevation_deg as f32;
     let (se, ce) = el.to_radians().sin_cos();
     let (sa, ca) = azimuth.to_radians().sin_cos();

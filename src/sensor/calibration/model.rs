@@ -1,13 +1,10 @@
 //! Per-laser calibration of any described sensor (HDL-64E units above all: every unit
 //! ships its own table), read from the ROS velodyne driver's YAML or VeloView's
 //! `db.xml`, including the
-//! corrections `src/calibration/` refuses for the HDL-32E: distance offset, two-point
-//! distance correction, vertical and horizontal offsets.
-//!
-//! Written here rather than by extending `src/calibration/`, whose readers and
-//! `Calibration` type are fixed at the HDL-32E's 32 lasers and refuse the offsets; the
-//! YAML is parsed with serde_norway and the XML with roxmltree as there (with its depth
-//! guard, `calibration::xml::too_deep`).
+//! corrections the HDL-32E's [`super::Calibration`] refuses: distance offset, two-point
+//! distance correction, vertical and horizontal offsets. The YAML is parsed with
+//! serde_norway and the XML with roxmltree as there (with its depth guard,
+//! [`super::xml`]).
 //!
 //! Conventions: `azimuth_offset_deg` is the negated `rot_correction` (point azimuth =
 //! block azimuth + offset), elevations in degrees, lengths in metres. How the corrections
@@ -16,8 +13,8 @@
 //! 2.40 m / 1.93 m and 25.04 m, the horizontal offset across the beam, z corrected by the
 //! mean of the x and y corrections as velodyne_decoder does).
 
-use super::SensorModel;
 use crate::error::{Error, Result};
+use crate::sensor::SensorModel;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -207,8 +204,8 @@ impl ModelCalibration {
             path: path.to_path_buf(),
             message,
         };
-        let max = crate::calibration::xml::MAX_DEPTH;
-        if let Some(line) = crate::calibration::xml::too_deep(text, max) {
+        let max = crate::sensor::calibration::xml::MAX_DEPTH;
+        if let Some(line) = crate::sensor::calibration::xml::too_deep(text, max) {
             return Err(err(format!(
                 "elements nested more than {max} levels deep at line {line}: not a VeloView \
                  calibration file"

@@ -303,7 +303,7 @@ mod tests {
         assert_eq!(lines.starts, vec![0, 2, 5, 6, 10]);
     }
 
-    use crate::calibration::BUILTIN_ELEVATION_DEG;
+    use crate::sensor::calibration::BUILTIN_ELEVATION_DEG;
     use std::path::PathBuf;
 
     fn fake_path() -> PathBuf {
@@ -346,7 +346,7 @@ mod tests {
         let text = veloview_xml(&ids(), &BUILTIN_ELEVATION_DEG, 0.0, 0.0);
         let cal = parse_str(&text, &fake_path()).unwrap();
         // Angles, offsets and the 2 mm distance unit (distLSB_ 0.2 cm in XML).
-        crate::calibration::tests::assert_matches_builtin(&cal);
+        crate::sensor::calibration::tests::assert_matches_builtin(&cal);
         assert_eq!(cal.rings(), Calibration::builtin().rings());
     }
 

@@ -227,7 +227,7 @@ fn laser_id_lines(text: &str, expected: usize) -> Option<Vec<usize>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calibration::BUILTIN_ELEVATION_DEG;
+    use crate::sensor::calibration::BUILTIN_ELEVATION_DEG;
     use std::path::PathBuf;
 
     fn fake_path() -> PathBuf {
@@ -271,7 +271,7 @@ mod tests {
         let text = ros_yaml(&ids(), &builtin_rad(), 0.0);
         let cal = parse_str(&text, &fake_path()).unwrap();
         // Angles, offsets and the 2 mm distance unit (distLSB_ 0.2 cm in XML).
-        crate::calibration::tests::assert_matches_builtin(&cal);
+        crate::sensor::calibration::tests::assert_matches_builtin(&cal);
         assert_eq!(cal.rings(), Calibration::builtin().rings());
         assert_eq!(cal.source, "/calib/test.yaml");
     }

@@ -1,17 +1,18 @@
 //! Frames of a capture of any described sensor but the HDL-32E (VLP-16, Puck Hi-Res,
 //! VLP-32C, HDL-64E S2/S3, VLS-128), for `run` (issue 31).
 //!
-//! The sensor is identified by structure ([`super::identify`]) from the first data
+//! The sensor is identified by structure ([`crate::sensor::identify`]) from the first data
 //! packets; each data packet is decoded by [`ModelDecoder`] (the model's built-in
 //! table), and its returns go to frames firing by firing: a firing sequence's azimuth is
 //! its block's, plus its share of the step to the next block for the second sequence of
 //! a VLP-16 block, and a frame ends where that azimuth crosses the cut angle, as the
-//! HDL-32E reader cuts (`src/hdl32e/frames.rs`, whose sweep and partial-frame rules this
-//! follows). The first and last sweeps are partial unless they start and end at the cut.
+//! HDL-32E reader cuts ([`super::FrameReader`], whose sweep, partial-frame and
+//! repeated-packet rules this follows). The first and last sweeps are partial unless they
+//! start and end at the cut.
 //!
-//! Why a reader of its own beside the HDL-32E's: that one's packet index, duplicate
-//! window and `--pcap-out` re-encoding are the HDL-32E's, and a capture's returns are the
-//! same however it is read.
+//! Why a reader of its own beside the HDL-32E's: that one decodes firing by firing with
+//! the HDL-32E's kernel ([`crate::sensor::decode::PacketDecoder`]); this one decodes a
+//! whole packet of any layout ([`ModelDecoder`]) and then distributes its returns.
 //!
 //! `run --chunk-frames` starts a chunk mid-capture: [`ModelFrameReader::scan`] reads the
 //! capture once and gives each frame a [`ModelSeek`] (the packet its first firing is in
@@ -20,13 +21,15 @@
 //! reader from the start (`tests/model_chunks.rs`). Unlike the HDL-32E's index, the scan
 //! decodes the returns (once, for the plan; each chunk then reads only its own packets).
 
-use super::decode::ModelDecoder;
-use super::identify::{identify, Identified};
-use super::{ReturnMode, SensorModel};
+use super::{is_zero, Building, RecentPackets};
 use crate::capture::CaptureReader;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, Return};
-use crate::hdl32e::frames::Building;
+use crate::sensor::decode::ModelDecoder;
+use crate::sensor::identify::SAMPLE_PACKETS;
+use crate::sensor::identify::{identify, Identified};
+use crate::sensor::packet::POSITION_PACKET_BYTES;
+use crate::sensor::{ReturnMode, SensorModel};
 use serde::Serialize;
 use std::collections::VecDeque;
 use std::ops::RangeInclusive;
@@ -35,7 +38,7 @@ use std::path::Path;
 /// The frame reader of a capture: the HDL-32E's, or another described sensor's.
 pub enum CaptureFrames {
     /// An HDL-32E capture (boxed: the reader is large).
-    Hdl32e(Box<crate::hdl32e::frames::FrameReader>),
+    Hdl32e(Box<crate::sensor::frames::FrameReader>),
     /// A capture of another described sensor.
     Model(Box<ModelFrameReader>),
 }
@@ -45,9 +48,9 @@ pub enum CaptureFrames {
 /// (files only: a FIFO is read once); else the HDL-32E reader's error.
 pub fn open_capture(
     path: &Path,
-    options: &crate::hdl32e::frames::DecoderOptions,
+    options: &crate::sensor::frames::DecoderOptions,
 ) -> Result<CaptureFrames> {
-    let e = match crate::hdl32e::frames::FrameReader::open(path, options) {
+    let e = match crate::sensor::frames::FrameReader::open(path, options) {
         Ok(r) => return Ok(CaptureFrames::Hdl32e(Box::new(r))),
         Err(e) => e,
     };
@@ -61,7 +64,7 @@ pub fn open_capture(
 #[derive(Clone, Debug)]
 pub enum CaptureSeek {
     /// In an HDL-32E capture, from its frame index.
-    Hdl32e(crate::hdl32e::index::FrameSeek),
+    Hdl32e(crate::sensor::index::FrameSeek),
     /// In a capture of another sensor, from [`ModelFrameReader::scan`].
     Model(ModelSeek),
 }
@@ -79,10 +82,10 @@ pub type ScannedFrames = Box<dyn Iterator<Item = Result<ScannedFrame>>>;
 /// capture reader's error when no described sensor fits.
 pub fn scan_capture(
     path: &Path,
-    options: &crate::hdl32e::frames::DecoderOptions,
+    options: &crate::sensor::frames::DecoderOptions,
 ) -> Result<(&'static SensorModel, ScannedFrames)> {
-    let e = match crate::hdl32e::index::FrameScan::open(path, options) {
-        Ok(scan) => return Ok((&super::HDL32E, hdl32e_scanned(scan))),
+    let e = match crate::sensor::index::FrameScan::open(path, options) {
+        Ok(scan) => return Ok((&crate::sensor::HDL32E, hdl32e_scanned(scan))),
         Err(e) => e,
     };
     // A FIFO is refused by the scan before it is opened (an open waits for a writer).
@@ -102,7 +105,7 @@ pub fn scan_capture(
 }
 
 /// The frames of an HDL-32E capture's frame index, as [`scan_capture`] gives them.
-pub fn hdl32e_scanned(scan: crate::hdl32e::index::FrameScan) -> ScannedFrames {
+pub fn hdl32e_scanned(scan: crate::sensor::index::FrameScan) -> ScannedFrames {
     Box::new(scan.map(|f| f.map(|f| (f.index, f.partial, CaptureSeek::Hdl32e(f.seek)))))
 }
 
@@ -111,12 +114,12 @@ pub fn hdl32e_scanned(scan: crate::hdl32e::index::FrameScan) -> ScannedFrames {
 /// the start yields.
 pub fn open_capture_at(
     path: &Path,
-    options: &crate::hdl32e::frames::DecoderOptions,
+    options: &crate::sensor::frames::DecoderOptions,
     at: &CaptureSeek,
 ) -> Result<CaptureFrames> {
     match at {
         CaptureSeek::Hdl32e(at) => Ok(CaptureFrames::Hdl32e(Box::new(
-            crate::hdl32e::frames::FrameReader::open_at(path, options, at)?,
+            crate::sensor::frames::FrameReader::open_at(path, options, at)?,
         ))),
         CaptureSeek::Model(at) => match open_capture(path, options)? {
             CaptureFrames::Model(mut r) => {
@@ -155,7 +158,7 @@ impl CaptureFrames {
 /// (it names what was measured and every sensor described); else the HDL-32E reader's.
 fn model_or(
     hdl32e: Error,
-    options: &crate::hdl32e::frames::DecoderOptions,
+    options: &crate::sensor::frames::DecoderOptions,
     model: Result<Option<ModelFrameReader>>,
 ) -> Result<CaptureFrames> {
     match model {
@@ -175,10 +178,10 @@ fn model_or(
 pub fn open_capture_bytes(
     bytes: std::sync::Arc<[u8]>,
     name: &Path,
-    options: &crate::hdl32e::frames::DecoderOptions,
+    options: &crate::sensor::frames::DecoderOptions,
 ) -> Result<CaptureFrames> {
     use crate::capture::ArcBytes;
-    let e = match crate::hdl32e::frames::FrameReader::from_bytes(bytes.clone(), name, options) {
+    let e = match crate::sensor::frames::FrameReader::from_bytes(bytes.clone(), name, options) {
         Ok(r) => return Ok(CaptureFrames::Hdl32e(Box::new(r))),
         Err(e) => e,
     };
@@ -198,7 +201,7 @@ const STATUS_PACKETS: usize = 3 * 4160;
 fn status_calibration(
     open: &impl Fn() -> Result<CaptureReader>,
     model: &'static SensorModel,
-) -> Result<Option<super::calibration::ModelCalibration>> {
+) -> Result<Option<crate::sensor::calibration::ModelCalibration>> {
     if model.lasers != 64 || model.layout.product_at.is_some() {
         return Ok(None);
     }
@@ -212,14 +215,8 @@ fn status_calibration(
             }
         }
     }
-    Ok(super::calibration::ModelCalibration::from_status_bytes(status, model).ok())
+    Ok(crate::sensor::calibration::ModelCalibration::from_status_bytes(status, model).ok())
 }
-
-/// Data packets read to identify the sensor.
-const SAMPLE_PACKETS: usize = 64;
-
-/// Size of a position (GPS) packet's payload.
-const POSITION_PACKET_BYTES: usize = 512;
 
 /// What was read from a capture of another sensor, for `summary.json`.
 #[derive(Clone, Debug, Default, Serialize)]
@@ -257,13 +254,17 @@ pub struct ModelCaptureSummary {
     /// The calibration decoded with: "built-in" (the model's table), or the unit's own
     /// read from an HDL-64E's status bytes.
     pub calibration: String,
+    /// Data packets dropped as exact copies of one of the few before them, as the
+    /// HDL-32E reader drops them (left out of reports when 0).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub duplicate_packets: u64,
 }
 
 impl ModelCaptureSummary {
     /// Laser ids without a single return in a capture that has returns (empty when it has
-    /// none), as [`crate::hdl32e::frames::CaptureSummary::dead_lasers`] gives them.
+    /// none), as [`crate::sensor::frames::CaptureSummary::dead_lasers`] gives them.
     pub fn dead_lasers(&self) -> Vec<u8> {
-        crate::hdl32e::frames::dead_lasers(self.returns, &self.returns_per_laser)
+        crate::sensor::frames::dead_lasers(self.returns, &self.returns_per_laser)
     }
 }
 
@@ -280,6 +281,7 @@ pub struct ModelSeek {
     hour_offset_us: f64,
     prev_rel: Option<u32>,
     previous: Vec<u8>,
+    recent: RecentPackets,
 }
 
 /// One frame found by [`ModelFrameReader::scan`].
@@ -354,6 +356,8 @@ pub struct ModelFrameReader {
     prev_rel: Option<u32>,
     /// The data packet before the current one (the VLS-128's dual-mode step).
     previous: Vec<u8>,
+    /// The last data packets kept, to drop exact copies.
+    recent: RecentPackets,
     packet: Vec<u8>,
     scratch: Vec<Return>,
     spare: Vec<Vec<Return>>,
@@ -373,13 +377,13 @@ impl ModelFrameReader {
     /// ([`ModelFrameReader::with_calibration_file`]), whose errors then are its own.
     pub fn open_with(
         open: impl Fn() -> Result<CaptureReader>,
-        options: &crate::hdl32e::frames::DecoderOptions,
+        options: &crate::sensor::frames::DecoderOptions,
     ) -> Result<Option<Self>> {
         let mut sample_reader = open()?;
         let path = sample_reader.path().to_path_buf();
         let mut sample: Vec<(Vec<u8>, u64)> = Vec::new();
         while let Some(d) = sample_reader.next_datagram()? {
-            if d.payload.len() == super::LAYOUT_1206.payload_bytes {
+            if d.payload.len() == crate::sensor::LAYOUT_1206.payload_bytes {
                 sample.push((d.payload.to_vec(), d.ts_ns));
                 if sample.len() >= SAMPLE_PACKETS {
                     break;
@@ -391,7 +395,7 @@ impl ModelFrameReader {
             path: path.clone(),
             message,
         })?;
-        if found.model.name == super::HDL32E.name {
+        if found.model.name == crate::sensor::HDL32E.name {
             return Ok(None);
         }
         let model = found.model;
@@ -427,6 +431,7 @@ impl ModelFrameReader {
             hour_offset_us: 0.0,
             prev_rel: None,
             previous: Vec::new(),
+            recent: RecentPackets::default(),
             packet: Vec::new(),
             scratch: Vec::new(),
             spare: Vec::new(),
@@ -468,6 +473,7 @@ impl ModelFrameReader {
         self.hour_offset_us = at.hour_offset_us;
         self.prev_rel = at.prev_rel;
         self.previous.clone_from(&at.previous);
+        self.recent = at.recent;
         self.ready.clear();
         self.done = false;
         self.past_range = false;
@@ -479,7 +485,7 @@ impl ModelFrameReader {
     /// the identified sensor: its unit's angles and corrections) instead of the built-in
     /// table or the status bytes' calibration.
     pub fn with_calibration_file(mut self, path: &Path) -> Result<Self> {
-        let cal = super::calibration::ModelCalibration::from_file(path, self.model)?;
+        let cal = crate::sensor::calibration::ModelCalibration::from_file(path, self.model)?;
         self.summary.calibration = path.display().to_string();
         self.decoder = self
             .decoder
@@ -494,7 +500,7 @@ impl ModelFrameReader {
     /// [`ModelFrameReader::open_with`] of a capture file.
     pub fn open(
         path: &Path,
-        options: &crate::hdl32e::frames::DecoderOptions,
+        options: &crate::sensor::frames::DecoderOptions,
     ) -> Result<Option<Self>> {
         Self::open_with(|| CaptureReader::open(path), options)
     }
@@ -561,6 +567,15 @@ impl ModelFrameReader {
             return Ok(());
         }
         let (record, offset) = (d.record, d.offset);
+        // While scanning, the window a frame starting in this packet resumes with.
+        let recent = self.recent;
+        // Exact copies are dropped before they touch the frame state (the HDL-32E
+        // reader's rule); a packet the decoder refuses does not join the window.
+        let lay = &self.model.layout;
+        if lay.return_mode(d.payload).is_ok() && self.recent.is_duplicate(d.payload) {
+            self.summary.duplicate_packets += 1;
+            return Ok(());
+        }
         let mut payload = std::mem::take(&mut self.packet);
         payload.clear();
         payload.extend_from_slice(d.payload);
@@ -584,6 +599,7 @@ impl ModelFrameReader {
                     hour_offset_us: before.3,
                     prev_rel: before.4,
                     previous: self.previous.clone(),
+                    recent,
                 });
             }
         }
@@ -673,7 +689,7 @@ impl ModelFrameReader {
                 return 0;
             };
             let s = (b + 36000 - a) % 36000;
-            if s > super::decode::MAX_STEP_CENTIDEG {
+            if s > crate::sensor::decode::MAX_STEP_CENTIDEG {
                 0
             } else {
                 s

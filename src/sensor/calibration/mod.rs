@@ -1,10 +1,15 @@
-//! Per-laser calibration: elevation, azimuth offset and ring of each HDL-32E laser.
+//! Per-laser calibration of the described sensors, read from the two formats users have:
+//! the ROS velodyne driver's YAML ([`yaml`]) and VeloView's XML ([`xml`]).
 //!
-//! [`Calibration::from_file`] reads the two formats users have: the ROS velodyne
-//! driver's YAML ([`yaml`]) and VeloView's XML ([`xml`]).
+//! [`Calibration`] is the HDL-32E's (32 lasers: elevation, azimuth offset, distance
+//! offset; the decoder's HDL-32E kernel); [`ModelCalibration`] any model's, with every
+//! correction of the HDL-64E's formulas, also read from an HDL-64E's status bytes.
 
+mod model;
 pub mod xml;
 pub mod yaml;
+
+pub use model::{LaserCorrection, ModelCalibration};
 
 use crate::error::{Error, Result};
 use std::path::Path;

@@ -5,14 +5,18 @@
 //! within one firing step of the cut angle, the last when it ends within one step of
 //! it; partial sweeps are numbered like the others but left out unless asked for.
 
+mod model;
+
+pub use model::*;
+
 use super::decode::{first_firing_us, DecodeCounts, DualSelect, PacketDecoder, ReturnTally};
 use super::identify::{self, Identity, Sample};
 use super::index::FrameSeek;
 use super::packet::{self, ReturnMode};
-use crate::calibration::Calibration;
 use crate::capture::{CaptureReader, CaptureStats, Format};
 use crate::error::{Error, Result};
 use crate::frame::Frame;
+use crate::sensor::calibration::Calibration;
 use serde::Serialize;
 use std::collections::VecDeque;
 use std::ops::RangeInclusive;
@@ -281,7 +285,7 @@ pub const DUPLICATE_WINDOW: usize = 8;
 /// packets kept, in a ring: a fixed size whatever the capture's length, and small enough
 /// to be copied into every seek point, so that a resumed reader drops the same packets.
 #[derive(Clone, Copy, Debug, Default)]
-struct RecentPackets {
+pub(crate) struct RecentPackets {
     entries: [(u32, u64); DUPLICATE_WINDOW],
     /// Entries filled so far (up to the window).
     len: usize,
@@ -289,24 +293,31 @@ struct RecentPackets {
     next: usize,
 }
 
-impl SweepState {
+impl RecentPackets {
     /// True when a data packet is an exact copy (same timestamp, same payload hash) of one
     /// of the last [`DUPLICATE_WINDOW`] data packets kept; a kept packet joins the window.
     /// A capture recorded twice over the same interface, or merged with itself, repeats
     /// every packet: decoding the copies doubled every return and cut extra frames where a
     /// copy straddles the cut angle.
     #[inline]
-    pub(super) fn is_duplicate(&mut self, payload: &[u8]) -> bool {
+    pub(crate) fn is_duplicate(&mut self, payload: &[u8]) -> bool {
         let ts = packet::timestamp_us(payload);
         let hash = xxhash_rust::xxh3::xxh3_64(payload);
-        let r = &mut self.recent;
-        if r.entries[..r.len].contains(&(ts, hash)) {
+        if self.entries[..self.len].contains(&(ts, hash)) {
             return true;
         }
-        r.entries[r.next] = (ts, hash);
-        r.next = (r.next + 1) % DUPLICATE_WINDOW;
-        r.len = (r.len + 1).min(DUPLICATE_WINDOW);
+        self.entries[self.next] = (ts, hash);
+        self.next = (self.next + 1) % DUPLICATE_WINDOW;
+        self.len = (self.len + 1).min(DUPLICATE_WINDOW);
         false
+    }
+}
+
+impl SweepState {
+    /// [`RecentPackets::is_duplicate`] of this reader's window.
+    #[inline]
+    pub(super) fn is_duplicate(&mut self, payload: &[u8]) -> bool {
+        self.recent.is_duplicate(payload)
     }
 
     /// Takes a data packet's timestamp and its first firing's time past the hour; returns
@@ -388,7 +399,7 @@ pub(super) fn identify_in(mut capture: CaptureReader) -> Result<Identity> {
             }
         }
     }
-    identify::identify(&sample).map_err(|refusal| {
+    identify::hdl32e_identity(&sample).map_err(|refusal| {
         if refusal.other_sensor {
             return Error::OtherSensor {
                 path: path.clone(),

@@ -3,9 +3,9 @@
 //! through the [`Pipeline`] on a pool of workers, and writes each frame's files and the
 //! reports as frames complete, with memory bounded whatever the input's length.
 //!
-//! `commands::run` only turns its arguments into a [`Plan`] and a [`RunRequest`] and
-//! calls [`run`]; the Python package calls the same function. Data flows one way:
-//! source -> pipeline -> per-frame files and report spool -> reports.
+//! The `run` command only turns its arguments into a [`Plan`] and a [`RunRequest`] and
+//! calls [`run`], which reports to an [`Observer`]. Data flows one way: source ->
+//! pipeline -> per-frame files and report spool -> reports.
 
 pub mod chunks;
 pub mod dataset;

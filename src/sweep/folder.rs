@@ -4,9 +4,10 @@
 //! clean-up of a failed first sweep. The command line and Python build a
 //! [`SweepRequest`] and call [`sweep`].
 
+use super::birdseye::{birdseye_panels, read_frame};
 use super::outputs::{write_outputs, BirdsEye};
 use super::plan::{BaseConfig, Vary};
-use super::run::{birdseye_panels, read_frame, run_mode, CaptureInput, Mode, SweepSettings};
+use super::run::{run_mode, CaptureInput, Mode, SweepSettings};
 use crate::observe::Observer;
 use crate::sensor::frames::DecoderOptions;
 use crate::shard::Shard;
@@ -376,7 +377,7 @@ fn sweep_into(
 /// cell or a part of one, even edited or cut): cells accumulate over runs and shards, so
 /// no one manifest lists them.
 fn is_cell_file(dir: &Path, rel: &str) -> bool {
-    rel.starts_with("cells/") && super::run::written_by_sweep(&dir.join(rel))
+    rel.starts_with("cells/") && super::cells::written_by_sweep(&dir.join(rel))
 }
 
 /// What decides a sweep folder's tables, plots and page: a sweep with other settings is

@@ -1,8 +1,9 @@
 //! The final outputs of a sweep, rebuilt from the rows every time: tables, plots, the
 //! bird's-eye figure and `index.html`. Nothing here depends on timing or thread count.
 
+use super::birdseye::Panel;
 use super::plan::{Vary, VaryKind};
-use super::run::{Panel, Row, Rows};
+use super::run::{Row, Rows};
 use super::tables::{self, Group};
 use crate::error::{Error, Result};
 use crate::writers::figure::{self, BirdsEyePanel, FigureFormat, LinePlot, Series};

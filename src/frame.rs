@@ -52,6 +52,28 @@ pub struct Return {
     pub kind: ReturnKind,
 }
 
+impl Return {
+    /// A return with every field zero (the strongest return of laser 0 in block 0): the
+    /// filler of decoder slots before they are decoded, and the base of returns built
+    /// field by field.
+    pub const BLANK: Return = Return {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+        range: 0.0,
+        azimuth: 0.0,
+        elevation: 0.0,
+        time: 0.0,
+        packet: 0,
+        raw_distance: 0,
+        intensity: 0,
+        laser: 0,
+        ring: 0,
+        block: 0,
+        kind: ReturnKind::Strongest,
+    };
+}
+
 /// One rotation of the sensor.
 #[derive(Clone, Debug, Default)]
 pub struct Frame {

@@ -246,7 +246,7 @@ mod tests {
                     intensity: (k % 101) as u8,
                     laser: (k % 29) as u8 + 3 * u8::from(k.is_multiple_of(5)),
                     block: ((k / 29) % 12) as u8,
-                    ..crate::sensor::decode::BLANK
+                    ..Return::BLANK
                 }
             })
             .collect()

@@ -564,7 +564,7 @@ mod tests {
                 f.clean.push(Return {
                     range,
                     laser: rng.random_range(0..40),
-                    ..crate::sensor::decode::BLANK
+                    ..Return::BLANK
                 });
                 f.range.push(rn);
                 // Mostly kept, as in real frames; every fate in some cases.

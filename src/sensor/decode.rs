@@ -285,7 +285,7 @@ impl PacketDecoder {
         // Every slot is written in place and kept only when its distance is non-zero, so
         // the loop has no branch on the data (a zero return is overwritten or cut off).
         let start = out.len();
-        out.resize(start + LASERS, BLANK);
+        out.resize(start + LASERS, Return::BLANK);
         let Ok(slots) = <&mut [Return; LASERS]>::try_from(&mut out[start..]) else {
             return;
         };
@@ -363,24 +363,6 @@ pub struct ReturnTally<'a> {
     /// Returns per intensity byte value.
     pub intensity: &'a mut [u64; 256],
 }
-
-/// Filler for the slots of a block before they are decoded (every field is overwritten).
-pub(crate) const BLANK: Return = Return {
-    x: 0.0,
-    y: 0.0,
-    z: 0.0,
-    range: 0.0,
-    azimuth: 0.0,
-    elevation: 0.0,
-    time: 0.0,
-    packet: 0,
-    raw_distance: 0,
-    intensity: 0,
-    laser: 0,
-    ring: 0,
-    block: 0,
-    kind: ReturnKind::Strongest,
-};
 
 /// Time of a packet's first firing in microseconds past the hour.
 ///

@@ -265,7 +265,7 @@ mod tests {
                     packet: f / 12,
                     block: (f % 12) as u8,
                     laser: j as u8,
-                    ..crate::sensor::decode::BLANK
+                    ..Return::BLANK
                 });
             }
         }

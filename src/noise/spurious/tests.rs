@@ -9,7 +9,7 @@ fn ret(packet: u32, block: u8, laser: u8, kind: ReturnKind) -> Return {
         laser,
         block,
         kind,
-        ..crate::sensor::decode::BLANK
+        ..Return::BLANK
     }
 }
 

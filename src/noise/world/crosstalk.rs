@@ -742,7 +742,7 @@ mod tests {
                     block: (f % 12) as u8,
                     time: 100.0 + f64::from(f) * 46.08e-6 + f64::from(l) * 1.152e-6,
                     kind: ReturnKind::Strongest,
-                    ..crate::sensor::decode::BLANK
+                    ..Return::BLANK
                 });
             }
         }

@@ -170,7 +170,7 @@ impl NoiseStage for Occlusion {
         // Out and back through the obstruction.
         let t2 = self.transmission * self.transmission;
         // Every return written, by selects: a beam's returns recur every firing, and a
-        // branch a return made the paper chain's bench 1.05 ms where these make it 0.98.
+        // branch a return mispredicts (a slower paper chain).
         for (((r, fate), cause), power) in frame
             .clean
             .iter()
@@ -304,7 +304,7 @@ mod tests {
                 azimuth: (k / 64) as f32 * 0.17,
                 packet: k / 384,
                 block: ((k / 64) % 6) as u8,
-                ..crate::sensor::decode::BLANK
+                ..Return::BLANK
             })
             .collect();
         let ideal = crate::noise::IdealPower::new(

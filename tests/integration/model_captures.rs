@@ -41,24 +41,6 @@ const SENSORS: [(&str, &SensorModel, &[&str], u8); 7] = [
     ),
 ];
 
-/// Synthesizes `rotations` turns of `scene_args` for `sensor` into `dir`; the capture.
-fn synth(dir: &Path, sensor: &str, scene_args: &[&str], rotations: u32) -> PathBuf {
-    let out = dir.join(sensor);
-    bin2()
-        .args(["--quiet", "synth", "--sensor", sensor, "--rotations"])
-        .arg(rotations.to_string())
-        .args(scene_args)
-        .arg("-o")
-        .arg(&out)
-        .assert()
-        .success();
-    std::fs::read_dir(&out)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.extension().is_some_and(|e| e == "pcap"))
-        .expect("synth wrote a capture")
-}
-
 /// Returns per laser id of every data packet of the capture, decoded one by one.
 fn decoded_per_laser(path: &Path, model: &SensorModel) -> Vec<u64> {
     let mut per_laser = vec![0u64; model.lasers];
@@ -97,7 +79,7 @@ fn config(dir: &Path, text: &str) -> PathBuf {
 fn captures_of_every_other_sensor_run_with_their_own_lasers() {
     let tmp = tempfile::tempdir().unwrap();
     for (name, model, scene, occluded) in SENSORS {
-        let capture = synth(tmp.path(), name, scene, 2);
+        let capture = common::synth_capture(tmp.path(), name, scene, 2);
         let cfg = config(
             tmp.path(),
             &format!("seed = 2\n[[noise]]\ntype = \"occlusion\"\nlasers = [{occluded}]\n"),
@@ -177,12 +159,12 @@ fn captures_of_every_other_sensor_run_with_their_own_lasers() {
 #[test]
 fn what_a_capture_of_another_sensor_cannot_do_is_refused_before_writing() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = synth(tmp.path(), "vlp16", &["--preset", "crossroad"], 1);
+    let capture = common::synth_capture(tmp.path(), "vlp16", &["--preset", "crossroad"], 1);
     // The paper's occlusion names laser 30: the VLP-16 has 16.
     refused_scan(&capture, &[], "the VLP-16 (16 lasers)");
     // A VLP-32C capture whose mode byte no firmware writes: the other sensors' reader
     // says what it found, not that only the HDL-32E is decoded.
-    let vlp32c = synth(tmp.path(), "vlp32c", &["--preset", "crossroad"], 1);
+    let vlp32c = common::synth_capture(tmp.path(), "vlp32c", &["--preset", "crossroad"], 1);
     let mut bytes = std::fs::read(&vlp32c).unwrap();
     let mut at = 24;
     while at + 16 <= bytes.len() {
@@ -247,7 +229,7 @@ fn slots(path: &Path, model: &SensorModel) -> Vec<(u32, u8, u8, u16, u8)> {
 fn pcap_out_writes_every_other_sensors_packets_back() {
     let tmp = tempfile::tempdir().unwrap();
     for (name, model, scene, occluded) in SENSORS {
-        let capture = synth(tmp.path(), name, scene, 2);
+        let capture = common::synth_capture(tmp.path(), name, scene, 2);
         let input = slots(&capture, model);
         for (k, text) in [
             "seed = 1\n".to_string(),
@@ -303,7 +285,7 @@ fn pcap_out_writes_every_other_sensors_packets_back() {
 #[test]
 fn a_capture_of_another_sensor_on_standard_input_runs_as_the_file_does() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = synth(tmp.path(), "vlp32c", &["--preset", "crossroad"], 2);
+    let capture = common::synth_capture(tmp.path(), "vlp32c", &["--preset", "crossroad"], 2);
     let cfg = config(
         tmp.path(),
         "seed = 4\n[[noise]]\ntype = \"rain\"\nrate_mm_h = 8.0\n",
@@ -363,7 +345,7 @@ fn a_capture_of_another_sensor_on_standard_input_runs_as_the_file_does() {
 fn sweeps_run_on_captures_of_other_sensors_with_their_labels() {
     let tmp = tempfile::tempdir().unwrap();
     for (name, _, scene, _) in SENSORS {
-        let capture = synth(tmp.path(), name, scene, 3);
+        let capture = common::synth_capture(tmp.path(), name, scene, 3);
         let out = tmp.path().join(format!("sweep-{name}"));
         bin2()
             .args(["--quiet", "sweep"])
@@ -389,7 +371,7 @@ fn sweeps_run_on_captures_of_other_sensors_with_their_labels() {
         }
     }
     // What does not fit the sensor is refused before anything is written.
-    let capture = synth(tmp.path(), "vlp16", CROSSROAD, 1);
+    let capture = common::synth_capture(tmp.path(), "vlp16", CROSSROAD, 1);
     let cfg = config(
         tmp.path(),
         "seed = 1\n[[noise]]\ntype = \"occlusion\"\nlasers = [20]\n",

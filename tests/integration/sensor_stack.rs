@@ -6,7 +6,7 @@
 use crate::common;
 use crate::common::bin2;
 use lidar_noise::sensor::SensorModel;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// One sensor of each family: its `synth` name and scene arguments.
 const FAMILIES: [(&str, &[&str]); 5] = [
@@ -17,23 +17,6 @@ const FAMILIES: [(&str, &[&str]); 5] = [
     ("hdl64e s2", &["--random", "3"]),
     ("vls128", &["--preset", "crossroad"]),
 ];
-
-/// Synthesizes two turns of `scene` for `sensor` into `dir`; the capture.
-fn synth(dir: &Path, sensor: &str, scene: &[&str]) -> PathBuf {
-    let out = dir.join(sensor);
-    bin2()
-        .args(["--quiet", "synth", "--sensor", sensor, "--rotations", "2"])
-        .args(scene)
-        .arg("-o")
-        .arg(&out)
-        .assert()
-        .success();
-    std::fs::read_dir(&out)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.extension().is_some_and(|e| e == "pcap"))
-        .expect("synth wrote a capture")
-}
 
 /// The classic pcap at `src` with every data packet (1206-byte payload) recorded twice in
 /// a row, written to `dst`; the number of data packets.
@@ -116,7 +99,7 @@ fn run_chunked(capture: &Path, dir: &Path) -> u64 {
 fn every_model_drops_repeated_packets_and_reports_them() {
     let tmp = tempfile::tempdir().unwrap();
     for (name, scene) in FAMILIES {
-        let original = synth(tmp.path(), name, scene);
+        let original = common::synth_capture(tmp.path(), name, scene, 2);
         let twice = tmp.path().join(format!("{name}-twice.pcap"));
         let data = doubled(&original, &twice);
         assert!(data > 20, "{name}: {data} data packets");
@@ -182,7 +165,7 @@ fn occlusion_elevations_are_checked_against_the_captures_sensor() {
     bin2().arg("validate").arg(&cfg).assert().success();
 
     // A VLP-16 capture: laser 10's returns, and only they, are occluded.
-    let capture = synth(tmp.path(), "vlp16", &["--preset", "crossroad"]);
+    let capture = common::synth_capture(tmp.path(), "vlp16", &["--preset", "crossroad"], 2);
     let out = tmp.path().join("vlp16-out");
     common::run_ok(&capture, &["--keep-partial", "--no-ply"], &cfg, &out);
     let sub = std::fs::read_dir(&out)

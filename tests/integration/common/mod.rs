@@ -207,6 +207,30 @@ pub fn bin2() -> assert_cmd::Command {
     c
 }
 
+/// Synthesizes `rotations` turns of `scene_args` for `sensor` (a `synth --sensor` name)
+/// into `dir/<sensor>`; the capture written.
+pub fn synth_capture(
+    dir: &std::path::Path,
+    sensor: &str,
+    scene_args: &[&str],
+    rotations: u32,
+) -> PathBuf {
+    let out = dir.join(sensor);
+    bin2()
+        .args(["--quiet", "synth", "--sensor", sensor, "--rotations"])
+        .arg(rotations.to_string())
+        .args(scene_args)
+        .arg("-o")
+        .arg(&out)
+        .assert()
+        .success();
+    std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "pcap"))
+        .expect("synth wrote a capture")
+}
+
 /// `run INPUT ARGS -c CONFIG -o OUT` (quiet, two threads), which must succeed.
 pub fn run_ok(
     input: &std::path::Path,

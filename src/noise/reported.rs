@@ -25,11 +25,10 @@ impl Reported<'_> {
         self.fate.is_empty()
     }
 
-    /// Return `i` as the sensor reports it, or `None` where it reports nothing (the
-    /// return was dropped).
+    /// True where the sensor still reports return `i` (it was not dropped).
     #[inline(always)]
-    pub fn alive(&self, i: usize) -> Option<Return> {
-        self.fate[i].is_alive().then(|| self.view.noisy_return(i))
+    pub fn is_alive(&self, i: usize) -> bool {
+        self.fate[i].is_alive()
     }
 
     /// Return `i` as reported.

@@ -402,8 +402,15 @@ impl NoisyCapture {
         let mut patches = Vec::with_capacity(reported.len());
         // The last packet of the recorded returns (dropped ones included): its records
         // are complete once this frame is.
-        let last = (0..frame.clean_len).map(|i| reported.of(i).packet).max();
-        for r in (0..reported.len()).filter_map(|i| reported.alive(i)) {
+        let mut last = None;
+        for i in 0..reported.len() {
+            let r = reported.of(i);
+            if i < frame.clean_len {
+                last = last.max(Some(r.packet));
+            }
+            if !reported.is_alive(i) {
+                continue;
+            }
             let fits = match self.model {
                 Some(m) => usize::from(r.laser) < m.lasers,
                 None => usize::from(r.block) < BLOCKS_PER_PACKET,
